@@ -1,0 +1,1 @@
+"""The DAMADICS (DABLib) actuator model and its 19 faults."""

@@ -1,0 +1,1 @@
+"""Relevance Vector Machines (sparse Bayesian learning) in torch."""
