@@ -36,9 +36,7 @@ FAULT_TABLE: dict[str, FaultInfo] = {
             "Hb*(1-0.2f); valve position X+0.2f; Kvr*(1-0.2f)",
             False,
         ),
-        FaultInfo(
-            "f3", "valve plug or seat erosion", "Hb*(1+0.1f); X-0.1f; Kvr*(1+0.1f)", False
-        ),
+        FaultInfo("f3", "valve plug or seat erosion", "Hb*(1+0.1f); X-0.1f; Kvr*(1+0.1f)", False),
         FaultInfo(
             "f4", "increase of valve or bushing friction", "backlash width X0*(0.01+f)", True
         ),
@@ -71,7 +69,9 @@ FAULT_TABLE: dict[str, FaultInfo] = {
             "chamber pressure reading Ps*(1-f) only (no effect on X', F')",
             True,
         ),
-        FaultInfo("f15", "positioner feedback fault", "backlash of width f*X0 in the PV path", False),
+        FaultInfo(
+            "f15", "positioner feedback fault", "backlash of width f*X0 in the PV path", False
+        ),
         FaultInfo(
             "f16", "positioner supply pressure drop", "supply Pz*(1-f); 0 below 120 kPa", False
         ),

@@ -103,20 +103,17 @@ PARAMETERS: dict[str, tuple[float, str, str]] = {
     "db": (0.01 * X0, "m", "nominal backlash (friction) width, 1 % of stroke"),
 }
 
-# scheme constants
-DT_REF = 0.0025
-STEPS_REF = 400  # per second
-CTRL_REF = 14  # steps per controller period
-DT_FAST = 0.005
+#: integration steps per second of the two schemes (the controller period, 35 ms, must be a
+#: whole number of steps: 400 -> 14 steps of 2.5 ms, 200 -> 7 steps of 5 ms)
+STEPS_REF = 400
 STEPS_FAST = 200
-CTRL_FAST = 7
 
 # fault indices (0-based position in the fault vector)
 F1, F2, F3, F4, F5, F6, F7, F8, F9, F10 = range(10)
 F11, F12, F13, F14, F15, F16, F17, F18, F19 = range(10, 19)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _interp(x, xp, fp):
     n = xp.shape[0]
     if x <= xp[0]:
@@ -130,12 +127,12 @@ def _interp(x, xp, fp):
     return fp[i - 1] + w * (fp[i] - fp[i - 1])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _clip(x, lo, hi):
     return lo if x < lo else (hi if x > hi else x)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _play(y, u, width):
     """Backlash (play operator) of total ``width``: output ``y`` follows ``u`` at +-width/2."""
     h = 0.5 * width
@@ -146,12 +143,12 @@ def _play(y, u, width):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _vapour_pressure(t):
     return 10.0 ** (10.7167 - 2141.0 / (t + 273.15))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _water_density(t, p):
     t = _clip(t, 0.0, 110.0)
     if t >= 30.0:
@@ -163,7 +160,7 @@ def _water_density(t, p):
     return rho0 / (1.0 - _interp(t, COMP_T, COMP_V) * p)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _hydraulics(p1, p2, t1, f7, f17, out):
     """External faults on the inputs and the valve's pressure/medium algebra.
 
@@ -189,20 +186,20 @@ def _hydraulics(p1, p2, t1, f7, f17, out):
     out[7] = p1e - p2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _valve_position(x_frac, f2, f3):
     xv = _clip(x_frac + 0.2 * f2, 0.0, 1.0)
     return _clip(xv - 0.1 * f3, 0.0, 1.0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _choked(dp, km, p1e, rc, pv):
     dp_allow = max(0.0, km * (p1e - rc * pv))
     dp_eff = dp if dp_allow > dp else dp_allow
     return max(dp_eff, 0.0)  # no reverse flow through the valve (P1 < P2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _flow(x_frac, hyd, f2, f3, f5, f6, f18):
     """Total flow [t/h] through valve and bypass at stem position ``x_frac`` (closing)."""
     p1e, rc, pv, rho, dp = hyd[4], hyd[5], hyd[3], hyd[6], hyd[7]
@@ -224,12 +221,12 @@ def _flow(x_frac, hyd, f2, f3, f5, f6, f18):
     return fv + qb
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _ep(cvi):
     return _interp(cvi, EP_X, EP_Y)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _fault(t, idx, strength, onset, ramp):
     if idx < 0 or t < onset:
         return 0.0
@@ -238,8 +235,8 @@ def _fault(t, idx, strength, onset, ramp):
     return strength
 
 
-@njit(cache=True)
-def _simulate_run(u, fidx, fstr, fon, framp, scheme, n_warm, out, extra):
+@njit(cache=True, inline="always", error_model="numpy")
+def _simulate_run(u, fidx, fstr, fon, framp, scheme, steps, n_warm, out, extra):
     """Simulate one run.
 
     ``u`` (T, 4): CV [0..1], P1 [Pa], P2 [Pa], T1 [°C] at 1 Hz, zero-order held.
@@ -248,10 +245,8 @@ def _simulate_run(u, fidx, fstr, fon, framp, scheme, n_warm, out, extra):
     pressure Ps [Pa], positioner controller output CVI.
     """
     n_t = u.shape[0]
-    if scheme == 0:
-        steps, ctrl, dt = STEPS_REF, CTRL_REF, DT_REF
-    else:
-        steps, ctrl, dt = STEPS_FAST, CTRL_FAST, DT_FAST
+    dt = 1.0 / steps
+    ctrl = round(T_CTRL * steps)
     f = np.zeros(19)
     hyd = np.zeros(8)
     # state
@@ -386,8 +381,9 @@ def _simulate_run(u, fidx, fstr, fon, framp, scheme, n_warm, out, extra):
                     v = 0.0
                     p = pm
                 else:
+                    stiff_p = dt * aef * aef * pm / vol
                     v_new = _stem_velocity(
-                        g0 + aef * (pm - PATM), dt * aef * aef * pm / vol, kf, x, xb, xr, dbf, hb, dt
+                        g0 + aef * (pm - PATM), stiff_p, kf, x, xb, xr, dbf, hb, dt
                     )
                     if abs(v_new) > V_CLIP:
                         # the chamber volume law saturates (|v| > 0.02 m/s): the air spring is
@@ -408,7 +404,7 @@ def _simulate_run(u, fidx, fstr, fon, framp, scheme, n_warm, out, extra):
             step += 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _stem_velocity(base, stiff_p, kf, x, xb, xr, dbf, hb, dt):
     """Linearly implicit Euler velocity of the quasi-static stem over one fast step.
 
@@ -433,7 +429,7 @@ def _stem_velocity(base, stiff_p, kf, x, xb, xr, dbf, hb, dt):
     return v_new
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _rhs(p, m, v, mdot, aef, vol, g0, spring, flag):
     vs = _clip(v, -V_CLIP, V_CLIP)
     dp = p * (mdot / m - aef * vs / vol)
@@ -442,15 +438,15 @@ def _rhs(p, m, v, mdot, aef, vol, g0, spring, flag):
     return dp, (g0 + aef * (p - PATM) - spring - C_DAMP * v) / MASS
 
 
-@njit(parallel=True, cache=True)
-def _simulate_batch(u, fidx, fstr, fon, framp, scheme, n_warm, out, extra):
+@njit(parallel=True, cache=True, error_model="numpy")
+def _simulate_batch(u, fidx, fstr, fon, framp, scheme, steps, n_warm, out, extra):
     for r in prange(u.shape[0]):
         _simulate_run(
-            u[r], fidx[r], fstr[r], fon[r], framp[r], scheme, n_warm, out[r], extra[r]
+            u[r], fidx[r], fstr[r], fon[r], framp[r], scheme, steps, n_warm, out[r], extra[r]
         )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def _flow_array(x, p1, p2, t1, f2, f3, f5, f6, f7, f17, f18, out):
     hyd = np.zeros(8)
     for i in range(x.shape[0]):
@@ -501,5 +497,6 @@ def water_density(t, p=0.0):
     t_arr, p_arr = np.broadcast_arrays(
         np.asarray(t, dtype=np.float64), np.asarray(p, dtype=np.float64)
     )
-    out = np.array([_water_density(a, b) for a, b in zip(t_arr.ravel(), p_arr.ravel())])
+    pairs = zip(t_arr.ravel(), p_arr.ravel(), strict=True)
+    out = np.array([_water_density(a, b) for a, b in pairs])
     return out.reshape(t_arr.shape)

@@ -21,7 +21,7 @@ NOISE_STD = float(np.sqrt(5e-9 / 0.0025))
 _SCALE = {"CV": 1.0, "P1": model.P_RANGE, "P2": model.P_RANGE, "T1": model.T_RANGE}
 #: order of the measured channels the kernel returns
 _MEASURED = ("X", "F", "P1", "P2", "T1")
-_INTEGRATORS = {"reference": 0, "fast": 1}
+_INTEGRATORS = {"reference": (0, model.STEPS_REF), "fast": (1, model.STEPS_FAST)}
 
 
 def _check_inputs(inputs: xr.Dataset, *, who: str) -> np.ndarray:
@@ -125,8 +125,9 @@ def _run_model(
     warmup: int,
     progress: bool,
     who: str,
+    steps: int | None = None,
 ):
-    """Run the compiled kernel; returns noise-free measured (run, time, 5) and states (run, time, 4)."""
+    """Run the compiled kernel: noise-free measured (run, time, 5) and states (run, time, 4)."""
     if integrator not in _INTEGRATORS:
         raise ValueError(f"{who}: integrator must be 'fast' or 'reference', got {integrator!r}")
     if isinstance(warmup, bool) or not isinstance(warmup, int | np.integer) or warmup < 0:
@@ -135,7 +136,8 @@ def _run_model(
     n_runs, n_t = u.shape[:2]
     out = np.empty((n_runs, n_t, 5))
     extra = np.empty((n_runs, n_t, 4))
-    scheme = _INTEGRATORS[integrator]
+    scheme, default_steps = _INTEGRATORS[integrator]
+    steps = default_steps if steps is None else int(steps)
     chunk = n_runs if not progress else max(1, min(n_runs, 64))
     bar = None
     if progress:
@@ -145,7 +147,7 @@ def _run_model(
     for start in range(0, n_runs, chunk):
         sl = slice(start, min(n_runs, start + chunk))
         model._simulate_batch(
-            u[sl], idx[sl], strength[sl], onset[sl], ramp[sl], scheme, int(warmup),
+            u[sl], idx[sl], strength[sl], onset[sl], ramp[sl], scheme, steps, int(warmup),
             out[sl], extra[sl],
         )  # fmt: skip
         if bar is not None:
