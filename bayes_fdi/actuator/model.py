@@ -113,7 +113,7 @@ F1, F2, F3, F4, F5, F6, F7, F8, F9, F10 = range(10)
 F11, F12, F13, F14, F15, F16, F17, F18, F19 = range(10, 19)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _interp(x, xp, fp):
     n = xp.shape[0]
     if x <= xp[0]:
@@ -127,12 +127,12 @@ def _interp(x, xp, fp):
     return fp[i - 1] + w * (fp[i] - fp[i - 1])
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _clip(x, lo, hi):
     return lo if x < lo else (hi if x > hi else x)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _play(y, u, width):
     """Backlash (play operator) of total ``width``: output ``y`` follows ``u`` at +-width/2."""
     h = 0.5 * width
@@ -143,12 +143,12 @@ def _play(y, u, width):
     return y
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _vapour_pressure(t):
     return 10.0 ** (10.7167 - 2141.0 / (t + 273.15))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _water_density(t, p):
     t = _clip(t, 0.0, 110.0)
     if t >= 30.0:
@@ -160,7 +160,7 @@ def _water_density(t, p):
     return rho0 / (1.0 - _interp(t, COMP_T, COMP_V) * p)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _hydraulics(p1, p2, t1, f7, f17, out):
     """External faults on the inputs and the valve's pressure/medium algebra.
 
@@ -186,20 +186,20 @@ def _hydraulics(p1, p2, t1, f7, f17, out):
     out[7] = p1e - p2
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _valve_position(x_frac, f2, f3):
     xv = _clip(x_frac + 0.2 * f2, 0.0, 1.0)
     return _clip(xv - 0.1 * f3, 0.0, 1.0)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _choked(dp, km, p1e, rc, pv):
     dp_allow = max(0.0, km * (p1e - rc * pv))
     dp_eff = dp if dp_allow > dp else dp_allow
     return max(dp_eff, 0.0)  # no reverse flow through the valve (P1 < P2)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _flow(x_frac, hyd, f2, f3, f5, f6, f18):
     """Total flow [t/h] through valve and bypass at stem position ``x_frac`` (closing)."""
     p1e, rc, pv, rho, dp = hyd[4], hyd[5], hyd[3], hyd[6], hyd[7]
@@ -221,12 +221,12 @@ def _flow(x_frac, hyd, f2, f3, f5, f6, f18):
     return fv + qb
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _ep(cvi):
     return _interp(cvi, EP_X, EP_Y)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _fault(t, idx, strength, onset, ramp):
     if idx < 0 or t < onset:
         return 0.0
@@ -235,7 +235,7 @@ def _fault(t, idx, strength, onset, ramp):
     return strength
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _simulate_run(u, fidx, fstr, fon, framp, scheme, steps, n_warm, out, extra):
     """Simulate one run.
 
@@ -404,7 +404,7 @@ def _simulate_run(u, fidx, fstr, fon, framp, scheme, steps, n_warm, out, extra):
             step += 1
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _stem_velocity(base, stiff_p, kf, x, xb, xr, dbf, hb, dt):
     """Linearly implicit Euler velocity of the quasi-static stem over one fast step.
 
@@ -429,7 +429,7 @@ def _stem_velocity(base, stiff_p, kf, x, xb, xr, dbf, hb, dt):
     return v_new
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _rhs(p, m, v, mdot, aef, vol, g0, spring, flag):
     vs = _clip(v, -V_CLIP, V_CLIP)
     dp = p * (mdot / m - aef * vs / vol)
@@ -446,7 +446,7 @@ def _simulate_batch(u, fidx, fstr, fon, framp, scheme, steps, n_warm, out, extra
         )
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _flow_array(x, p1, p2, t1, f2, f3, f5, f6, f7, f17, f18, out):
     hyd = np.zeros(8)
     for i in range(x.shape[0]):
