@@ -21,7 +21,7 @@ NOISE_STD = float(np.sqrt(5e-9 / 0.0025))
 _SCALE = {"CV": 1.0, "P1": model.P_RANGE, "P2": model.P_RANGE, "T1": model.T_RANGE}
 #: order of the measured channels the kernel returns
 _MEASURED = ("X", "F", "P1", "P2", "T1")
-_INTEGRATORS = {"reference": (0, model.STEPS_REF), "fast": (1, model.STEPS_FAST)}
+_INTEGRATORS = {"reference": (0, model.STEPS_REF), "fast": (1, model.STEPS_REF)}
 
 
 def _check_inputs(inputs: xr.Dataset, *, who: str) -> np.ndarray:
