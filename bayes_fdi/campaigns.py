@@ -6,45 +6,46 @@ into an immutable :class:`Campaign`; :func:`simulate_campaign` runs the DAMADICS
 (:mod:`bayes_fdi.actuator`) and returns a dataset in the project's format
 (:mod:`bayes_fdi.datasets`); ``bayes-fdi simulate CAMPAIGN.toml --out FILE.nc`` does both.
 
-Schema
-------
-.. code-block:: toml
+The schema (also in ``docs/data.md``):
 
-    [campaign]
-    name = "paper-simulated"       # required; stored as the dataset's ``campaign`` attribute
-    description = "..."            # optional free text
-    seed = 2026                    # required int >= 0; ``simulate_campaign(seed=)`` overrides it
-    duration = 350                 # required int > 0: seconds per run (1 Hz samples)
-    source = "benchmark-inputs"    # "benchmark-inputs" (DGen sines) | "lublin-example" (real hour)
-    runs_per_state = 190           # int > 0 (state mode; omit when [[scenarios]] are given)
-    states = "all"                 # "all" (fn, f1..f19) or a list such as ["fn", "f1", "f17"]
-    batch_size = 64                # runs simulated together (memory/speed only; the result does
-                                   # not depend on it)
+```toml
+[campaign]
+name = "paper-simulated"       # required; stored as the dataset's ``campaign`` attribute
+description = "..."            # optional free text
+seed = 2026                    # required int >= 0; ``simulate_campaign(seed=)`` overrides it
+duration = 350                 # required int > 0: seconds per run (1 Hz samples)
+source = "benchmark-inputs"    # "benchmark-inputs" (DGen sines) | "lublin-example" (real hour)
+runs_per_state = 190           # int > 0 (state mode; omit when [[scenarios]] are given)
+states = "all"                 # "all" (fn, f1..f19) or a list such as ["fn", "f1", "f17"]
+batch_size = 64                # runs simulated together (memory/speed only; the result does
+                               # not depend on it)
 
-    [inputs]                       # how the inputs vary from run to run
-    vary = true                    # benchmark-inputs: random phases/amplitudes (see below)
-    window = "random"              # lublin-example: "random" | "even" offsets of 350 s windows
+[inputs]                       # how the inputs vary from run to run
+vary = true                    # benchmark-inputs: per-run sine phases U[0, 2 pi) and
+                               # amplitude factors U[0.8, 1.2] (actuator.benchmark_inputs)
+window = "random"              # lublin-example: "random" | "even" offsets of 350 s windows
 
-    [faults]                       # defaults for every fault (state mode)
-    strength = [0.5, 1.0]          # magnitude range, drawn uniformly per run; 0 < low <= high <= 1
-    onset = 0.0                    # s; 0 = the whole run is faulty (the paper's per-run features)
-    profile = "abrupt"             # "abrupt" | "incipient"
-    ramp = 0.0                     # s; > 0 for incipient, 0 for abrupt
+[faults]                       # defaults for every fault (state mode)
+strength = [0.5, 1.0]          # magnitude range, drawn uniformly per run; 0 < low <= high <= 1
+onset = 0.0                    # s; 0 = the whole run is faulty (the paper's per-run features)
+profile = "abrupt"             # "abrupt" | "incipient"
+ramp = 0.0                     # s; > 0 for incipient, 0 for abrupt
 
-    [faults.f4]                    # per-fault overrides of any of the keys above, plus
-    strength = [0.05, 0.2]
-    direction = 1                  # sign of the strength: +1, or -1 for the signed faults
-                                   # (f4, f12, f13, f14, f17, f19); default the benchmark's
-                                   # direction (-1 for f12, f14, f19; +1 otherwise)
+[faults.f4]                    # per-fault overrides of any of the keys above, plus
+strength = [0.05, 0.2]
+direction = 1                  # sign of the strength: +1, or -1 for the signed faults
+                               # (f4, f12, f13, f14, f17, f19); default the benchmark's
+                               # direction (-1 for f12, f14, f19; +1 otherwise)
 
-    [[scenarios]]                  # scenario mode: explicit runs instead of runs_per_state/states
-    state = "f1"                   # "fn" or "f1".."f19"
-    strength = 0.25                # magnitude in [0, 1] (sign from direction); 0 for "fn"
-    direction = 1                  # optional, as above
-    onset = 900.0
-    profile = "abrupt"
-    ramp = 0.0
-    runs = 1                       # repetitions (different noise and input draws)
+[[scenarios]]                  # scenario mode: explicit runs instead of runs_per_state/states
+state = "f1"                   # "fn" or "f1".."f19"
+strength = 0.25                # magnitude in (0, 1] (sign from direction); omit for "fn"
+direction = 1                  # optional, as above
+onset = 900.0
+profile = "abrupt"
+ramp = 0.0
+runs = 1                       # repetitions (different noise and input draws)
+```
 
 Every error names the offending key, e.g. ``campaign.duration must be > 0``,
 ``faults.f42: unknown fault``, ``faults.f2.strength: [0.5, 1.5] not within [0, 1]``.
