@@ -705,6 +705,10 @@ def run_from_cli(args) -> int:
     except (CampaignError, FileNotFoundError) as exc:
         print(f"bayes-fdi simulate: {exc}", file=sys.stderr)
         return 2
+    out_dir = os.path.dirname(os.path.abspath(args.out))
+    if not os.path.isdir(out_dir):
+        print(f"bayes-fdi simulate: output directory {out_dir!r} does not exist", file=sys.stderr)
+        return 2
     t0 = time.perf_counter()
     ds = simulate_campaign(campaign, seed=args.seed, progress=not args.no_progress)
     save_dataset(ds, args.out)

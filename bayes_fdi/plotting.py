@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from collections.abc import Sequence
 
 import numpy as np
@@ -199,12 +200,20 @@ def run_from_cli(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ds = load_dataset(args.dataset)
-    if args.overlay:
-        fig, ax = plt.subplots(figsize=(8.0, 4.5))
-        plot_runs(ds, runs=args.runs, channels=args.channels, ax=ax, states=args.states)
-    else:
-        fig = plot_runs(ds, runs=args.runs, channels=args.channels, states=args.states)
+    try:
+        ds = load_dataset(args.dataset)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"bayes-fdi plot: {exc}", file=sys.stderr)
+        return 2
+    try:
+        if args.overlay:
+            fig, ax = plt.subplots(figsize=(8.0, 4.5))
+            plot_runs(ds, runs=args.runs, channels=args.channels, ax=ax, states=args.states)
+        else:
+            fig = plot_runs(ds, runs=args.runs, channels=args.channels, states=args.states)
+    except ValueError as exc:
+        print(f"bayes-fdi plot: {exc}", file=sys.stderr)
+        return 2
     out = args.out or os.path.splitext(args.dataset)[0] + ".png"
     fig.savefig(out, dpi=args.dpi, bbox_inches="tight")
     plt.close(fig)

@@ -88,7 +88,8 @@ def test_day_file_columns_and_units(tmp_path, rng, actuator):
     np.testing.assert_array_equal(ds["time"].values, np.arange(37000.0, 37300.0))
     for name, (col, div) in EXPECTED[actuator].items():
         np.testing.assert_allclose(ds[name].values[0], values[:, col - 1] / div, rtol=1e-15)
-    assert ds.attrs["actuator"] == actuator and ds.attrs["date"] == "17112001"
+    assert ds.attrs["actuator"] == actuator and ds.attrs["day"] == "17112001"
+    assert ds.attrs["date"] == "2001-11-17"
     events = json.loads(ds.attrs["fault_events"])
     assert events and all(e["actuator"] == actuator and e["date"] == "17112001" for e in events)
 
@@ -100,7 +101,7 @@ def test_day_file_values_outside_range_are_kept(tmp_path, rng):
     ds = load_lublin_day(_write(tmp_path / "day.txt", values), actuator=3)
     assert ds["X"].values[0, 5] == pytest.approx(1.035)
     assert ds["P1"].values[0, 6] == pytest.approx(-12.0 / 4000)
-    assert ds.attrs["date"] == ""
+    assert ds.attrs["date"] == "" and ds.attrs["day"] == "" and ds.attrs["fault_events"] == "[]"
 
 
 def test_day_file_gaps_are_kept_and_reported(tmp_path, rng):
@@ -156,7 +157,7 @@ def test_full_size_day_file(tmp_path, rng):
         ds = load_lublin_day(path, actuator=3)
     assert ds.sizes == {"run": 1, "time": 86_400}
     np.testing.assert_allclose(ds["F"].values[0], np.round(values[:, 26], 1) / 40)
-    assert ds.attrs["date"] == "20112001"
+    assert ds.attrs["day"] == "20112001"
 
 
 @pytest.mark.parametrize(

@@ -85,3 +85,11 @@ def test_cli_writes_png(ds, tmp_path, capsys):
     assert capsys.readouterr().out.strip() == str(out)
     assert main(["plot", str(tmp_path / "d.nc"), "--states", "f17", "--overlay"]) == 0
     assert (tmp_path / "d.png").stat().st_size > 1000
+
+
+def test_cli_errors_are_reported(ds, tmp_path, capsys):
+    assert main(["plot", str(tmp_path / "missing.nc")]) == 2
+    assert "missing.nc" in capsys.readouterr().err
+    save_dataset(ds, tmp_path / "d.nc")
+    assert main(["plot", str(tmp_path / "d.nc"), "--runs", "9"]) == 2
+    assert "run 9 out of range" in capsys.readouterr().err

@@ -362,10 +362,11 @@ def load_lublin_day(
         One run (state ``"fn"``; see :data:`LUBLIN_FAULT_EVENTS` and :func:`lublin_fault_labels`
         for the real faults of that day) with channels ``CV, P1, P2, T1, X, F`` divided by the
         ranges; ``time`` holds the seconds from midnight of column 1. Gaps stay ``NaN``. Attrs:
-        ``campaign="lublin-day"``, ``source``, ``actuator``, ``date`` (``"DDMM2001"`` when the file
-        name has that form, else ``""``), ``units``, ``gaps`` (JSON: per channel ``n_missing``,
-        ``n_gaps`` and inclusive ``spans`` in seconds) and ``fault_events`` (JSON list of that
-        day's real fault events of this actuator).
+        ``campaign="lublin-day"``, ``source``, ``actuator``, ``day`` (``"DDMM2001"`` when the file
+        name has that form, else ``""``), ``date`` (the same day as ``"2001-MM-DD"``),
+        ``units``, ``gaps`` (JSON: per channel ``n_missing``, ``n_gaps`` and inclusive ``spans``
+        in seconds) and ``fault_events`` (JSON list of that day's real fault events of this
+        actuator).
 
     Raises
     ------
@@ -409,9 +410,9 @@ def load_lublin_day(
             raise ValueError(f"ranges[{name!r}] divisor must be > 0, got {divisor}")
         channels[name] = values[:, DAY_COLUMNS.index(columns[name])] / divisor
     stem = os.path.splitext(os.path.basename(source))[0]
-    date = stem if _DAY_NAME.match(stem) else ""
-    events = [e._asdict() for e in LUBLIN_FAULT_EVENTS if e.date == date and e.actuator == actuator]
-    ds = _make_real(channels, source, actuator, date, ranges, events)
+    day = stem if _DAY_NAME.match(stem) else ""
+    events = [e._asdict() for e in LUBLIN_FAULT_EVENTS if e.date == day and e.actuator == actuator]
+    ds = _make_real(channels, source, actuator, day, ranges, events)
     ds = ds.assign_coords(time=expected.astype(np.float64))
     ds.attrs.update(_gap_attrs(ds))
     if warn:
@@ -419,7 +420,7 @@ def load_lublin_day(
     return ds
 
 
-def _make_real(channels, source, actuator, date, ranges, events) -> xr.Dataset:
+def _make_real(channels, source, actuator, day, ranges, events) -> xr.Dataset:
     # make_dataset validates without NaN; build with NaN replaced, then restore the gaps.
     nan_masks = {k: np.isnan(v) for k, v in channels.items()}
     filled = {k: np.where(nan_masks[k], 0.0, v) for k, v in channels.items()}
@@ -430,7 +431,8 @@ def _make_real(channels, source, actuator, date, ranges, events) -> xr.Dataset:
         attrs={
             "source": f"Lublin Sugar Factory benchmark day file {os.path.basename(source)}",
             "actuator": int(actuator),
-            "date": date,
+            "date": f"{day[4:]}-{day[2:4]}-{day[:2]}" if day else "",
+            "day": day,
             "units": _units_attr(actuator, ranges),
             "fault_events": json.dumps(events),
         },
