@@ -88,7 +88,7 @@ def test_single_fault_applies_to_every_run():
 
 def test_incipient_fault_grows_along_its_ramp():
     inputs = benchmark_inputs(n_runs=2, duration=200)
-    ds, st = simulate(
+    _, st = simulate(
         inputs,
         [None, Fault("f18", 1.0, onset=20.0, profile="incipient", ramp=100.0)],
         noise=False,
@@ -150,8 +150,9 @@ def test_inject_faults_adds_the_model_difference_to_the_record():
     record = simulate(inputs, seed=5)  # stands in for a real noisy record
     faults = [None, Fault("f18", 0.5, onset=60.0), Fault("f17", 0.3, onset=60.0)]
     injected = inject_faults(record, faults)
-    _, nominal = simulate(inputs, noise=False, return_states=True)
-    _, faulty = simulate(inputs, faults, noise=False, return_states=True)
+    # the model is driven by the record's own (measured) inputs
+    _, nominal = simulate(record, [None] * 3, noise=False, return_states=True)
+    _, faulty = simulate(record, faults, noise=False, return_states=True)
     xr.testing.assert_equal(injected.isel(run=0), record.isel(run=0))
     for r in (1, 2):
         # before the onset the record is untouched
