@@ -282,11 +282,14 @@ def _simulate_run(u, fidx, fstr, fon, framp, scheme, steps, n_warm, out, extra):
             fv = _fault(t, fidx, fstr, fon, framp)
             if fidx >= 0:
                 f[fidx] = fv
-            if j == 0 or fv != fval_last:
+            if j == 0:
                 _hydraulics(u[ki, 1], u[ki, 2], u[ki, 3], f[F7], f[F17], hyd)
-                if j > 0 and framp <= 0.0:
+            elif fv != fval_last:
+                if fidx == F7 or fidx == F17:
+                    _hydraulics(u[ki, 1], u[ki, 2], u[ki, 3], f[F7], f[F17], hyd)
+                if framp <= 0.0:
                     dyn_until = j + n_dyn
-                fval_last = fv
+            fval_last = fv
             rk4 = scheme == 0 or j < dyn_until or j % 2 == 1
             dt = dt_tick if rk4 else 2.0 * dt_tick
             # --- servomotor geometry with faults ---------------------------------------
