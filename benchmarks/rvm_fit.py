@@ -123,8 +123,9 @@ def make_data(
 ) -> dict[str, np.ndarray]:
     """Seeded benchmark data: inputs uniform on ``[-1, 1]^3``, Gaussian noise of ``noise_std``.
 
-    The training rows are nested: the benchmark at size N uses the first N rows, so every size
-    shares its data with the smaller ones. The test set is independent of ``n_train``.
+    The benchmark generates the set once for its largest N and fits size N on the first N rows,
+    so the sizes are nested. The test set does not depend on ``n_train`` (separate random
+    stream), so every size is scored on the same points.
 
     Returns
     -------
