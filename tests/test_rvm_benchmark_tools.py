@@ -254,3 +254,12 @@ def test_run_worker_end_to_end_and_guards(tmp_path):
         sys.executable, "sklearn-ard", path, 10_000, 0.5, timeout_s=120.0, mem_limit_mb=8192.0
     )
     assert bad["status"] == "error" and "exceeds" in bad["detail"]
+
+
+def test_replace_marked_block_keeps_surroundings_and_rejects_bad_markers():
+    text = f"intro\n{bench.BEGIN_MARK}\nold table\n{bench.END_MARK}\noutro\n"
+    new = bench.replace_marked_block(text, "| new |\n")
+    assert new == f"intro\n{bench.BEGIN_MARK}\n| new |\n{bench.END_MARK}\noutro\n"
+    assert bench.replace_marked_block(new, "| new |") == new  # idempotent
+    with pytest.raises(ValueError, match="marker"):
+        bench.replace_marked_block("no markers", "x")
