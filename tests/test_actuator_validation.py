@@ -48,16 +48,45 @@ def real_hour():
     return load_lublin_example()
 
 
-def test_fast_matches_reference_on_test_inputs_nominal_and_faults():
-    names = [None, "f1", "f2", "f6", "f7", "f10", "f11", "f13", "f16", "f17", "f18", "f19"]
+@pytest.mark.parametrize("hold", ["linear", "zero"])
+def test_fast_matches_reference_on_test_inputs_nominal_and_faults(hold):
+    names = [None, "f1", "f2", "f3", "f6", "f7", "f10", "f16", "f17", "f18", "f19"]
     inputs = benchmark_inputs(n_runs=len(names), duration=350, vary=True, seed=4)
     faults = [None if n is None else Fault(n, 0.75 * DIRECTION.get(n, 1.0), 100.0) for n in names]
-    fast = simulate(inputs, faults, noise=False, integrator="fast")
-    ref = simulate(inputs, faults, noise=False, integrator="reference")
+    fast = simulate(inputs, faults, noise=False, integrator="fast", hold=hold)
+    ref = simulate(inputs, faults, noise=False, integrator="reference", hold=hold)
     for r, name in enumerate(names):
         for ch in ("X", "F"):
             err = _rms(fast[ch].values[r], ref[ch].values[r])
             assert err <= NOISE_STD, (name, ch, err)
+
+
+def test_fast_is_within_the_reference_discretisation_error_on_sensitive_faults():
+    # with smooth (linearly interpolated) inputs the positioner idles in its E/P dead zone,
+    # where the stem position is only neutrally stable: any integration error persists. For
+    # the faults that make the loop most sensitive (softer spring f11, E/P gain f12, stem
+    # sensor f13 which also scales X' by up to 2.25) the fast path is compared with the
+    # reference's own error, the change of the 2.5 ms RK4 when its step is halved
+    from bayes_fdi.actuator.simulate import _check_inputs, _run_model
+
+    names = ["f11", "f12", "f13"]
+    inputs = benchmark_inputs(n_runs=3, duration=350, vary=True, seed=4)
+    faults = [Fault(n, 0.75 * DIRECTION.get(n, 1.0), 100.0) for n in names]
+    u = _check_inputs(inputs, who="test")
+    kw = {"warmup": 30, "progress": False, "who": "test", "hold": "linear"}
+    out = {}
+    for key, integrator, steps in (
+        ("fast", "fast", None),
+        ("ref", "reference", None),
+        ("ref_half_step", "reference", 800),
+    ):
+        raw, _ = _run_model(u, faults, integrator=integrator, steps=steps, **kw)
+        out[key] = np.clip(raw, 0.0, 1.0)
+    for r, name in enumerate(names):
+        for c, ch in enumerate(("X", "F")):
+            err = _rms(out["fast"][r, :, c], out["ref"][r, :, c])
+            own = _rms(out["ref_half_step"][r, :, c], out["ref"][r, :, c])
+            assert err <= max(NOISE_STD, 1.5 * own), (name, ch, err, own)
 
 
 def test_fast_matches_reference_on_the_real_hour(real_hour):
@@ -66,6 +95,7 @@ def test_fast_matches_reference_on_the_real_hour(real_hour):
     batch = runs.isel(run=[0, 0, 0, 0]).assign_coords(run=np.arange(4))
     fast = simulate(batch, faults, noise=False, integrator="fast")
     ref = simulate(batch, faults, noise=False, integrator="reference")
+    assert fast.attrs["hold"] == "linear"
     for r in range(4):
         for ch in ("X", "F"):
             assert _rms(fast[ch].values[r], ref[ch].values[r]) <= NOISE_STD
@@ -101,19 +131,26 @@ def test_large_play_faults_agree_in_distribution(large_play_effects, name):
 
 
 def test_nominal_model_reproduces_the_real_hour(real_hour):
-    """Fidelity to real plant data (Lublin Actuator 3, 11 Oct 2001, 1 h).
-
-    The issue's targets are X RMS <= 3 % and F RMS <= 6 % of range. Measured with this
-    model: X 2.8 %, F 7.0 %; the F target is NOT met (the model's flow law alone, fed the
-    recorded X, is already 4.2 % RMS off with a -2.3 % bias), so F is checked against 7.5 %.
-    """
+    """Fidelity to real plant data (Lublin Actuator 3, 11 Oct 2001, 1 h): X RMS <= 3 % and
+    F RMS <= 6 % of range (measured: 2.0 % and 5.2 %)."""
     sim = simulate(real_hour, seed=0)
     x_err = _rms(sim.X.values, real_hour.X.values)
     f_err = _rms(sim.F.values, real_hour.F.values)
     assert x_err <= 0.03
-    assert f_err <= 0.075
+    assert f_err <= 0.06
     # and far better than the trivial "X = CV" model (an independent baseline)
     assert x_err < 0.5 * _rms(real_hour.CV.values, real_hour.X.values)
+
+
+def test_linear_hold_reconstructs_the_record_better_than_zero_order_hold(real_hour):
+    # the samples of a record are values at instants: interpolating between them (as
+    # Simulink's From Workspace does for DABLib) fits the plant better than holding them
+    linear = simulate(real_hour, seed=0, hold="linear")
+    zero = simulate(real_hour, seed=0, hold="zero")
+    for ch in ("X", "F"):
+        assert _rms(linear[ch].values, real_hour[ch].values) < 0.8 * _rms(
+            zero[ch].values, real_hour[ch].values
+        )
 
 
 @pytest.fixture(scope="module")
@@ -140,8 +177,8 @@ def test_fault_signature_matches_the_reference_table(signatures, name):
         # hunting's phase (test_f4_signature_over_input_phases checks the distribution)
         assert dx > 0.02 and df < 0
         return
-    tol_x = 0.02 + 0.1 * abs(rx)
-    tol_f = 0.02 + 0.1 * abs(rf)
+    tol_x = 0.01 + 0.05 * abs(rx)
+    tol_f = 0.01 + 0.05 * abs(rf)
     assert abs(dx - rx) <= tol_x, (dx, rx)
     assert abs(df - rf) <= tol_f, (df, rf)
 
