@@ -231,8 +231,8 @@ def simulate(
         large backlash (f4, f15), where they agree in distribution (see ``docs/actuator.md``).
     hold
         How the 1 Hz samples drive the model between samples: ``"linear"`` (default)
-        interpolates linearly from each sample to the next, as Simulink's From Workspace block
-        feeds recorded data to DABLib (with it the model reproduces the real hour to 2.0 % / 5.2 %
+        interpolates linearly from each sample to the next (the default of Simulink's From
+        Workspace block; with it the model reproduces the real hour to 2.0 % / 5.2 %
         RMS in X / F, against 2.8 % / 7.0 % with ``"zero"``); ``"zero"`` holds each sample for
         one second (zero-order hold, DGen's 1 s outputs taken literally).
     noise
