@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = [i for i, s in enumerate(states) if s == state]
         ex = max(np.sqrt(np.mean((fast.X.values[r] - ref.X.values[r]) ** 2)) for r in rows)
         ef = max(np.sqrt(np.mean((fast.F.values[r] - ref.F.values[r]) ** 2)) for r in rows)
-        flag = "" if max(ex, ef) <= NOISE_STD else "  > noise (large-play hunting, see docs)"
+        flag = "" if max(ex, ef) <= NOISE_STD else "  > noise (hunting or dead-zone drift)"
         print(f"{state:6s} {ex:10.5f} {ef:10.5f}{flag}")
     return 0
 

@@ -223,7 +223,8 @@ def simulate(
     seed
         Seed of the measurement noise. Run ``r`` uses the stream
         ``numpy.random.default_rng([seed, run_id])`` where ``run_id`` is its ``run``
-        coordinate, so a run's noise does not depend on the other runs of the batch.
+        coordinate (its position if the coordinate is not a non-negative integer), so a run's
+        noise does not depend on the other runs of the batch.
     integrator
         ``"fast"`` (default: 5 ms quasi-static implicit stem, with RK4 ticks for 50 ms after each
         input sample) or ``"reference"`` (DABLib's RK4 at 2.5 ms, about twice the cost). They
@@ -231,8 +232,8 @@ def simulate(
         large backlash (f4, f15), where they agree in distribution (see ``docs/actuator.md``).
     hold
         How the 1 Hz samples drive the model between samples: ``"linear"`` (default)
-        interpolates linearly from each sample to the next, as Simulink's From Workspace block
-        feeds recorded data to DABLib (with it the model reproduces the real hour to 2.0 % / 5.2 %
+        interpolates linearly from each sample to the next (the default of Simulink's From
+        Workspace block; with it the model reproduces the real hour to 2.0 % / 5.2 %
         RMS in X / F, against 2.8 % / 7.0 % with ``"zero"``); ``"zero"`` holds each sample for
         one second (zero-order hold, DGen's 1 s outputs taken literally).
     noise
@@ -273,7 +274,10 @@ def simulate(
         u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold
     )
     if noise:
-        out = out + _noise(np.asarray(inputs["run"].values), u.shape[1], int(seed))
+        run_ids = np.asarray(inputs["run"].values)
+        if not np.issubdtype(run_ids.dtype, np.integer) or (run_ids < 0).any():
+            run_ids = np.arange(run_ids.size)  # non-integer run labels: use positions
+        out = out + _noise(run_ids, u.shape[1], int(seed))
     np.clip(out, 0.0, 1.0, out=out)
     ds = inputs.copy()
     for i, name in enumerate(_MEASURED):
