@@ -307,6 +307,7 @@ def run_worker(
                 time.sleep(0.05)
         base = {"method": method, "n": n, "sigma": sigma}
         if status is not None:
+            detail += f"; RSS reached {max_rss:.0f} MB" if status == "timeout" else ""
             return {**base, "status": status, "detail": detail, "watch_rss_mb": max_rss}
         if proc.returncode != 0 or not out.exists():
             lines = [ln for ln in err_path.read_text().splitlines() if ln.strip()]
