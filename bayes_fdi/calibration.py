@@ -415,6 +415,10 @@ def reliability_diagram(
     acc = np.asarray(res.bin_accuracy, dtype=float)
     if res.classwise:
         if class_index is None:
+            if res.strategy != "uniform":
+                raise ValueError(
+                    "pooling classwise bins needs uniform bins; pass class_index to draw one class"
+                )
             tot = counts.sum(axis=0)
             with np.errstate(invalid="ignore", divide="ignore"):
                 conf = np.where(tot > 0, np.nansum(conf * counts, axis=0) / tot, np.nan)

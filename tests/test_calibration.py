@@ -353,3 +353,12 @@ def test_reliability_diagram_draws_bins_with_counts(rng):
     assert "classwise" in ax2.get_title()
     with pytest.raises(ValueError, match="proba"):
         reliability_diagram(y)
+
+
+def test_reliability_diagram_classwise_quantile_needs_a_class(rng):
+    y, p = _calibrated_sample(rng, 600, 3)
+    res = expected_calibration_error(y, p, n_bins=5, strategy="quantile", classwise=True)
+    with pytest.raises(ValueError, match="class_index"):
+        reliability_diagram(res)
+    ax = reliability_diagram(res, class_index=2)
+    assert sorted(int(t.get_text()) for t in ax.texts) == sorted(res.bin_counts[2])
