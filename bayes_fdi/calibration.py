@@ -133,7 +133,9 @@ class ECEResult(NamedTuple):
         ECE: sum over bins of ``count / n * |accuracy - confidence|`` (classwise: averaged
         over classes).
     ci_low, ci_high
-        Bootstrap percentile interval of the ECE (NaN when ``n_bootstrap == 0``).
+        Bootstrap confidence interval of the population ECE (NaN when ``n_bootstrap == 0``);
+        by default the *basic* (bias-reversing) interval ``[2 v - q_hi, 2 v - q_lo]``
+        clipped at 0, see :func:`expected_calibration_error`.
     bin_edges
         Bin edges, ``n_bins + 1`` per row.
     bin_counts
@@ -151,6 +153,13 @@ class ECEResult(NamedTuple):
         Whether this is the classwise ECE.
     classes
         Class labels in column order.
+    debiased
+        Bootstrap bias-corrected ECE ``max(0, 2 v - mean(bootstrap ECEs))`` (NaN without
+        bootstrap).
+    noise_floor
+        Expected ECE of a *perfectly calibrated* model with the same bins and confidences
+        (normal approximation: ``sqrt(2/pi) * sum_b sqrt(sum_{i in b} c_i (1 - c_i)) / n``).
+        An ECE near this value is indistinguishable from sampling noise.
     """
 
     value: float
@@ -164,6 +173,8 @@ class ECEResult(NamedTuple):
     strategy: str = "uniform"
     classwise: bool = False
     classes: np.ndarray | None = None
+    debiased: float = float("nan")
+    noise_floor: float = float("nan")
 
     @property
     def n_samples(self) -> int:
@@ -174,8 +185,8 @@ class ECEResult(NamedTuple):
 
 def _bin_stats(
     conf: np.ndarray, hit: np.ndarray, n_bins: int, strategy: str
-) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Bin ``conf`` and compute (ece, mce, edges, counts, mean conf, mean hit)."""
+) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """Bin ``conf``: (ece, mce, edges, counts, mean conf, mean hit, noise floor)."""
     n = conf.shape[0]
     if strategy == "uniform":
         edges = np.linspace(0.0, 1.0, n_bins + 1)
@@ -208,25 +219,32 @@ def _bin_stats(
     ece = float(gap.sum() / n)
     nonempty = counts > 0
     mce = float(np.max(np.abs(mean_hit[nonempty] - mean_conf[nonempty])))
-    return ece, mce, edges, counts, mean_conf, mean_hit
+    var_sum = np.bincount(idx, weights=conf * (1.0 - conf), minlength=n_bins)
+    floor = float(np.sqrt(2.0 / np.pi) * np.sum(np.sqrt(var_sum)) / n)
+    return ece, mce, edges, counts, mean_conf, mean_hit, floor
+
+
+def _conf_hit(y_idx: np.ndarray, p: np.ndarray, classwise: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Confidences and outcomes, one column per binned quantity (1 top-label, K classwise)."""
+    if classwise:
+        hit = (y_idx[:, None] == np.arange(p.shape[1])[None, :]).astype(np.float64)
+        return p, hit
+    pred = np.argmax(p, axis=1)
+    conf = p[np.arange(p.shape[0]), pred]
+    return conf[:, None], (pred == y_idx).astype(np.float64)[:, None]
 
 
 def _ece_arrays(
-    y_idx: np.ndarray, p: np.ndarray, n_bins: int, strategy: str, classwise: bool
-) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    conf: np.ndarray, hit: np.ndarray, n_bins: int, strategy: str, classwise: bool
+) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    rows = [_bin_stats(conf[:, k], hit[:, k], n_bins, strategy) for k in range(conf.shape[1])]
     if not classwise:
-        pred = np.argmax(p, axis=1)
-        conf = p[np.arange(p.shape[0]), pred]
-        hit = (pred == y_idx).astype(np.float64)
-        return _bin_stats(conf, hit, n_bins, strategy)
-    rows = [
-        _bin_stats(p[:, k], (y_idx == k).astype(np.float64), n_bins, strategy)
-        for k in range(p.shape[1])
-    ]
+        return rows[0]
     ece = float(np.mean([r[0] for r in rows]))
     mce = float(np.max([r[1] for r in rows]))
     stacked = [np.stack([r[i] for r in rows]) for i in range(2, 6)]
-    return (ece, mce, *stacked)
+    floor = float(np.mean([r[6] for r in rows]))
+    return (ece, mce, *stacked, floor)
 
 
 def expected_calibration_error(
@@ -239,6 +257,7 @@ def expected_calibration_error(
     classwise: bool = False,
     n_bootstrap: int = 0,
     confidence_level: float = 0.95,
+    ci_method: str = "basic",
     random_state: int | np.random.Generator | None = None,
 ) -> ECEResult:
     """Expected calibration error of a class distribution.
@@ -249,7 +268,15 @@ def expected_calibration_error(
     et al. 2019): the same for every class ``k`` with confidence ``proba[:, k]`` and outcome
     ``y == k``, averaged over classes. Both are binned estimators and biased upwards for
     finite samples (even a perfectly calibrated model has ECE > 0, of order
-    ``sqrt(n_bins / n)``), which is why bin counts and bootstrap intervals are returned.
+    ``sqrt(n_bins / n)``, returned as ``noise_floor``), which is why bin counts, a
+    bias-corrected value and bootstrap intervals are returned too.
+
+    The bootstrap resamples the samples with replacement and recomputes the ECE (equal-mass
+    bins are re-cut on every resample). Because the ECE of a resample is biased upwards
+    relative to the ECE of the sample, just as the sample's is relative to the population's,
+    the default interval is the *basic* bootstrap interval ``[2 v - q_hi, 2 v - q_lo]``
+    (clipped at 0), which moves the bias the right way; ``ci_method="percentile"`` gives
+    ``[q_lo, q_hi]`` (the spread of resampled ECEs, which can lie entirely above ``v``).
 
     Parameters
     ----------
@@ -271,10 +298,12 @@ def expected_calibration_error(
     classwise
         Compute the classwise ECE instead of the top-label ECE.
     n_bootstrap
-        Number of bootstrap resamples (of samples, with replacement) for a percentile
-        confidence interval; 0 (default) skips it and the interval is NaN.
+        Number of bootstrap resamples (of samples, with replacement) for the confidence
+        interval and ``debiased``; 0 (default) skips them (NaN).
     confidence_level
         Coverage of the bootstrap interval (default 0.95).
+    ci_method
+        ``"basic"`` (default) or ``"percentile"`` bootstrap interval.
     random_state
         Seed or generator of the bootstrap.
 
@@ -294,19 +323,29 @@ def expected_calibration_error(
         raise ValueError("n_bootstrap must be >= 0")
     if not 0 < confidence_level < 1:
         raise ValueError("confidence_level must lie in (0, 1)")
+    if ci_method not in ("basic", "percentile"):
+        raise ValueError(f"ci_method must be 'basic' or 'percentile', got {ci_method!r}")
     lookup = {c: i for i, c in enumerate(cls.tolist())}
     y_idx = np.array([lookup[v] for v in y.tolist()], dtype=np.intp)
-    ece, mce, edges, counts, conf, acc = _ece_arrays(y_idx, p, n_bins, strategy, classwise)
-    lo = hi = float("nan")
+    c_all, h_all = _conf_hit(y_idx, p, classwise)
+    ece, mce, edges, counts, conf, acc, floor = _ece_arrays(
+        c_all, h_all, n_bins, strategy, classwise
+    )
+    lo = hi = debiased = float("nan")
     if n_bootstrap:
         rng = np.random.default_rng(random_state)
         n = y.shape[0]
         boots = np.empty(n_bootstrap)
         for i in range(n_bootstrap):
             take = rng.integers(0, n, size=n)
-            boots[i] = _ece_arrays(y_idx[take], p[take], n_bins, strategy, classwise)[0]
+            boots[i] = _ece_arrays(c_all[take], h_all[take], n_bins, strategy, classwise)[0]
         alpha = (1.0 - confidence_level) / 2.0
-        lo, hi = (float(v) for v in np.quantile(boots, [alpha, 1.0 - alpha]))
+        q_lo, q_hi = (float(v) for v in np.quantile(boots, [alpha, 1.0 - alpha]))
+        if ci_method == "percentile":
+            lo, hi = q_lo, q_hi
+        else:
+            lo, hi = max(0.0, 2 * ece - q_hi), max(0.0, 2 * ece - q_lo)
+        debiased = max(0.0, 2 * ece - float(np.mean(boots)))
     return ECEResult(
         value=ece,
         ci_low=lo,
@@ -319,6 +358,8 @@ def expected_calibration_error(
         strategy=strategy,
         classwise=bool(classwise),
         classes=cls,
+        debiased=debiased,
+        noise_floor=floor,
     )
 
 

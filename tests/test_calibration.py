@@ -63,9 +63,40 @@ def test_ece_of_calibrated_sampler_is_sampling_noise_only(rng, strategy):
     # the binned ECE of a calibrated model is its sampling noise, ~ sqrt(2/pi) sigma per bin
     assert res.value < 3 * noise
     assert res.value < 0.02
-    assert res.ci_low <= res.value <= res.ci_high
-    assert res.ci_low < 2 * noise
+    # the basic interval reaches down to (about) zero, the true ECE
+    assert res.ci_low <= noise
+    assert res.ci_low <= res.ci_high
+    assert res.debiased < res.value
     assert res.bin_counts.sum() == 20_000
+    # noise floor uses sum c(1-c) per bin, <= the c_bar(1-c_bar) version (Jensen), close to it
+    assert 0.8 * noise < res.noise_floor <= noise * (1 + 1e-12)
+
+
+def test_noise_floor_is_the_mean_ece_of_calibrated_models(rng):
+    eces, floors = [], []
+    for _ in range(40):
+        y, p = _calibrated_sample(rng, 2000, 3)
+        r = expected_calibration_error(y, p, n_bins=10)
+        eces.append(r.value)
+        floors.append(r.noise_floor)
+    assert np.mean(eces) == pytest.approx(np.mean(floors), rel=0.12)
+
+
+def test_basic_bootstrap_interval_covers_the_true_ece(rng):
+    hits_basic = hits_pct = 0
+    reps = 40
+    for i in range(reps):
+        conf = rng.uniform(0.6, 1.0, size=1500)
+        y, p = _top_label_sample(rng, conf.size, 3, conf, conf - 0.1)
+        kw = {"n_bins": 10, "n_bootstrap": 150, "random_state": i}
+        basic = expected_calibration_error(y, p, **kw)
+        pct = expected_calibration_error(y, p, ci_method="percentile", **kw)
+        hits_basic += basic.ci_low <= 0.1 <= basic.ci_high
+        hits_pct += pct.ci_low <= 0.1 <= pct.ci_high
+        assert pct.value == basic.value
+    # nominal 95 %: allow for Monte-Carlo error of 40 replicates
+    assert hits_basic / reps >= 0.85
+    assert hits_basic >= hits_pct
 
 
 def test_ece_of_constant_overconfidence_is_the_shift(rng):
