@@ -481,7 +481,7 @@ def reliability_diagram(
         left[ok], conf[ok] - acc[ok], bottom=acc[ok], width=width[ok], align="edge",
         color="C3", alpha=0.3, edgecolor="C3", lw=0.5, hatch="//", label="gap to confidence",
     )  # fmt: skip
-    ax.plot(conf[ok], acc[ok], "o", color="k", ms=3, label="bin mean confidence")
+    ax.plot(conf[ok], acc[ok], "o", color="k", ms=3, label="(mean confidence, frequency)")
     if show_counts:
         for lo_, w_, a_, c_ in zip(left[ok], width[ok], acc[ok], counts[ok], strict=True):
             ax.text(lo_ + w_ / 2, min(a_ + 0.02, 0.97), str(int(c_)), ha="center", fontsize=6)

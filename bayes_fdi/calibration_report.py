@@ -211,9 +211,10 @@ def _num(v: float | None) -> str:
 
 
 def _fmt_ece(e: dict[str, Any]) -> str:
+    """``plug-in (bias-corrected [basic CI])``, or just the plug-in without bootstrap."""
     if e["ci_low"] is None or not np.isfinite(e["ci_low"]):
         return f"{e['value']:.4f}"
-    return f"{e['value']:.4f} [{e['ci_low']:.4f}, {e['ci_high']:.4f}]"
+    return f"{e['value']:.4f} ({_num(e['debiased'])} [{e['ci_low']:.4f}, {e['ci_high']:.4f}])"
 
 
 def write_calibration_report(
@@ -383,10 +384,11 @@ def _markdown(r: dict[str, Any], node_note: str) -> str:
         "## Whole tree",
         "",
         f"Recalibration: {rc['method']} (T = {temp_s}, fitted on {rc['n_fit']} runs).",
-        "ECE values are plug-in estimates with 95 % basic-bootstrap intervals for the "
-        "population ECE; the bias-corrected ECE subtracts the bootstrap estimate of the "
-        "estimator's upward bias; the noise floor is the ECE a perfectly calibrated model "
-        "would show on this many runs (values near it are indistinguishable from noise). "
+        "ECE cells: plug-in estimate (bias-corrected estimate [95 % basic-bootstrap interval "
+        "of the population ECE]). The plug-in ECE is biased upwards, so it may lie above the "
+        "interval; the bias-corrected value subtracts the bootstrap estimate of that bias. "
+        "The noise floor is the ECE a perfectly calibrated model would show on this many "
+        "runs: plug-in values near it are indistinguishable from sampling noise. "
         "Brier score is the multi-class one (sum over classes of squared errors, range [0, 2]).",
         "",
         "| metric | before | after |",
@@ -396,8 +398,6 @@ def _markdown(r: dict[str, Any], node_note: str) -> str:
         f"| top-label ECE (equal mass) | {_fmt_ece(b['ece_quantile'])} | "
         f"{_fmt_ece(a['ece_quantile'])} |",
         f"| classwise ECE | {_fmt_ece(b['ece_classwise'])} | {_fmt_ece(a['ece_classwise'])} |",
-        f"| top-label ECE, bias-corrected | {_num(b['ece']['debiased'])} | "
-        f"{_num(a['ece']['debiased'])} |",
         f"| noise floor of top-label ECE | {b['ece']['noise_floor']:.4f} | "
         f"{a['ece']['noise_floor']:.4f} |",
         f"| MCE (top-label) | {b['ece']['mce']:.4f} | {a['ece']['mce']:.4f} |",
