@@ -207,6 +207,8 @@ class SevaRecord:
         Fraction of window samples whose inputs are novel (NaN when not checked).
     feature_novelty
         Nearest-neighbour distance ratio of the run's feature vector (NaN when not checked).
+    window
+        Window index within the run for windowed diagnoses, else None.
     """
 
     run: int
@@ -229,6 +231,7 @@ class SevaRecord:
     saturated_fraction: float = 0.0
     novel_fraction: float = math.nan
     feature_novelty: float = math.nan
+    window: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-Python dict (JSON-ready: status as its name, distribution as a dict)."""
@@ -331,6 +334,34 @@ def _stack_samples(runs: xr.Dataset, channels: Sequence[str]) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 # measurement screening (BLIND)
 # --------------------------------------------------------------------------------------
+def _screen_one(
+    values: Mapping[str, np.ndarray],
+    th: SevaThresholds,
+    limits: Mapping[str, tuple[float, float]],
+) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Missing and saturated fractions per channel of one run/window, and BLIND reasons."""
+    names = list(values)
+    missing = np.zeros(len(names))
+    saturated = np.zeros(len(names))
+    why = []
+    for j, c in enumerate(names):
+        v = np.asarray(values[c], dtype=np.float64)
+        if v.size == 0:
+            raise ValueError("a run or window holds no samples")
+        bad = ~np.isfinite(v)
+        missing[j] = bad.mean()
+        if c in limits:
+            lo, hi = limits[c]
+            with np.errstate(invalid="ignore"):
+                rail = (v <= lo + th.saturation_tol) | (v >= hi - th.saturation_tol)
+            saturated[j] = (rail & ~bad).mean()
+        if missing[j] > th.max_missing:
+            why.append(f"{c} missing in {missing[j]:.0%} of samples")
+        if saturated[j] > th.max_saturated:
+            why.append(f"{c} saturated in {saturated[j]:.0%} of samples")
+    return missing, saturated, tuple(why)
+
+
 def screen_measurements(
     runs: xr.Dataset,
     *,
@@ -339,6 +370,9 @@ def screen_measurements(
     saturation_limits: Mapping[str, tuple[float, float]] | None = None,
 ) -> dict[str, np.ndarray]:
     """Per-run missing and saturated fractions and a BLIND flag.
+
+    A sample is missing when NaN/inf, saturated when within ``saturation_tol`` of (or beyond)
+    a rail of ``saturation_limits`` (default: [0, 1] for every normalised channel).
 
     Returns
     -------
@@ -352,28 +386,17 @@ def screen_measurements(
     if absent:
         raise ValueError(f"dataset lacks channel(s) {absent}")
     n_runs = runs.sizes["run"]
+    arrays = {c: np.asarray(runs[c].transpose("run", "time").values) for c in channels}
     missing = np.zeros((n_runs, len(channels)))
     saturated = np.zeros((n_runs, len(channels)))
-    for j, c in enumerate(channels):
-        v = np.asarray(runs[c].transpose("run", "time").values, dtype=np.float64)
-        bad = ~np.isfinite(v)
-        missing[:, j] = bad.mean(axis=1)
-        if c in limits:
-            lo, hi = limits[c]
-            with np.errstate(invalid="ignore"):
-                rail = (v <= lo + th.saturation_tol) | (v >= hi - th.saturation_tol)
-            saturated[:, j] = (rail & ~bad).mean(axis=1)
     blind = np.zeros(n_runs, dtype=bool)
     reasons = np.empty(n_runs, dtype=object)
     for i in range(n_runs):
-        why = []
-        for j, c in enumerate(channels):
-            if missing[i, j] > th.max_missing:
-                why.append(f"{c} missing in {missing[i, j]:.0%} of samples")
-            if saturated[i, j] > th.max_saturated:
-                why.append(f"{c} saturated in {saturated[i, j]:.0%} of samples")
+        missing[i], saturated[i], why = _screen_one(
+            {c: a[i] for c, a in arrays.items()}, th, limits
+        )
         blind[i] = bool(why)
-        reasons[i] = tuple(why)
+        reasons[i] = why
     return {"missing": missing, "saturated": saturated, "blind": blind, "reasons": reasons}
 
 
@@ -399,6 +422,45 @@ def _rms(a: np.ndarray) -> float:
     return float(np.sqrt(np.mean(a[ok] ** 2))) if ok.any() else math.nan
 
 
+def _status(
+    th: SevaThresholds,
+    blind_reasons: tuple[str, ...],
+    state: str,
+    prob: float,
+    ent: float,
+    diagnosed: bool,
+    novel_frac: float,
+    feat_nov: float,
+) -> tuple[SevaStatus, list[str]]:
+    """The SEVA decision rules, in order: BLIND, DAZZLED, then CLEAR or BLURRED."""
+    if blind_reasons:
+        return SevaStatus.BLIND, list(blind_reasons)
+    if not diagnosed:
+        return SevaStatus.DAZZLED, ["no class distribution available"]
+    reasons: list[str] = []
+    novel_in = np.isfinite(novel_frac) and novel_frac > th.novelty_fraction
+    novel_ft = np.isfinite(feat_nov) and feat_nov > 1.0
+    if novel_in:
+        reasons.append(
+            f"inputs unlike training in {novel_frac:.0%} of samples (> {th.novelty_fraction:.0%})"
+        )
+    if novel_ft:
+        reasons.append(f"residual features unlike training (ratio {feat_nov:.2g} > 1)")
+    flat = ent > th.max_entropy
+    if flat:
+        reasons.append(f"distribution too flat (entropy {ent:.2f} > {th.max_entropy})")
+    if state == th.fault_free:
+        ok_status, need = SevaStatus.CLEAR, ("p_clear", th.p_clear)
+    else:
+        ok_status, need = SevaStatus.BLURRED, ("p_fault", th.p_fault)
+    confident = prob >= need[1]
+    if not confident:
+        reasons.append(f"P({state}) = {prob:.3f} < {need[0]} = {need[1]}")
+    if confident and not (flat or novel_in or novel_ft):
+        return ok_status, [f"P({state}) = {prob:.3f} >= {need[0]} = {need[1]}"]
+    return SevaStatus.DAZZLED, reasons
+
+
 def records_from_diagnosis(
     diagnosis: xr.Dataset | None,
     runs: xr.Dataset,
@@ -409,17 +471,19 @@ def records_from_diagnosis(
     feature_reference: NoveltyReference | None = None,
     input_channels: Sequence[str] = INPUT_CHANNELS,
     saturation_limits: Mapping[str, tuple[float, float]] | None = None,
+    not_diagnosed: Mapping[int, tuple[str, ...]] | None = None,
 ) -> list[SevaRecord]:
-    """Build one :class:`SevaRecord` per run from a diagnosis and the measured runs.
+    """Build one :class:`SevaRecord` per run (or per run and window) from a diagnosis.
 
     Parameters
     ----------
     diagnosis
-        The output of ``FaultDiagnoser.diagnose(runs)`` (dims ``run``, ``class``[, ``time``];
-        variables ``proba``, ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``, optionally
-        ``features``), with the same runs in the same order as ``runs``. Runs whose
-        distribution is NaN (e.g. not diagnosed because BLIND) get an empty state. ``None``:
-        every run must be BLIND (used by :func:`seva_records` when no run is usable).
+        The output of ``FaultDiagnoser.diagnose(runs)``: dims ``run``, ``class``[,
+        ``window``][, ``time``]; variables ``proba``, ``X_hat``, ``X_hat_std``, ``F_hat``,
+        ``F_hat_std``, optionally ``features``; with windows, coordinates ``window_start``
+        and ``window_end`` (s, end exclusive). Same runs in the same order as ``runs``. A
+        NaN distribution (e.g. a run not diagnosed because BLIND) gives an empty state.
+        ``None``: every run must be BLIND (used by :func:`seva_records`).
     runs
         The measured runs (dataset format of :mod:`bayes_fdi.datasets`).
     thresholds
@@ -430,21 +494,27 @@ def records_from_diagnosis(
         Fitted :class:`NoveltyReference` of the training inputs (columns ``input_channels``);
         None skips the input-novelty check (the record says so in ``reasons``).
     feature_reference
-        Fitted :class:`NoveltyReference` of the classifier's training features; None skips it.
+        Fitted :class:`NoveltyReference` of the classifier's training features (unscaled, as
+        in ``diagnosis["features"]``); None skips it.
     input_channels
         Columns of ``input_reference``.
     saturation_limits
         Rails per channel (default :data:`DEFAULT_SATURATION_LIMITS`).
+    not_diagnosed
+        ``{run position: BLIND reasons}`` of runs deliberately not diagnosed (their windows
+        are BLIND with these reasons); set by :func:`seva_records`.
 
     Returns
     -------
     list of SevaRecord
+        Run-major order (all windows of run 0 first).
     """
     th = (thresholds or SevaThresholds()).validate()
     if not 0 < coverage < 1:
         raise ValueError(f"coverage must lie in (0, 1), got {coverage}")
     if "run" not in runs.dims or "time" not in runs.dims:
         raise ValueError("runs must have dims 'run' and 'time'")
+    limits = dict(DEFAULT_SATURATION_LIMITS if saturation_limits is None else saturation_limits)
     n_runs = runs.sizes["run"]
     if diagnosis is not None and diagnosis.sizes.get("run") != n_runs:
         raise ValueError(
@@ -456,128 +526,109 @@ def records_from_diagnosis(
         if np.all(np.isin(t_diag, runs["time"].values)):
             runs = runs.sel(time=t_diag)
     channels = [c for c in CHANNELS if c in runs]
-    screen = screen_measurements(
-        runs, channels=channels, thresholds=th, saturation_limits=saturation_limits
-    )
-    z = float(stats.norm.ppf(0.5 + coverage / 2.0))
+    arrays = {c: np.asarray(runs[c].transpose("run", "time").values) for c in channels}
     times = np.asarray(runs["time"].values, dtype=np.float64)
     run_ids = np.asarray(runs["run"].values) if "run" in runs.coords else np.arange(n_runs)
+    z = float(stats.norm.ppf(0.5 + coverage / 2.0))
+
+    windowed = diagnosis is not None and "window" in diagnosis["proba"].dims
     if diagnosis is not None:
         if "proba" not in diagnosis:
             raise ValueError("diagnosis lacks 'proba'")
         classes = [str(c) for c in diagnosis["class"].values]
-        proba = np.asarray(diagnosis["proba"].transpose("run", "class").values, dtype=np.float64)
+        lead = ("run", "window") if windowed else ("run",)
+        proba = np.asarray(diagnosis["proba"].transpose(*lead, "class").values, dtype=np.float64)
+        proba = proba.reshape(n_runs, -1, len(classes))
     else:
-        if not screen["blind"].all():
+        blind = screen_measurements(runs, channels=channels, thresholds=th,
+                                    saturation_limits=limits)["blind"]  # fmt: skip
+        if not blind.all():
             raise ValueError("diagnosis is None but some runs are not BLIND")
-        classes, proba = [], np.full((n_runs, 0), np.nan)
+        classes, proba = [], np.full((n_runs, 1, 0), np.nan)
+    n_win = proba.shape[1]
+    if windowed:
+        w_start = np.asarray(diagnosis["window_start"].values, dtype=np.float64)
+        w_end = np.asarray(diagnosis["window_end"].values, dtype=np.float64)
+    else:
+        w_start, w_end = np.array([times[0]]), np.array([np.inf])
 
     def per_time(name: str) -> np.ndarray:
         if diagnosis is None or name not in diagnosis:
-            return np.full((n_runs, 1), np.nan)
-        v = diagnosis[name]
-        return np.asarray(v.transpose("run", ...).values, dtype=np.float64).reshape(n_runs, -1)
+            return np.full((n_runs, times.size), np.nan)
+        v = diagnosis[name].transpose("run", ...)
+        return np.asarray(v.values, dtype=np.float64).reshape(n_runs, -1)
 
     x_hat, x_std, f_hat, f_std = (per_time(k) for k in ("X_hat", "X_hat_std", "F_hat", "F_hat_std"))
     feats = None
     if feature_reference is not None and diagnosis is not None and "features" in diagnosis:
-        feats = np.asarray(diagnosis["features"].transpose("run", ...).values, dtype=np.float64)
+        fv = diagnosis["features"].transpose(*(("run", "window") if windowed else ("run",)), ...)
+        feats = np.asarray(fv.values, dtype=np.float64).reshape(n_runs, n_win, -1)
+    novel_all = None
+    if input_reference is not None:
+        U = np.stack([np.asarray(runs[c].transpose("run", "time").values, dtype=np.float64)
+                      for c in input_channels], axis=-1)  # fmt: skip
+        ok = np.all(np.isfinite(U), axis=-1)
+        novel_all = np.full(ok.shape, np.nan)
+        novel_all[ok] = input_reference.score(U[ok]) > 1.0
 
     records = []
     for i in range(n_runs):
-        reasons: list[str] = []
-        p = proba[i]
-        diagnosed = p.size > 0 and np.all(np.isfinite(p))
-        if diagnosed:
-            k = int(np.argmax(p))
-            state, prob = classes[k], float(p[k])
-        else:
-            state, prob = "", math.nan
-        ent = _entropy(p) if diagnosed else math.nan
-        # novelty of the inputs, sample by sample, on the finite samples
-        novel_frac = math.nan
-        if input_reference is not None:
-            U = np.stack(
-                [np.asarray(runs[c].isel(run=i).values, dtype=np.float64) for c in input_channels],
-                axis=1,
+        for w in range(n_win):
+            tm = (times >= w_start[w]) & (times < w_end[w])
+            if not tm.any():
+                raise ValueError(f"window {w} holds no samples of run {i}")
+            missing, saturated, blind_why = _screen_one(
+                {c: a[i, tm] for c, a in arrays.items()}, th, limits
             )
-            ok = np.all(np.isfinite(U), axis=1)
-            if ok.any():
-                novel_frac = float(np.mean(input_reference.score(U[ok]) > 1.0))
-        feat_nov = math.nan
-        if feats is not None and np.all(np.isfinite(feats[i])):
-            feat_nov = float(feature_reference.score(feats[i][None, :])[0])
-
-        if screen["blind"][i]:
-            status = SevaStatus.BLIND
-            reasons.extend(screen["reasons"][i])
-        elif not diagnosed:
-            status = SevaStatus.DAZZLED
-            reasons.append("no class distribution available")
-        else:
-            novel_in = np.isfinite(novel_frac) and novel_frac > th.novelty_fraction
-            novel_ft = np.isfinite(feat_nov) and feat_nov > 1.0
-            if novel_in:
-                reasons.append(
-                    f"inputs unlike training in {novel_frac:.0%} of samples "
-                    f"(> {th.novelty_fraction:.0%})"
-                )
-            if novel_ft:
-                reasons.append(f"residual features unlike training (ratio {feat_nov:.2g} > 1)")
-            flat = ent > th.max_entropy
-            if flat:
-                reasons.append(
-                    f"class distribution too flat (entropy {ent:.2f} > {th.max_entropy})"
-                )
-            if state == th.fault_free:
-                confident = prob >= th.p_clear
-                if not confident:
-                    reasons.append(f"P({state}) = {prob:.3f} < p_clear = {th.p_clear}")
-                ok_status = SevaStatus.CLEAR
+            if not_diagnosed and i in not_diagnosed and not blind_why:
+                blind_why = tuple(f"run not diagnosed: {r}" for r in not_diagnosed[i])
+            p = proba[i, w]
+            diagnosed = p.size > 0 and bool(np.all(np.isfinite(p)))
+            if diagnosed:
+                k = int(np.argmax(p))
+                state, prob, ent = classes[k], float(p[k]), _entropy(p)
             else:
-                confident = prob >= th.p_fault
-                if not confident:
-                    reasons.append(f"P({state}) = {prob:.3f} < p_fault = {th.p_fault}")
-                ok_status = SevaStatus.BLURRED
-            if confident and not flat and not novel_in and not novel_ft:
-                status = ok_status
-                reasons.append(
-                    f"P({state}) = {prob:.3f} >= "
-                    f"{th.p_clear if ok_status is SevaStatus.CLEAR else th.p_fault}"
+                state, prob, ent = "", math.nan, math.nan
+            novel_frac = math.nan
+            if novel_all is not None:
+                nv = novel_all[i, tm]
+                nv = nv[np.isfinite(nv)]
+                novel_frac = float(nv.mean()) if nv.size else math.nan
+            feat_nov = math.nan
+            if feats is not None and np.all(np.isfinite(feats[i, w])):
+                feat_nov = float(feature_reference.score(feats[i, w][None, :])[0])
+            status, reasons = _status(th, blind_why, state, prob, ent, diagnosed, novel_frac,
+                                      feat_nov)  # fmt: skip
+            if input_reference is None and status is not SevaStatus.BLIND:
+                reasons.append("input novelty not checked (no input reference)")
+            t_sel = times[tm]
+            records.append(
+                SevaRecord(
+                    run=int(run_ids[i]),
+                    t_start=float(t_sel[0]),
+                    t_end=float(t_sel[-1]),
+                    x_measured=_nanmean(arrays["X"][i, tm]) if "X" in arrays else math.nan,
+                    f_measured=_nanmean(arrays["F"][i, tm]) if "F" in arrays else math.nan,
+                    x_vmv=_nanmean(x_hat[i, tm]),
+                    x_vu=z * _rms(x_std[i, tm]),
+                    f_vmv=_nanmean(f_hat[i, tm]),
+                    f_vu=z * _rms(f_std[i, tm]),
+                    coverage=float(coverage),
+                    state=state,
+                    probability=prob,
+                    distribution=ClassDistribution(
+                        list(zip(classes, p.tolist(), strict=True)) if diagnosed else []
+                    ),
+                    entropy=ent,
+                    status=status,
+                    reasons=tuple(reasons),
+                    missing_fraction=float(missing.max(initial=0.0)),
+                    saturated_fraction=float(saturated.max(initial=0.0)),
+                    novel_fraction=novel_frac,
+                    feature_novelty=feat_nov,
+                    window=w if windowed else None,
                 )
-            else:
-                status = SevaStatus.DAZZLED
-        if input_reference is None and status is not SevaStatus.BLIND:
-            reasons.append("input novelty not checked (no input reference)")
-
-        xm = np.asarray(runs["X"].isel(run=i).values) if "X" in runs else np.array([np.nan])
-        fm = np.asarray(runs["F"].isel(run=i).values) if "F" in runs else np.array([np.nan])
-        records.append(
-            SevaRecord(
-                run=int(run_ids[i]),
-                t_start=float(times[0]),
-                t_end=float(times[-1]),
-                x_measured=_nanmean(xm),
-                f_measured=_nanmean(fm),
-                x_vmv=_nanmean(x_hat[i]),
-                x_vu=z * _rms(x_std[i]),
-                f_vmv=_nanmean(f_hat[i]),
-                f_vu=z * _rms(f_std[i]),
-                coverage=float(coverage),
-                state=state,
-                probability=prob,
-                distribution=ClassDistribution(
-                    list(zip(classes, p.tolist(), strict=True)) if diagnosed else []
-                ),
-                entropy=ent,
-                status=status,
-                reasons=tuple(reasons),
-                missing_fraction=float(screen["missing"][i].max(initial=0.0)),
-                saturated_fraction=float(screen["saturated"][i].max(initial=0.0)),
-                novel_fraction=novel_frac,
-                feature_novelty=feat_nov,
             )
-        )
     return records
 
 
@@ -593,13 +644,24 @@ def seva_records(
 ) -> list[SevaRecord]:
     """Diagnose ``runs`` with a fitted diagnoser and return their SEVA records.
 
-    BLIND runs (missing/saturated signals) are not passed to ``diagnoser.diagnose``; they get
-    a record with an empty distribution. The novelty references default to the diagnoser's
-    ``input_reference_`` and ``feature_reference_`` attributes when it has them.
+    BLIND runs (missing/saturated signals over the whole run) are not passed to
+    ``diagnoser.diagnose``; their records are BLIND with an empty distribution.
+
+    Novelty references, when not given: ``input_reference`` defaults to the diagnoser's
+    ``input_reference_`` attribute (None if absent: the check is skipped and the records say
+    so); ``feature_reference`` to its ``feature_reference_``, else a
+    :class:`NoveltyReference` fitted on its ``training_features_`` (the unscaled training
+    feature rows of :class:`~bayes_fdi.diagnosis.FaultDiagnoser`).
     """
     th = (thresholds or SevaThresholds()).validate()
-    input_reference = input_reference or getattr(diagnoser, "input_reference_", None)
-    feature_reference = feature_reference or getattr(diagnoser, "feature_reference_", None)
+    if input_reference is None:
+        input_reference = getattr(diagnoser, "input_reference_", None)
+    if feature_reference is None:
+        feature_reference = getattr(diagnoser, "feature_reference_", None)
+    if feature_reference is None and getattr(diagnoser, "training_features_", None) is not None:
+        tf = np.asarray(diagnoser.training_features_, dtype=np.float64)
+        if tf.ndim == 2 and tf.shape[0] >= 3:
+            feature_reference = NoveltyReference().fit(tf)
     channels = [c for c in CHANNELS if c in runs]
     screen = screen_measurements(
         runs, channels=channels, thresholds=th, saturation_limits=saturation_limits
@@ -616,6 +678,7 @@ def seva_records(
             part = part[[v for v in names if v in part.data_vars]]
             part = part.assign_coords(run=runs["run"].values[usable])
             diag = part.reindex(run=runs["run"].values)
+    skipped = {int(i): tuple(screen["reasons"][i]) for i in np.flatnonzero(screen["blind"])}
     return records_from_diagnosis(
         diag,
         runs,
@@ -624,19 +687,16 @@ def seva_records(
         input_reference=input_reference,
         feature_reference=feature_reference,
         saturation_limits=saturation_limits,
+        not_diagnosed=skipped,
     )
-
-
-def diag_vars(ds: xr.Dataset) -> list[str]:
-    return list(ds.data_vars)
 
 
 # --------------------------------------------------------------------------------------
 # conversions
 # --------------------------------------------------------------------------------------
 _SCALAR_FIELDS = (
-    "run", "t_start", "t_end", "x_measured", "f_measured", "x_vmv", "x_vu", "f_vmv", "f_vu",
-    "coverage", "state", "probability", "entropy", "status", "missing_fraction",
+    "run", "window", "t_start", "t_end", "x_measured", "f_measured", "x_vmv", "x_vu", "f_vmv",
+    "f_vu", "coverage", "state", "probability", "entropy", "status", "missing_fraction",
     "saturated_fraction", "novel_fraction", "feature_novelty",
 )  # fmt: skip
 
@@ -650,44 +710,64 @@ def _all_classes(records: Sequence[SevaRecord]) -> list[str]:
     return classes
 
 
-def to_frame(records: Sequence[SevaRecord]):
-    """A :class:`pandas.DataFrame`, one row per record, indexed by run.
+def _windowed(records: Sequence[SevaRecord]) -> bool:
+    return any(r.window is not None for r in records)
 
-    The class distribution becomes columns ``p_<class>`` (NaN where absent); ``reasons`` is
-    joined with ``"; "``; ``status`` is its string value.
+
+def to_frame(records: Sequence[SevaRecord]):
+    """A :class:`pandas.DataFrame`, one row per record.
+
+    Indexed by ``run`` (or ``(run, window)`` for windowed records). The class distribution
+    becomes columns ``p_<class>`` (NaN where absent); ``reasons`` is joined with ``"; "``;
+    ``status`` is its string value.
     """
     import pandas as pd
 
     classes = _all_classes(records)
+    windowed = _windowed(records)
+    fields = [f for f in _SCALAR_FIELDS if windowed or f != "window"]
     rows = []
     for r in records:
-        row = {f: getattr(r, f) for f in _SCALAR_FIELDS}
+        row = {f: getattr(r, f) for f in fields}
         row["status"] = r.status.value
+        if windowed:
+            row["window"] = -1 if r.window is None else r.window
         row.update({f"p_{c}": r.distribution.get(c, math.nan) for c in classes})
         row["reasons"] = "; ".join(r.reasons)
         rows.append(row)
-    cols = [*_SCALAR_FIELDS, *(f"p_{c}" for c in classes), "reasons"]
-    return pd.DataFrame(rows, columns=cols).set_index("run")
+    cols = [*fields, *(f"p_{c}" for c in classes), "reasons"]
+    return pd.DataFrame(rows, columns=cols).set_index(["run", "window"] if windowed else "run")
 
 
 def to_xarray(records: Sequence[SevaRecord]) -> xr.Dataset:
-    """An :class:`xarray.Dataset` with dims ``run`` and ``class``.
+    """An :class:`xarray.Dataset` of the records.
 
-    Scalar fields become ``(run,)`` variables, the distribution a ``proba (run, class)``
-    variable (NaN where absent), ``reasons`` a ``(run,)`` string variable.
+    Dims ``run`` and ``class`` (windowed records: ``record`` and ``class``, with ``run`` and
+    ``window`` coordinates on ``record``; window -1 for records without one). Scalar fields
+    become variables along the first dim, the distribution ``proba (.., class)`` (NaN where
+    absent), ``reasons`` a string variable.
     """
     classes = _all_classes(records)
-    run = np.array([r.run for r in records], dtype=np.int64)
+    windowed = _windowed(records)
+    dim = "record" if windowed else "run"
     data: dict[str, Any] = {}
-    for f in _SCALAR_FIELDS[1:]:
-        if f not in ("state", "status"):
-            data[f] = ("run", np.asarray([getattr(r, f) for r in records], dtype=np.float64))
-    data["state"] = ("run", np.asarray([r.state for r in records], dtype=str))
-    data["status"] = ("run", np.asarray([r.status.value for r in records], dtype=str))
-    data["reasons"] = ("run", np.asarray(["; ".join(r.reasons) for r in records], dtype=str))
+    for f in _SCALAR_FIELDS:
+        if f in ("run", "window", "state", "status"):
+            continue
+        data[f] = (dim, np.asarray([getattr(r, f) for r in records], dtype=np.float64))
+    data["state"] = (dim, np.asarray([r.state for r in records], dtype=str))
+    data["status"] = (dim, np.asarray([r.status.value for r in records], dtype=str))
+    data["reasons"] = (dim, np.asarray(["; ".join(r.reasons) for r in records], dtype=str))
     proba = np.array([[r.distribution.get(c, math.nan) for c in classes] for r in records])
-    data["proba"] = (("run", "class"), proba.reshape(len(records), len(classes)))
-    return xr.Dataset(data, coords={"run": run, "class": np.asarray(classes, dtype=str)})
+    data["proba"] = ((dim, "class"), proba.reshape(len(records), len(classes)))
+    run = np.array([r.run for r in records], dtype=np.int64)
+    coords: dict[str, Any] = {"class": np.asarray(classes, dtype=str)}
+    if windowed:
+        win = np.array([-1 if r.window is None else r.window for r in records], dtype=np.int64)
+        coords |= {"run": (dim, run), "window": (dim, win)}
+    else:
+        coords["run"] = run
+    return xr.Dataset(data, coords=coords)
 
 
 def _json_safe(v: Any) -> Any:

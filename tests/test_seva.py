@@ -254,3 +254,54 @@ def test_mismatched_runs_are_rejected(rng):
         records_from_diagnosis(diag, runs)
     with pytest.raises(ValueError, match="coverage"):
         records_from_diagnosis(_diagnosis(runs, [FLAT, FLAT]), runs, coverage=1.0)
+
+
+def _windowed_diagnosis(runs, proba_rw, width):
+    """Windowed contract: proba (run, window, class), window_start/window_end (end exclusive)."""
+    d = _diagnosis(runs, np.asarray(proba_rw)[:, 0])
+    n_win = np.asarray(proba_rw).shape[1]
+    starts = np.arange(n_win) * width
+    d = d.drop_vars(["proba", "state", "confidence", "features"])
+    d["proba"] = (("run", "window", "class"), np.asarray(proba_rw, dtype=float))
+    return d.assign_coords(
+        window_start=("window", starts.astype(float)),
+        window_end=("window", (starts + width).astype(float)),
+    )
+
+
+def test_windowed_records(rng):
+    ch = _runs(rng, 2)
+    ch["F"][1, 100:150] = np.nan  # run 1, window 1 (100..199): 50 % missing -> BLIND
+    runs = _make(ch)
+    diag = _windowed_diagnosis(
+        runs, [[CONFIDENT_FN, CONFIDENT_F2], [CONFIDENT_FN, CONFIDENT_FN]], width=100
+    )
+    recs = records_from_diagnosis(diag, runs)
+    assert [(r.run, r.window) for r in recs] == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    assert [r.status for r in recs] == [
+        SevaStatus.CLEAR,
+        SevaStatus.BLURRED,
+        SevaStatus.CLEAR,
+        SevaStatus.BLIND,
+    ]
+    assert (recs[1].t_start, recs[1].t_end) == (100.0, 199.0)
+    assert recs[1].x_measured == pytest.approx(ch["X"][0, 100:200].mean())
+    assert recs[3].missing_fraction == pytest.approx(0.5)
+    assert recs[3].f_measured == pytest.approx(ch["F"][1, 150:200].mean())
+    df = to_frame(recs)
+    assert list(df.index) == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    ds = to_xarray(recs)
+    assert ds["proba"].dims == ("record", "class")
+    assert ds["window"].values.tolist() == [0, 1, 0, 1]
+
+
+def test_seva_records_uses_training_features_for_feature_novelty(rng):
+    runs = make_dataset(_runs(rng, 2), state=["fn", "f2"])
+    fake = _FakeDiagnoser()
+    fake.training_features_ = rng.normal(scale=0.1, size=(300, 2))
+    recs = seva_records(fake, runs)
+    # the fake's features are (0, 0), inside the training cloud
+    assert all(r.feature_novelty < 1 for r in recs)
+    fake.training_features_ = rng.normal(loc=5.0, scale=0.1, size=(300, 2))
+    recs = seva_records(fake, runs)
+    assert all(r.status is SevaStatus.DAZZLED and r.feature_novelty > 10 for r in recs)
