@@ -176,6 +176,42 @@ def normal_model_summary(
     return out
 
 
+def _samples(
+    diag: xr.Dataset, runs: xr.Dataset
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """True labels, class distributions and features, one row per run (or run and window).
+
+    For windowed diagnoses a window whose last sample is at or before its run's fault
+    ``onset`` is labelled ``"fn"`` (the fault is not yet present), as FaultDiagnoser labels
+    its training windows.
+    """
+    if "state" not in runs.coords:
+        raise ValueError("runs must carry the per-run coordinate 'state'")
+    states = np.asarray(runs["state"].values).astype(str)
+    proba_da = diag["proba"]
+    feats = None
+    if "window" in proba_da.dims:
+        proba = np.asarray(proba_da.transpose("run", "window", "class").values, dtype=np.float64)
+        last = np.asarray(diag["window_end"].values, dtype=np.float64) - 1.0
+        onset = (
+            np.asarray(runs["onset"].values, dtype=np.float64)
+            if "onset" in runs.coords
+            else np.full(states.size, -np.inf)
+        )
+        y = np.where(last[None, :] <= onset[:, None], "fn", states[:, None]).ravel()
+        proba = proba.reshape(-1, proba.shape[-1])
+        if "features" in diag:
+            f = diag["features"].transpose("run", "window", ...).values
+            feats = np.asarray(f, dtype=np.float64).reshape(proba.shape[0], -1)
+    else:
+        proba = np.asarray(proba_da.transpose("run", "class").values, dtype=np.float64)
+        y = states
+        if "features" in diag:
+            f = diag["features"].transpose("run", ...).values
+            feats = np.asarray(f, dtype=np.float64).reshape(proba.shape[0], -1)
+    return y, proba, feats
+
+
 def _cross_fit(
     proba: np.ndarray, y: np.ndarray, classes: np.ndarray, seed: int
 ) -> tuple[np.ndarray, list[float]]:
@@ -267,27 +303,29 @@ def write_calibration_report(
 
     diag = diagnoser.diagnose(test_runs)
     classes = np.asarray([str(c) for c in diag["class"].values])
-    proba = np.asarray(diag["proba"].transpose("run", "class").values, dtype=np.float64)
-    y_all = np.asarray(test_runs["state"].values).astype(str)
-    known = np.isin(y_all, classes)
-    y, p = y_all[known], proba[known]
+    y_samples, proba, feats_all = _samples(diag, test_runs)
+    known = np.isin(y_samples, classes)
+    y, p = y_samples[known], proba[known]
     if y.size < 2:
-        raise ValueError("fewer than two test runs have a state the diagnoser knows")
+        raise ValueError("fewer than two test samples have a state the diagnoser knows")
+    y_all = np.asarray(test_runs["state"].values).astype(str)
     results: dict[str, Any] = {
         "title": title,
         "classes": classes.tolist(),
         "n_test_runs": int(y_all.size),
+        "n_samples": int(y_samples.size),
+        "windowed": bool("window" in diag["proba"].dims),
         "n_excluded_unknown_state": int((~known).sum()),
-        "excluded_states": sorted(set(y_all[~known].tolist())),
+        "excluded_states": sorted(set(y_samples[~known].tolist())),
     }
     kw = {"n_bins": n_bins, "n_bootstrap": n_bootstrap, "random_state": seed}
     before = classification_summary(y, p, classes, **kw)
 
     # ---- temperature scaling on held-out data
     if calibration_runs is not None:
-        dcal = diagnoser.diagnose(calibration_runs)
-        pcal = np.asarray(dcal["proba"].transpose("run", "class").values, dtype=np.float64)
-        ycal = np.asarray(calibration_runs["state"].values).astype(str)
+        if "state" not in calibration_runs.coords:
+            raise ValueError("calibration_runs must carry the per-run coordinate 'state'")
+        ycal, pcal, _ = _samples(diagnoser.diagnose(calibration_runs), calibration_runs)
         kcal = np.isin(ycal, classes)
         ts = TemperatureScaler(classes=classes).fit(pcal[kcal], ycal[kcal])
         p_after = ts.transform(p)
@@ -325,11 +363,13 @@ def write_calibration_report(
     node_note = ""
     if nodes is None:
         node_note = "The diagnoser exposes no `classifier_.nodes_`; per-node calibration skipped."
-    elif "features" not in diag:
+    elif feats_all is None:
         node_note = "The diagnosis has no `features`; per-node calibration skipped."
     else:
-        feats = np.asarray(diag["features"].transpose("run", ...).values, dtype=np.float64)
-        feats = feats.reshape(feats.shape[0], -1)[known]
+        feats = feats_all[known]
+        scaler = getattr(diagnoser, "scaler_", None)
+        if scaler is not None:  # the tree sees standardised features
+            feats = np.asarray(scaler.transform(feats), dtype=np.float64)
         for nc in node_calibration(nodes, feats, y, n_bins=min(n_bins, 10), random_state=seed):
             node_rows.append(
                 {
@@ -376,7 +416,9 @@ def _markdown(r: dict[str, Any], node_note: str) -> str:
     lines = [
         f"# {r['title']}",
         "",
-        f"Test runs: {r['n_test_runs']} ({r['n_excluded_unknown_state']} excluded from the "
+        f"Test runs: {r['n_test_runs']}"
+        + (f", diagnosed in {r['n_samples']} windows" if r.get("windowed") else "")
+        + f" ({r['n_excluded_unknown_state']} excluded from the "
         f"classification metrics because their state is not among the diagnoser's classes"
         + (f": {', '.join(r['excluded_states'])}" if r["excluded_states"] else "")
         + f"). Classes: {', '.join(r['classes'])}.",
@@ -482,14 +524,10 @@ def _build_diagnoser(method: str, seed: int) -> Any:
     except ImportError as err:  # pragma: no cover - until the diagnosis stream is merged
         raise RuntimeError(f"bayes_fdi.diagnosis is not available: {err}") from None
     if method == "rvm":
-        return FaultDiagnoser()
-    from sklearn.svm import SVC
+        return FaultDiagnoser(random_state=seed)
+    from bayes_fdi.baselines import svm_fault_diagnoser
 
-    from bayes_fdi.tree import HierarchicalClassifier
-
-    return FaultDiagnoser(
-        classifier=HierarchicalClassifier(SVC(probability=True, random_state=seed))
-    )
+    return svm_fault_diagnoser(random_state=seed)
 
 
 def run_from_cli(args: argparse.Namespace) -> int:

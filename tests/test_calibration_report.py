@@ -189,3 +189,38 @@ def test_report_rejects_unlabelled_runs(setup, tmp_path):
     test, _, feats = setup
     with pytest.raises(ValueError, match="state"):
         cr.write_calibration_report(FakeDiagnoser(feats), test.drop_vars("state"), tmp_path)
+
+
+def test_nodes_see_standardised_features(setup, tmp_path):
+    test, _, feats = setup
+
+    class Scaled(FakeDiagnoser):
+        """Reports unscaled features 3x + 2; the tree works on x (scaler_ maps back)."""
+
+        scaler_ = SimpleNamespace(transform=lambda f: (np.asarray(f) - 2.0) / 3.0)
+
+        def diagnose(self, runs):
+            d = super().diagnose(runs)
+            d["features"] = 3.0 * d["features"] + 2.0
+            return d
+
+    cr.write_calibration_report(Scaled(feats), test, tmp_path, n_bootstrap=0)
+    res = json.loads((tmp_path / "calibration.json").read_text())
+    assert all(n["ece"] < 0.06 for n in res["nodes"])
+    assert res["nodes"][1]["accuracy"] > 0.85  # f1 vs f2 at distance 1.41 / 0.5: ~0.92
+
+
+def test_window_labels_follow_onset():
+    runs = make_dataset({"X": np.zeros((2, 300))}, state=["f1", "fn"], onset=[150.0, 0.0])
+    diag = xr.Dataset(
+        {"proba": (("run", "window", "class"), np.full((2, 3, 3), 1 / 3))},
+        coords={
+            "class": CLASSES,
+            "window_start": ("window", [0.0, 100.0, 200.0]),
+            "window_end": ("window", [100.0, 200.0, 300.0]),
+        },
+    )
+    y, p, f = cr._samples(diag, runs)
+    # run 0 (f1, onset 150): window ending at 99 is fn, at 199 and 299 is f1
+    assert y.tolist() == ["fn", "f1", "f1", "fn", "fn", "fn"]
+    assert p.shape == (6, 3) and f is None
