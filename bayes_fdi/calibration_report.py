@@ -53,6 +53,8 @@ __all__ = [
     "configure_parser",
     "normal_model_summary",
     "run_from_cli",
+    "split_in_time",
+    "time_split_summary",
     "write_calibration_report",
 ]
 
@@ -173,6 +175,63 @@ def normal_model_summary(
             "pit_edges": edges.tolist(),
             "_pit": pit,
         }
+    return out
+
+
+def split_in_time(runs: xr.Dataset, fraction: float = 0.5) -> tuple[xr.Dataset, xr.Dataset]:
+    """Split every run at ``fraction`` of its length: ``(first part, second part)``.
+
+    Both parts keep their original ``time`` coordinate (the second part starts at the split
+    time), so nothing is re-labelled.
+    """
+    if not 0 < fraction < 1:
+        raise ValueError(f"fraction must lie in (0, 1), got {fraction}")
+    n = runs.sizes["time"]
+    cut = round(fraction * n)
+    if cut < 1 or cut >= n:
+        raise ValueError(f"cannot split {n} samples at fraction {fraction}")
+    return runs.isel(time=slice(0, cut)), runs.isel(time=slice(cut, n))
+
+
+def time_split_summary(
+    normal_model: Any,
+    runs: xr.Dataset,
+    *,
+    fraction: float = 0.5,
+    levels: tuple[float, ...] = DEFAULT_LEVELS,
+) -> dict[str, Any]:
+    """Fit a normal model on the first part of fault-free runs, score it on the rest.
+
+    This is the honest test of the normal models on a single real record (e.g. the Lublin
+    hour): fit on its first half, test on its second half, which the model has not seen and
+    which lies later in time.
+
+    Parameters
+    ----------
+    normal_model
+        An unfitted model with ``fit(runs) -> self`` and ``predict(runs) -> Dataset`` of
+        ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std`` (e.g.
+        ``bayes_fdi.residuals.NormalModels``).
+    runs
+        Fault-free runs.
+    fraction
+        Share of each run used for fitting (default 0.5).
+    levels
+        Central-interval levels.
+
+    Returns
+    -------
+    dict
+        As :func:`normal_model_summary` (without private entries), plus ``fraction``,
+        ``n_fit_samples`` and ``split_time`` (s).
+    """
+    first, second = split_in_time(runs, fraction)
+    model = normal_model.fit(first)
+    summary = normal_model_summary(model.predict(second), second, levels=levels)
+    out = _strip_private(summary)
+    out["fraction"] = float(fraction)
+    out["n_fit_samples"] = int(first.sizes["run"] * first.sizes["time"])
+    out["split_time"] = float(second["time"].values[0])
     return out
 
 

@@ -224,3 +224,49 @@ def test_window_labels_follow_onset():
     # run 0 (f1, onset 150): window ending at 99 is fn, at 199 and 299 is f1
     assert y.tolist() == ["fn", "f1", "f1", "fn", "fn", "fn"]
     assert p.shape == (6, 3) and f is None
+
+
+class _GaussianNormalModel:
+    """Normal model with a known answer: X ~ N(a CV + b, s^2), fitted by least squares."""
+
+    def fit(self, runs):
+        self.coef_ = {}
+        for name in ("X", "F"):
+            cv = runs["CV"].values.ravel()
+            y = runs[name].values.ravel()
+            A = np.column_stack([cv, np.ones_like(cv)])
+            beta, *_ = np.linalg.lstsq(A, y, rcond=None)
+            self.coef_[name] = (beta, np.std(y - A @ beta, ddof=2))
+        return self
+
+    def predict(self, runs):
+        out = {}
+        for name, (beta, s) in self.coef_.items():
+            m = beta[0] * runs["CV"].values + beta[1]
+            out[f"{name}_hat"] = (("run", "time"), m)
+            out[f"{name}_hat_std"] = (("run", "time"), np.full(m.shape, s))
+        return xr.Dataset(out, coords={"time": runs["time"].values})
+
+
+def test_time_split_summary_of_a_correct_gaussian_model(rng):
+    n_t = 20_000
+    cv = rng.uniform(0.2, 0.8, size=(1, n_t))
+    runs = make_dataset(
+        {
+            "CV": cv,
+            "X": 0.9 * cv + 0.05 + 0.01 * rng.normal(size=cv.shape),
+            "F": 0.5 * cv + 0.2 + 0.03 * rng.normal(size=cv.shape),
+        }
+    )
+    first, second = cr.split_in_time(runs, 0.5)
+    assert first.sizes["time"] == second.sizes["time"] == n_t // 2
+    assert second["time"].values[0] == n_t // 2
+    res = cr.time_split_summary(_GaussianNormalModel(), runs)
+    assert res["split_time"] == n_t // 2 and res["n_fit_samples"] == n_t // 2
+    for name, s in (("X", 0.01), ("F", 0.03)):
+        for c in res[name]["coverage"].values():
+            se = np.sqrt(c["nominal"] * (1 - c["nominal"]) / (n_t // 2))
+            assert abs(c["coverage"] - c["nominal"]) < 4 * se
+        assert res[name]["crps"] == pytest.approx(s / np.sqrt(np.pi), rel=0.03)
+    with pytest.raises(ValueError, match="fraction"):
+        cr.split_in_time(runs, 1.0)
