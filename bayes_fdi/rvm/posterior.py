@@ -16,14 +16,16 @@ logits ``Phi w`` (classification).
 Two model forms are provided, in the style of ``pyro.contrib.gp`` (a class holding the data and the
 declared priors, with ``model`` methods):
 
-* :class:`SparseBayesRegressionModel` -- ``model`` is *collapsed*: the weights are integrated out
-  analytically and the Gaussian log evidence ``log N(t | 0, beta^-1 I + Phi A^-1 Phi^T)`` enters as a
-  ``pyro.factor``; it is computed from the Cholesky factor of the ``M x M`` matrix
+* :class:`SparseBayesRegressionModel` -- ``model`` is *collapsed*: the weights are integrated
+  out analytically and the Gaussian log evidence ``log N(t | 0, beta^-1 I + Phi A^-1 Phi^T)``
+  enters as a ``pyro.factor``; it is computed from the Cholesky factor of the ``M x M`` matrix
   ``A + beta Phi^T Phi`` (Woodbury identity and matrix determinant lemma). NUTS samples
   ``(log alpha, log beta)`` only, and the weights are then drawn exactly from their Gaussian
   conditional ``N(mu, Sigma)``. ``noncentred_model`` keeps the weights, written as
   ``w = z / sqrt(alpha)`` with ``z ~ N(0, I)``; SVI uses it.
-* :class:`SparseBayesClassificationModel` -- Bernoulli likelihood, non-centred weights.
+* :class:`SparseBayesClassificationModel` -- Bernoulli likelihood; NUTS samples
+  ``(log alpha, w)`` (centred, default on the relevance vectors) or ``(log alpha, z)``
+  (non-centred); SVI uses the non-centred form.
 
 :func:`fit_posterior` runs it from a fitted estimator (``RVR(...).fit(X, y).fit_posterior(X, y)``),
 :func:`sample_posterior` from a model built on an explicit design matrix. Both return an immutable
@@ -97,8 +99,8 @@ class Hyperpriors(NamedTuple):
     relative : bool
         If True (default) the rates are in units of the target variance: the model uses
         ``b * var(t)``, which makes the prior invariant to rescaling the targets (``alpha`` and
-        ``beta`` both scale as ``1 / var(t)``). Classification targets are on the logit scale and use
-        a scale of 1. Set False to give absolute rates.
+        ``beta`` both scale as ``1 / var(t)``). Classification targets are on the logit scale
+        and use a scale of 1. Set False to give absolute rates.
 
     Notes
     -----
@@ -150,18 +152,48 @@ def _as_tensor(x: Any, name: str, ndim: int) -> torch.Tensor:
     return out
 
 
-def _cholesky(H: torch.Tensor) -> torch.Tensor:
+def _np_cholesky(H: np.ndarray) -> np.ndarray:
     """Cholesky factor of a batch of SPD matrices, adding diagonal jitter only if needed."""
-    L, info = torch.linalg.cholesky_ex(H)
-    if not bool((info > 0).any()):
-        return L
-    eye = torch.eye(H.shape[-1], dtype=H.dtype, device=H.device)
-    scale = H.diagonal(dim1=-2, dim2=-1).abs().mean(-1, keepdim=True).unsqueeze(-1)
+    try:
+        return np.linalg.cholesky(H)
+    except np.linalg.LinAlgError:
+        pass
+    eye = np.eye(H.shape[-1])
+    scale = np.abs(np.diagonal(H, axis1=-2, axis2=-1)).mean(-1)[..., None, None]
     for jitter in (1e-12, 1e-10, 1e-8, 1e-6):
-        L, info = torch.linalg.cholesky_ex(H + jitter * scale * eye)
-        if not bool((info > 0).any()):
-            return L
+        try:
+            return np.linalg.cholesky(H + jitter * scale * eye)
+        except np.linalg.LinAlgError:
+            continue
     raise ValueError("posterior precision matrix A + beta Phi^T Phi is not positive definite")
+
+
+def _np_log_gamma_on_log_scale(u: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+    """Value and derivative of the log density of ``u = log x``, ``x ~ Gamma(a, b)``."""
+    bx = b * np.exp(u)
+    return a * math.log(b) - math.lgamma(a) + a * u - bx, a - bx
+
+
+def _as_pair(x: Any, y: Any) -> tuple[torch.Tensor, torch.Tensor]:
+    return torch.as_tensor(x, dtype=_DTYPE), torch.as_tensor(y, dtype=_DTYPE)
+
+
+class _NumpyFunction(torch.autograd.Function):
+    """Bridge: ``fn(*arrays) -> (value, grads)`` computed in numpy, differentiable in torch."""
+
+    @staticmethod
+    def forward(ctx, fn, *inputs):  # type: ignore[override]
+        value, grads = fn(*(x.detach().cpu().numpy() for x in inputs))
+        ctx.save_for_backward(*(torch.as_tensor(g, dtype=_DTYPE) for g in grads))
+        return torch.as_tensor(value, dtype=_DTYPE)
+
+    @staticmethod
+    def backward(ctx, grad_output):  # type: ignore[override]
+        out = []
+        for g in ctx.saved_tensors:
+            go = grad_output.reshape(grad_output.shape + (1,) * (g.ndim - grad_output.ndim))
+            out.append(go * g)
+        return (None, *out)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -199,66 +231,71 @@ class SparseBayesRegressionModel:
         var = float(self.t.var())
         self.target_scale = var if var > 0 else 1.0
         self.hyperpriors = (hyperpriors or Hyperpriors()).resolve(self.target_scale)
-        self._PtP = self.Phi.T @ self.Phi
-        self._Ptt = self.Phi.T @ self.t
-        self._tt = float(self.t @ self.t)
+        Phi_np, t_np = self.Phi.numpy(), self.t.numpy()
+        self._PtP_np = Phi_np.T @ Phi_np
+        self._Ptt_np = Phi_np.T @ t_np
+        self._tt = float(t_np @ t_np)
 
     @property
     def n_basis(self) -> int:
         """Number of basis functions ``M``."""
         return int(self.Phi.shape[1])
 
-    # ---- closed-form pieces -------------------------------------------------------------------
-    def _factor(self, log_alpha: torch.Tensor, log_beta: torch.Tensor):
-        alpha = torch.exp(log_alpha)
-        beta = torch.exp(log_beta)
-        H = torch.diag_embed(alpha) + beta[..., None, None] * self._PtP
-        L = _cholesky(H)
-        rhs = (beta[..., None] * self._Ptt).unsqueeze(-1)
-        mu = torch.cholesky_solve(rhs, L).squeeze(-1)
-        return alpha, beta, L, mu
+    # ---- closed-form pieces (numpy: small M x M algebra, far below torch's per-op overhead) -----
+    def _factor_np(self, la: np.ndarray, lb: np.ndarray):
+        """alpha, beta, L (chol of H = A + beta Phi^T Phi), L^-1, Sigma = H^-1, mu (batched)."""
+        alpha, beta = np.exp(la), np.exp(lb)
+        eye = np.eye(self.n_basis)
+        H = beta[..., None, None] * self._PtP_np + alpha[..., :, None] * eye
+        L = _np_cholesky(H)
+        L_inv = np.linalg.solve(L, np.broadcast_to(eye, H.shape))
+        Sigma = np.swapaxes(L_inv, -1, -2) @ L_inv
+        mu = beta[..., None] * (Sigma @ self._Ptt_np)
+        return alpha, beta, L, L_inv, Sigma, mu
+
+    def _evidence_np(self, la: np.ndarray, lb: np.ndarray):
+        """Log evidence and its closed-form gradient w.r.t. ``(log alpha, log beta)``."""
+        n = self.Phi.shape[0]
+        alpha, beta, L, _, Sigma, mu = self._factor_np(la, lb)
+        logdet_H = 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
+        mu_Ptt = (mu * self._Ptt_np).sum(-1)
+        value = -0.5 * (n * _LOG_2PI - n * lb + logdet_H - la.sum(-1) + beta * (self._tt - mu_Ptt))
+        sigma_diag = np.diagonal(Sigma, axis1=-2, axis2=-1)
+        resid2 = self._tt - 2.0 * mu_Ptt + (mu * (mu @ self._PtP_np)).sum(-1)
+        g_la = 0.5 * (1.0 - alpha * (mu * mu + sigma_diag))
+        g_lb = 0.5 * (n - beta * resid2 - (1.0 - alpha * sigma_diag).sum(-1))
+        return value, (g_la, g_lb)
+
+    def _joint_np(self, la: np.ndarray, lb: np.ndarray):
+        hp = self.hyperpriors
+        value, (g_la, g_lb) = self._evidence_np(la, lb)
+        prior_a, dprior_a = _np_log_gamma_on_log_scale(la, hp.a_alpha, hp.b_alpha)
+        prior_b, dprior_b = _np_log_gamma_on_log_scale(lb, hp.a_beta, hp.b_beta)
+        return value + prior_a.sum(-1) + prior_b, (g_la + dprior_a, g_lb + dprior_b)
 
     def log_evidence(self, log_alpha: torch.Tensor, log_beta: torch.Tensor) -> torch.Tensor:
         """Gaussian log marginal likelihood ``log N(t | 0, beta^-1 I + Phi A^-1 Phi^T)``.
 
-        Batched over leading dimensions of ``log_alpha`` (``(..., M)``) and ``log_beta`` (``(...)``).
+        Batched over leading dims of ``log_alpha`` (``(..., M)``) and ``log_beta`` (``(...)``).
         Uses ``|C| = beta^-N |A|^-1 |H|`` and ``t^T C^-1 t = beta t^T t - beta t^T Phi mu`` with
         ``H = A + beta Phi^T Phi`` and ``mu = beta H^-1 Phi^T t``, so only ``M x M`` matrices are
         factorised. Differentiable; the gradient is the closed form
         ``d/d log alpha_i = (1 - alpha_i (mu_i^2 + Sigma_ii)) / 2`` and
-        ``d/d log beta = (N - beta ||t - Phi mu||^2 - sum_i gamma_i) / 2`` (Tipping 2001), several
-        times cheaper than differentiating through the Cholesky factorisation.
+        ``d/d log beta = (N - beta ||t - Phi mu||^2 - sum_i gamma_i) / 2`` (Tipping 2001).
         """
-        log_alpha = torch.as_tensor(log_alpha, dtype=_DTYPE)
-        log_beta = torch.as_tensor(log_beta, dtype=_DTYPE)
-        return _LogEvidence.apply(log_alpha, log_beta, self)
-
-    def _log_evidence_and_grad(
-        self, log_alpha: torch.Tensor, log_beta: torch.Tensor
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        n = self.Phi.shape[0]
-        alpha, beta, L, mu = self._factor(log_alpha, log_beta)
-        logdet_H = 2.0 * torch.log(L.diagonal(dim1=-2, dim2=-1)).sum(-1)
-        mu_Ptt = (mu * self._Ptt).sum(-1)
-        quad = beta * (self._tt - mu_Ptt)
-        value = -0.5 * (n * _LOG_2PI - n * log_beta + logdet_H - log_alpha.sum(-1) + quad)
-        sigma_diag = torch.cholesky_inverse(L).diagonal(dim1=-2, dim2=-1)
-        gamma = 1.0 - alpha * sigma_diag
-        resid2 = self._tt - 2.0 * mu_Ptt + (mu * (mu @ self._PtP)).sum(-1)
-        grad_alpha = 0.5 * (1.0 - alpha * (mu * mu + sigma_diag))
-        grad_beta = 0.5 * (n - beta * resid2 - gamma.sum(-1))
-        return value, grad_alpha, grad_beta
+        return _NumpyFunction.apply(self._evidence_np, *_as_pair(log_alpha, log_beta))
 
     def log_hyperprior(self, log_alpha: torch.Tensor, log_beta: torch.Tensor) -> torch.Tensor:
         """Log prior density of ``(log alpha, log beta)`` (Gamma priors with their Jacobians)."""
         hp = self.hyperpriors
-        return _log_gamma_on_log_scale(log_alpha, hp.a_alpha, hp.b_alpha).sum(
+        la, lb = _as_pair(log_alpha, log_beta)
+        return _log_gamma_on_log_scale(la, hp.a_alpha, hp.b_alpha).sum(
             -1
-        ) + _log_gamma_on_log_scale(log_beta, hp.a_beta, hp.b_beta)
+        ) + _log_gamma_on_log_scale(lb, hp.a_beta, hp.b_beta)
 
     def log_joint(self, log_alpha: torch.Tensor, log_beta: torch.Tensor) -> torch.Tensor:
-        """Unnormalised log posterior density of ``(log alpha, log beta)``, weights integrated out."""
-        return self.log_hyperprior(log_alpha, log_beta) + self.log_evidence(log_alpha, log_beta)
+        """Unnormalised log posterior of ``(log alpha, log beta)``, weights integrated out."""
+        return _NumpyFunction.apply(self._joint_np, *_as_pair(log_alpha, log_beta))
 
     def potential(self, params: Mapping[str, torch.Tensor]) -> torch.Tensor:
         """NUTS potential energy: ``-log_joint`` on the unconstrained ``(log alpha, log beta)``."""
@@ -272,10 +309,9 @@ class SparseBayesRegressionModel:
         Returns ``mu`` (``(..., M)``) and the Cholesky factor ``L`` of the precision
         ``Sigma^-1 = A + beta Phi^T Phi`` (``(..., M, M)``).
         """
-        _, _, L, mu = self._factor(
-            torch.as_tensor(log_alpha, dtype=_DTYPE), torch.as_tensor(log_beta, dtype=_DTYPE)
-        )
-        return mu, L
+        la, lb = (x.detach().numpy() for x in _as_pair(log_alpha, log_beta))
+        _, _, L, _, _, mu = self._factor_np(la, lb)
+        return torch.from_numpy(mu), torch.from_numpy(L)
 
     def sample_weights(
         self,
@@ -285,17 +321,17 @@ class SparseBayesRegressionModel:
         batch_size: int = 256,
     ) -> torch.Tensor:
         """Exact draws ``w ~ N(mu, Sigma)``, one per row of ``log_alpha`` (``(S, M)``)."""
-        log_alpha = torch.as_tensor(log_alpha, dtype=_DTYPE).reshape(-1, self.n_basis)
-        log_beta = torch.as_tensor(log_beta, dtype=_DTYPE).reshape(-1)
+        la_all, lb_all = (x.detach().numpy() for x in _as_pair(log_alpha, log_beta))
+        la_all = la_all.reshape(-1, self.n_basis)
+        lb_all = lb_all.reshape(-1)
         out = []
-        for start in range(0, log_alpha.shape[0], batch_size):
-            la = log_alpha[start : start + batch_size]
-            mu, L = self.weight_posterior(la, log_beta[start : start + batch_size])
-            eps = torch.randn(mu.shape, generator=generator, dtype=_DTYPE)
-            # Sigma = (L L^T)^-1, so w = mu + L^-T eps has covariance Sigma.
-            delta = torch.linalg.solve_triangular(L.mT, eps.unsqueeze(-1), upper=True)
-            out.append(mu + delta.squeeze(-1))
-        return torch.cat(out, 0)
+        for start in range(0, la_all.shape[0], batch_size):
+            la = la_all[start : start + batch_size]
+            _, _, _, L_inv, _, mu = self._factor_np(la, lb_all[start : start + batch_size])
+            eps = torch.randn(mu.shape, generator=generator, dtype=_DTYPE).numpy()
+            # Sigma = L^-T L^-1, so w = mu + L^-T eps has covariance Sigma.
+            out.append(mu + np.einsum("...ji,...j->...i", L_inv, eps))
+        return torch.from_numpy(np.concatenate(out, 0))
 
     # ---- Pyro models ----------------------------------------------------------------------------
     def _priors(self):
@@ -344,23 +380,8 @@ class SparseBayesRegressionModel:
         }
 
 
-class _LogEvidence(torch.autograd.Function):
-    """Regression log evidence with its closed-form gradient (see ``log_evidence``)."""
-
-    @staticmethod
-    def forward(ctx, log_alpha, log_beta, model):  # type: ignore[override]
-        value, g_alpha, g_beta = model._log_evidence_and_grad(log_alpha, log_beta)
-        ctx.save_for_backward(g_alpha, g_beta)
-        return value
-
-    @staticmethod
-    def backward(ctx, grad_output):  # type: ignore[override]
-        g_alpha, g_beta = ctx.saved_tensors
-        return grad_output[..., None] * g_alpha, grad_output * g_beta, None
-
-
 class SparseBayesClassificationModel:
-    """Sparse Bayesian logistic regression: ``t ~ Bernoulli(sigmoid(Phi w))``, non-centred weights.
+    """Sparse Bayesian logistic regression: ``t ~ Bernoulli(sigmoid(Phi w))``.
 
     Parameters
     ----------
@@ -370,12 +391,27 @@ class SparseBayesClassificationModel:
         Binary targets in {0, 1}.
     hyperpriors : Hyperpriors, optional
         Only ``a_alpha``, ``b_alpha`` are used; relative rates use a scale of 1 (logit units).
+    parametrisation : {"auto", "centred", "noncentred"} or array of bool, shape (M,)
+        Per basis function, NUTS samples ``v_i = w_i`` (centred) or ``v_i = w_i sqrt(alpha_i)``
+        (non-centred). A weight the data determine makes the non-centred posterior a funnel, a
+        weight the prior dominates makes the centred one a funnel, so each weight gets its own
+        form: ``"auto"`` (default) centres the weights that are more than 3 posterior standard
+        deviations from zero in a Laplace fit with unit prior precision (weights the data pin
+        down; the others may be switched off by large ``alpha``); a boolean mask
+        (True = centred) sets it directly. SVI always uses
+        :meth:`noncentred_model`.
     """
 
     kind = "classification"
-    latent_names = ("log_alpha", "z")
+    latent_names = ("log_alpha", "v")
 
-    def __init__(self, Phi: Any, t: Any, hyperpriors: Hyperpriors | None = None) -> None:
+    def __init__(
+        self,
+        Phi: Any,
+        t: Any,
+        hyperpriors: Hyperpriors | None = None,
+        parametrisation: Any = "auto",
+    ) -> None:
         self.Phi = _as_tensor(Phi, "Phi", 2)
         self.t = _as_tensor(t, "t", 1)
         n, m = self.Phi.shape
@@ -387,33 +423,99 @@ class SparseBayesClassificationModel:
             raise ValueError("classification targets t must be 0 or 1")
         self.target_scale = 1.0
         self.hyperpriors = (hyperpriors or Hyperpriors()).resolve(1.0)
+        self._Phi_np, self._t_np = self.Phi.numpy(), self.t.numpy()
+        if isinstance(parametrisation, str):
+            if parametrisation == "centred":
+                mask = np.ones(m, dtype=bool)
+            elif parametrisation == "noncentred":
+                mask = np.zeros(m, dtype=bool)
+            elif parametrisation == "auto":
+                mask = self.well_determined()
+            else:
+                raise ValueError(
+                    "parametrisation must be 'auto', 'centred', 'noncentred' or a boolean mask, "
+                    f"got {parametrisation!r}"
+                )
+        else:
+            mask = np.asarray(parametrisation)
+            if mask.shape != (m,) or mask.dtype != bool:
+                raise ValueError(f"parametrisation mask must be a bool array of shape ({m},)")
+        self._centred_t = torch.tensor(mask)
+        self.centred = mask.copy()
+        self.centred.flags.writeable = False
 
     @property
     def n_basis(self) -> int:
         """Number of basis functions ``M``."""
         return int(self.Phi.shape[1])
 
+    def laplace(
+        self, alpha: np.ndarray, w0: np.ndarray | None = None, n_newton: int = 50
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior mode and Laplace covariance of ``w`` for fixed precisions ``alpha``."""
+        w = np.zeros(self.n_basis) if w0 is None else np.array(w0, dtype=float)
+        for _ in range(n_newton):
+            _, g = self._loglik_np(w)
+            p = 0.5 * (1.0 + np.tanh(0.5 * (self._Phi_np @ w)))
+            H = (self._Phi_np * (p * (1 - p))[:, None]).T @ self._Phi_np + np.diag(alpha)
+            step = np.linalg.solve(H, g - alpha * w)
+            w = w + step
+            if np.max(np.abs(step)) < 1e-10:
+                break
+        p = 0.5 * (1.0 + np.tanh(0.5 * (self._Phi_np @ w)))
+        H = (self._Phi_np * (p * (1 - p))[:, None]).T @ self._Phi_np + np.diag(alpha)
+        L = _np_cholesky(H)
+        L_inv = np.linalg.solve(L, np.eye(self.n_basis))
+        return w, L_inv.T @ L_inv
+
+    def well_determined(self, threshold: float = 3.0) -> np.ndarray:
+        """Weights whose Laplace z-score ``|w_i| / sd_i`` exceeds ``threshold`` (unit prior)."""
+        w, Sigma = self.laplace(np.ones(self.n_basis))
+        return np.abs(w) > threshold * np.sqrt(np.diag(Sigma))
+
     def log_likelihood(self, w: torch.Tensor) -> torch.Tensor:
         """Bernoulli log likelihood of the targets for weights ``w`` (``(..., M)``)."""
         logits = w @ self.Phi.T
         return (self.t * logits - torch.nn.functional.softplus(logits)).sum(-1)
 
-    def log_joint(self, log_alpha: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-        """Unnormalised log posterior of the non-centred latents ``(log alpha, z)``."""
+    def _loglik_np(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        f = w @ self._Phi_np.T
+        loglik = (self._t_np * f - np.logaddexp(0.0, f)).sum(-1)
+        g_w = (self._t_np - 0.5 * (1.0 + np.tanh(0.5 * f))) @ self._Phi_np
+        return loglik, g_w
+
+    def weights_from_latent(self, log_alpha: Any, v: Any) -> Any:
+        """Weights ``w`` from the sampled latents (numpy or torch, broadcasting)."""
+        if isinstance(v, torch.Tensor):
+            c = self._centred_t
+            return torch.where(c, v, v * torch.exp(-0.5 * log_alpha))
+        return np.where(self.centred, v, v * np.exp(-0.5 * np.asarray(log_alpha)))
+
+    def _joint_np(self, la: np.ndarray, v: np.ndarray):
+        """Log joint of ``(log alpha, v)`` and its gradient (numpy, batched)."""
         hp = self.hyperpriors
-        w = z * torch.exp(-0.5 * log_alpha)
-        log_prior = _log_gamma_on_log_scale(log_alpha, hp.a_alpha, hp.b_alpha).sum(-1)
-        log_prior = log_prior - 0.5 * (z * z).sum(-1) - 0.5 * self.n_basis * _LOG_2PI
-        return log_prior + self.log_likelihood(w)
+        c = self.centred
+        alpha, scale = np.exp(la), np.exp(-0.5 * la)
+        w = np.where(c, v, v * scale)
+        loglik, g_w = self._loglik_np(w)
+        prior_a, dprior_a = _np_log_gamma_on_log_scale(la, hp.a_alpha, hp.b_alpha)
+        log_pv = np.where(c, 0.5 * la - 0.5 * alpha * v * v, -0.5 * v * v)
+        value = prior_a.sum(-1) + log_pv.sum(-1) - 0.5 * self.n_basis * _LOG_2PI + loglik
+        g_la = dprior_a + np.where(c, 0.5 - 0.5 * alpha * v * v, -0.5 * w * g_w)
+        g_v = np.where(c, -alpha * v + g_w, -v + scale * g_w)
+        return value, (g_la, g_v)
+
+    def log_joint(self, log_alpha: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        """Unnormalised log posterior of the latents ``(log alpha, v)``."""
+        return _NumpyFunction.apply(self._joint_np, *_as_pair(log_alpha, v))
 
     def potential(self, params: Mapping[str, torch.Tensor]) -> torch.Tensor:
-        """NUTS potential energy on the unconstrained ``(log alpha, z)``."""
-        return -self.log_joint(params["log_alpha"], params["z"])
+        """NUTS potential energy on the unconstrained latents ``(log alpha, v)``."""
+        return -self.log_joint(params["log_alpha"], params["v"])
 
-    def model(self) -> torch.Tensor:
-        """Non-centred Pyro model with a Bernoulli likelihood on logits ``Phi w``."""
+    def _alpha(self) -> torch.Tensor:
         hp = self.hyperpriors
-        alpha = pyro.sample(
+        return pyro.sample(
             "alpha",
             dist.Gamma(
                 torch.tensor(hp.a_alpha, dtype=_DTYPE), torch.tensor(hp.b_alpha, dtype=_DTYPE)
@@ -421,19 +523,34 @@ class SparseBayesClassificationModel:
             .expand([self.n_basis])
             .to_event(1),
         )
-        z = pyro.sample("z", dist.Normal(torch.zeros(self.n_basis, dtype=_DTYPE), 1.0).to_event(1))
-        w = pyro.deterministic("weights", z * alpha.rsqrt(), event_dim=1)
+
+    def _likelihood(self, w: torch.Tensor) -> None:
         with pyro.plate("data", self.Phi.shape[0]):
             pyro.sample("t", dist.Bernoulli(logits=w @ self.Phi.T), obs=self.t)
+
+    def model(self) -> torch.Tensor:
+        """Pyro model in this instance's per-weight parametrisation (latent site ``v``)."""
+        alpha = self._alpha()
+        c = self._centred_t
+        scale = torch.where(c, alpha.rsqrt(), torch.ones_like(alpha))
+        v = pyro.sample("v", dist.Normal(torch.zeros_like(alpha), scale).to_event(1))
+        w = pyro.deterministic("weights", torch.where(c, v, v * alpha.rsqrt()), event_dim=1)
+        self._likelihood(w)
         return w
 
-    noncentred_model = model
+    def noncentred_model(self) -> torch.Tensor:
+        """Non-centred Pyro model: ``w = z / sqrt(alpha)``, ``z ~ N(0, I)``."""
+        alpha = self._alpha()
+        z = pyro.sample("z", dist.Normal(torch.zeros(self.n_basis, dtype=_DTYPE), 1.0).to_event(1))
+        w = pyro.deterministic("weights", z * alpha.rsqrt(), event_dim=1)
+        self._likelihood(w)
+        return w
 
     def default_init(self) -> dict[str, torch.Tensor]:
         """Start values: unit weight precision, zero weights."""
         return {
             "log_alpha": torch.zeros(self.n_basis, dtype=_DTYPE),
-            "z": torch.zeros(self.n_basis, dtype=_DTYPE),
+            "v": torch.zeros(self.n_basis, dtype=_DTYPE),
         }
 
 
@@ -686,7 +803,8 @@ class RVMPosterior:
             Phi = torch.as_tensor(np.asarray(Phi, dtype=np.float64))
         if Phi.ndim != 2 or Phi.shape[1] != self.weights.shape[2]:
             raise ValueError(
-                f"design matrix must have shape (n, {self.weights.shape[2]}), got {tuple(Phi.shape)}"
+                f"design matrix must have shape (n, {self.weights.shape[2]}), "
+                f"got {tuple(Phi.shape)}"
             )
         if not torch.isfinite(Phi).all():
             raise ValueError("design matrix contains NaN or inf")
@@ -732,9 +850,7 @@ class RVMPosterior:
         mean = f.mean(1)
         if not return_std:
             return self._out(mean, as_torch)
-        noise_var = torch.exp(
-            -torch.as_tensor(self.log_beta, dtype=f.dtype, device=f.device)
-        ).mean()
+        noise_var = torch.exp(-torch.tensor(self.log_beta, dtype=f.dtype, device=f.device)).mean()
         std = torch.sqrt(noise_var + f.var(1, unbiased=False))
         return self._out(mean, as_torch), self._out(std, as_torch)
 
@@ -804,21 +920,32 @@ def _chain_seeds(seed: int, n: int) -> list[int]:
 
 
 def _check_init(model: Model, init: Mapping[str, Any] | None) -> dict[str, torch.Tensor]:
+    """Validate start values; classification accepts weights ``w`` or ``z`` for either form."""
     default = model.default_init()
     if init is None:
         return default
-    out = {}
-    for name, ref in default.items():
-        if name not in init:
-            raise ValueError(f"init is missing {name!r} (needs {sorted(default)})")
-        value = torch.as_tensor(np.asarray(init[name], dtype=np.float64), dtype=_DTYPE)
-        if value.shape != ref.shape:
-            raise ValueError(
-                f"init[{name!r}] must have shape {tuple(ref.shape)}, got {tuple(value.shape)}"
-            )
+    given = {}
+    for name, value in init.items():
+        value = torch.as_tensor(np.asarray(value, dtype=np.float64), dtype=_DTYPE)
         if not torch.isfinite(value).all():
             raise ValueError(f"init[{name!r}] contains NaN or inf")
-        out[name] = value
+        given[name] = value
+    if model.kind == "classification" and "log_alpha" in given and "v" not in given:
+        half = torch.exp(0.5 * given["log_alpha"])
+        if "z" in given:
+            given["w"] = given["z"] / half
+        if "w" in given:
+            c = model._centred_t
+            given["v"] = torch.where(c, given["w"], given["w"] * half)
+    out = {}
+    for name, ref in default.items():
+        if name not in given:
+            raise ValueError(f"init is missing {name!r} (needs {sorted(default)})")
+        if given[name].shape != ref.shape:
+            raise ValueError(
+                f"init[{name!r}] must have shape {tuple(ref.shape)}, got {tuple(given[name].shape)}"
+            )
+        out[name] = given[name]
     return out
 
 
@@ -891,7 +1018,8 @@ def _run_svi(
         mu, _ = model.weight_posterior(init["log_alpha"], init["log_beta"])
         values["z"] = mu * torch.exp(0.5 * init["log_alpha"])
     else:
-        values["z"] = init["z"]
+        w = model.weights_from_latent(init["log_alpha"], init["v"])
+        values["z"] = w * torch.exp(0.5 * init["log_alpha"])
     guide = AutoMultivariateNormal(fn, init_loc_fn=init_to_value(values=values), init_scale=0.01)
     optim = pyro.optim.ClippedAdam({"lr": lr, "lrd": 0.05 ** (1.0 / steps), "clip_norm": 10.0})
     elbo = Trace_ELBO(num_particles=particles, vectorize_particles=True, max_plate_nesting=1)
@@ -963,7 +1091,8 @@ def sample_posterior(
     seed : int
         Seeds every chain (via ``numpy.random.SeedSequence``), the weight draws and SVI.
     init : dict, optional
-        Start values (``log_alpha``, ``log_beta`` or ``z``); default ``model.default_init()``.
+        Start values: ``log_alpha`` and ``log_beta`` (regression) or weights ``w`` (or ``z``)
+        (classification); default ``model.default_init()``.
         Each chain starts at ``init`` plus ``N(0, init_jitter^2)`` noise.
     target_accept_prob, max_tree_depth, full_mass : NUTS settings.
     svi_steps, svi_lr, svi_particles : SVI settings (ClippedAdam, learning rate decaying 20x).
@@ -1017,7 +1146,7 @@ def sample_posterior(
             weights = w.numpy().reshape(log_alpha.shape)
         else:
             log_beta = None
-            weights = raw["z"] * np.exp(-0.5 * log_alpha)
+            weights = model.weights_from_latent(log_alpha, raw["v"])
         elapsed = time.perf_counter() - t0
         variables = {"log_alpha": log_alpha, "weights": weights}
         if log_beta is not None:
@@ -1106,12 +1235,25 @@ def _estimator_init(
             raise ValueError(f"estimator.beta_ must be positive and finite, got {beta!r}")
         init["log_beta"] = torch.tensor(math.log(beta), dtype=_DTYPE)
     else:
-        z = np.zeros(m)
+        w = np.zeros(m)
         mean = np.asarray(estimator.mean_, dtype=np.float64).reshape(-1)
         if cols is not None and mean.size == cols.size:
-            z[cols] = mean * np.sqrt(alpha)
-        init["z"] = torch.as_tensor(z, dtype=_DTYPE)
+            w[cols] = mean
+        init["w"] = torch.as_tensor(w, dtype=_DTYPE)
     return init, names
+
+
+def _well_determined_from_estimator(estimator: Any, basis: str, m: int) -> Any:
+    """Per-basis centring mask from the type-II fit (``|mean_i| > 3 sd_i``), or "auto"."""
+    cov = getattr(estimator, "covariance_", None)
+    mean = getattr(estimator, "mean_", None)
+    if basis != "active" or cov is None or mean is None:
+        return "auto"
+    cov = np.asarray(cov, dtype=np.float64)
+    mean = np.asarray(mean, dtype=np.float64).reshape(-1)
+    if cov.shape != (m, m) or mean.size != m:
+        return "auto"
+    return np.abs(mean) > 3.0 * np.sqrt(np.diag(cov))
 
 
 def fit_posterior(
@@ -1151,7 +1293,9 @@ def fit_posterior(
     svi_steps : int
         Optimisation steps for ``inference="svi"``.
     **kwargs
-        Further :func:`sample_posterior` settings (``target_accept_prob``, ``svi_lr``, ...).
+        Further :func:`sample_posterior` settings (``target_accept_prob``, ``svi_lr``, ...), and
+        for classifiers ``parametrisation`` (default: centred where the type-II fit's weight is
+        more than 3 standard deviations from 0, see :class:`SparseBayesClassificationModel`).
 
     Returns
     -------
@@ -1183,8 +1327,11 @@ def fit_posterior(
         unknown = ~np.isin(y_arr, classes)
         if unknown.any():
             raise ValueError(f"y has labels not in estimator.classes_: {np.unique(y_arr[unknown])}")
+        param = kwargs.pop("parametrisation", None)
+        if param is None:
+            param = _well_determined_from_estimator(estimator, basis, int(Phi.shape[1]))
         model: Model = SparseBayesClassificationModel(
-            Phi, (y_arr == classes[1]).astype(np.float64), hyperpriors
+            Phi, (y_arr == classes[1]).astype(np.float64), hyperpriors, param
         )
     else:
         model = SparseBayesRegressionModel(Phi, y_arr.astype(np.float64), hyperpriors)
