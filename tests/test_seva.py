@@ -70,7 +70,7 @@ FLAT = [0.28, 0.24, 0.25, 0.23]
 def test_status_of_each_constructed_case(rng):
     ch = _runs(rng, 6)
     ch["X"][0, 50:120] = np.nan  # 35 % missing -> BLIND
-    ch["F"][1, 20:150] = 1.0  # 65 % at the upper rail -> BLIND
+    ch["P1"][1, 20:150] = 1.0  # input at the upper rail in 65 % of samples -> BLIND
     runs = _make(ch)
     proba = [CONFIDENT_FN, CONFIDENT_F2, CONFIDENT_FN, CONFIDENT_F2, FLAT, [0.6, 0.3, 0.05, 0.05]]
     recs = records_from_diagnosis(_diagnosis(runs, proba), runs)
@@ -84,7 +84,7 @@ def test_status_of_each_constructed_case(rng):
         SevaStatus.DAZZLED,
     ]
     assert any("X missing in 35%" in s for s in recs[0].reasons)
-    assert any("F saturated in 65%" in s for s in recs[1].reasons)
+    assert any("P1 saturated in 65%" in s for s in recs[1].reasons)
     assert recs[0].missing_fraction == pytest.approx(0.35)
     assert recs[1].saturated_fraction == pytest.approx(0.65)
     assert recs[3].state == "f2" and recs[3].probability == pytest.approx(0.93)
@@ -305,3 +305,18 @@ def test_seva_records_uses_training_features_for_feature_novelty(rng):
     fake.training_features_ = rng.normal(loc=5.0, scale=0.1, size=(300, 2))
     recs = seva_records(fake, runs)
     assert all(r.status is SevaStatus.DAZZLED and r.feature_novelty > 10 for r in recs)
+
+
+def test_saturated_output_is_noted_and_blinds_only_when_asked(rng):
+    ch = _runs(rng, 1)
+    ch["F"][0, :150] = 1.0  # F at its rail 75 % of the time (as DABLib's F' under f18)
+    runs = _make(ch)
+    diag = _diagnosis(runs, [CONFIDENT_F2])
+    rec = records_from_diagnosis(diag, runs)[0]
+    assert rec.status is SevaStatus.BLURRED
+    assert rec.saturated_fraction == pytest.approx(0.75)
+    assert any("F at a rail in 75%" in s for s in rec.reasons)
+    th = SevaThresholds(max_output_saturated=0.5)
+    rec = records_from_diagnosis(diag, runs, thresholds=th)[0]
+    assert rec.status is SevaStatus.BLIND
+    assert rec.reasons == ("F saturated in 75% of samples",)
