@@ -489,6 +489,7 @@ def records_from_diagnosis(
     input_channels: Sequence[str] = INPUT_CHANNELS,
     saturation_limits: Mapping[str, tuple[float, float]] | None = None,
     not_diagnosed: Mapping[int, tuple[str, ...]] | None = None,
+    calibrator: Any = None,
 ) -> list[SevaRecord]:
     """Build one :class:`SevaRecord` per run (or per run and window) from a diagnosis.
 
@@ -520,6 +521,11 @@ def records_from_diagnosis(
     not_diagnosed
         ``{run position: BLIND reasons}`` of runs deliberately not diagnosed (their windows
         are BLIND with these reasons); set by :func:`seva_records`.
+    calibrator
+        Optional recalibration of the class distributions before the rules, an object with
+        ``transform(proba) -> proba`` in the diagnosis' class order, e.g. a
+        :class:`~bayes_fdi.calibration.TemperatureScaler` fitted on held-out runs. The
+        thresholds only mean what they say for calibrated probabilities.
 
     Returns
     -------
@@ -556,6 +562,13 @@ def records_from_diagnosis(
         lead = ("run", "window") if windowed else ("run",)
         proba = np.asarray(diagnosis["proba"].transpose(*lead, "class").values, dtype=np.float64)
         proba = proba.reshape(n_runs, -1, len(classes))
+        if calibrator is not None:
+            flat = proba.reshape(-1, len(classes))
+            ok = np.all(np.isfinite(flat), axis=1)
+            cal = np.full_like(flat, np.nan)
+            if ok.any():
+                cal[ok] = np.asarray(calibrator.transform(flat[ok]), dtype=np.float64)
+            proba = cal.reshape(proba.shape)
     else:
         blind = screen_measurements(runs, channels=channels, thresholds=th,
                                     saturation_limits=limits)["blind"]  # fmt: skip
@@ -659,8 +672,13 @@ def seva_records(
     input_reference: NoveltyReference | None = None,
     feature_reference: NoveltyReference | None = None,
     saturation_limits: Mapping[str, tuple[float, float]] | None = None,
+    calibrator: Any = None,
 ) -> list[SevaRecord]:
     """Diagnose ``runs`` with a fitted diagnoser and return their SEVA records.
+
+    ``calibrator`` (e.g. a fitted :class:`~bayes_fdi.calibration.TemperatureScaler`)
+    recalibrates the class distributions first; other arguments as in
+    :func:`records_from_diagnosis`.
 
     BLIND runs (missing/saturated signals over the whole run) are not passed to
     ``diagnoser.diagnose``; their records are BLIND with an empty distribution.
@@ -706,6 +724,7 @@ def seva_records(
         feature_reference=feature_reference,
         saturation_limits=saturation_limits,
         not_diagnosed=skipped,
+        calibrator=calibrator,
     )
 
 

@@ -320,3 +320,23 @@ def test_saturated_output_is_noted_and_blinds_only_when_asked(rng):
     rec = records_from_diagnosis(diag, runs, thresholds=th)[0]
     assert rec.status is SevaStatus.BLIND
     assert rec.reasons == ("F saturated in 75% of samples",)
+
+
+def test_calibrator_is_applied_before_the_rules(rng):
+    from bayes_fdi.calibration import TemperatureScaler
+
+    runs = make_dataset(_runs(rng, 2))
+    under = [[0.7, 0.1, 0.1, 0.1], [0.1, 0.1, 0.7, 0.1]]
+    diag = _diagnosis(runs, under)
+    assert [r.status for r in records_from_diagnosis(diag, runs)] == [SevaStatus.DAZZLED] * 2
+    # an under-confident model: labels drawn from softmax(2 * log p) -> fitted T ~ 0.5
+    logits = rng.normal(size=(5000, 4))
+    p = np.exp(logits) / np.exp(logits).sum(1, keepdims=True)
+    sharp = p**2 / (p**2).sum(1, keepdims=True)
+    y = (rng.random(5000)[:, None] > np.cumsum(sharp, 1)).sum(1).clip(max=3)
+    ts = TemperatureScaler(classes=[0, 1, 2, 3]).fit(p, y)
+    assert ts.temperature_ == pytest.approx(0.5, rel=0.1)
+    recs = records_from_diagnosis(diag, runs, calibrator=ts)
+    want = np.array(under[0]) ** (1 / ts.temperature_)
+    assert recs[0].probability == pytest.approx(want[0] / want.sum())
+    assert [r.status for r in recs] == [SevaStatus.CLEAR, SevaStatus.BLURRED]
