@@ -132,7 +132,7 @@ def test_noncentred_pyro_model_with_fixed_hyperparameters_gives_closed_form(rng)
         data={"alpha": torch.tensor(alpha), "beta": torch.tensor(beta, dtype=torch.float64)},
     )
     pyro.set_rng_seed(0)
-    mcmc = MCMC(NUTS(conditioned), num_samples=600, warmup_steps=200, disable_progbar=True)
+    mcmc = MCMC(NUTS(conditioned), num_samples=500, warmup_steps=150, disable_progbar=True)
     mcmc.run()
     z = mcmc.get_samples()["z"].numpy()
     w = z / np.sqrt(alpha)
@@ -201,7 +201,9 @@ def test_nuts_matches_grid_posterior_and_converges():
 
 def test_svi_lands_close_to_nuts(bump_nuts):
     model, nuts = bump_nuts
-    svi = sample_posterior(model, inference="svi", num_samples=500, seed=0, svi_steps=1500)
+    svi = sample_posterior(
+        model, inference="svi", num_samples=500, seed=0, svi_steps=800, svi_lr=0.04
+    )
     assert svi.weights.shape == (1, 1000, 2)
     assert np.all(np.isfinite(svi.diagnostics.elbo))
     xs = np.linspace(-3, 3, 9)

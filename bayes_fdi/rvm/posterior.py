@@ -1067,8 +1067,8 @@ def sample_posterior(
     max_tree_depth: int = 10,
     full_mass: bool = False,
     init_jitter: float = 0.1,
-    svi_steps: int = 3000,
-    svi_lr: float = 0.02,
+    svi_steps: int = 2000,
+    svi_lr: float = 0.03,
     svi_particles: int = 4,
     progress: bool = False,
     basis: str = "design",
@@ -1196,38 +1196,35 @@ def sample_posterior(
 # Estimator front end
 # --------------------------------------------------------------------------------------------------
 def _estimator_init(
-    estimator: Any, model: Model, basis: str, n_train: int | None
+    estimator: Any, model: Model, basis: str
 ) -> tuple[dict[str, torch.Tensor], tuple[str, ...]]:
-    """Start values and basis names from a fitted RVR / RVC (type-II ML point estimates)."""
+    """Start values and basis names from a fitted RVR / RVC (type-II ML point estimates).
+
+    Column layout (RVM API): ``"active"`` = bias (if kept) then the relevance columns;
+    ``"all"`` = bias (if the estimator has ``bias=True``) then every candidate column, so the
+    relevance column ``i`` of ``relevance_indices_`` sits at ``offset + i``.
+    """
     alpha = np.asarray(estimator.alpha_, dtype=np.float64).reshape(-1)
     rv = np.asarray(estimator.relevance_indices_).reshape(-1).astype(int)
     has_bias = alpha.size == rv.size + 1
-    active_names = (("bias",) if has_bias else ()) + tuple(f"rv{i}" for i in rv)
     if not np.all(np.isfinite(alpha)) or np.any(alpha <= 0):
         raise ValueError("estimator.alpha_ must be positive and finite over the active basis")
-    log_alpha_active = np.log(alpha)
     m = model.n_basis
     if basis == "active":
         if m != alpha.size:
             raise ValueError(f"design matrix has {m} columns but estimator.alpha_ has {alpha.size}")
         cols = np.arange(m)
-        names = active_names
-        log_alpha = log_alpha_active
+        names = (("bias",) if has_bias else ()) + tuple(f"rv{i}" for i in rv)
+        log_alpha = np.log(alpha)
     else:
-        # basis="all": bias column first (when the estimator has one), then one per training row.
-        offset = m - (n_train if n_train is not None else m)
-        names = (("bias",) if offset == 1 else ()) + tuple(f"x{i}" for i in range(m - offset))
-        cols = rv + offset
-        if has_bias and offset == 1:
-            cols = np.concatenate([[0], cols])
-        elif has_bias:
-            cols = None
+        offset = 1 if bool(getattr(estimator, "bias", has_bias)) else 0
+        names = (("bias",) if offset else ()) + tuple(f"c{i}" for i in range(m - offset))
+        cols = np.concatenate([[0] if has_bias else [], rv + offset]).astype(int)
+        if cols.size != alpha.size or (cols.size and cols.max() >= m):
+            raise ValueError("estimator's active basis does not fit its basis='all' design matrix")
         # inactive basis functions start where the alpha hyperprior begins to bite (weight ~ 0)
         log_alpha = np.full(m, math.log(0.1 / model.hyperpriors.b_alpha))
-        if cols is not None and cols.size == alpha.size and np.all(cols < m):
-            log_alpha[cols] = log_alpha_active
-        else:
-            cols = None
+        log_alpha[cols] = np.log(alpha)
     init = {"log_alpha": torch.as_tensor(log_alpha, dtype=_DTYPE)}
     if model.kind == "regression":
         beta = float(np.asarray(estimator.beta_))
@@ -1237,8 +1234,9 @@ def _estimator_init(
     else:
         w = np.zeros(m)
         mean = np.asarray(estimator.mean_, dtype=np.float64).reshape(-1)
-        if cols is not None and mean.size == cols.size:
-            w[cols] = mean
+        if mean.size != cols.size:
+            raise ValueError("estimator.mean_ does not match estimator.alpha_")
+        w[cols] = mean
         init["w"] = torch.as_tensor(w, dtype=_DTYPE)
     return init, names
 
@@ -1268,7 +1266,7 @@ def fit_posterior(
     seed: int = 0,
     basis: Literal["active", "all"] = "active",
     hyperpriors: Hyperpriors | None = None,
-    svi_steps: int = 3000,
+    svi_steps: int = 2000,
     **kwargs: Any,
 ) -> RVMPosterior:
     """Full posterior of a fitted ``RVR`` / binary ``RVC`` over its basis (NUTS or SVI).
@@ -1335,18 +1333,7 @@ def fit_posterior(
         )
     else:
         model = SparseBayesRegressionModel(Phi, y_arr.astype(np.float64), hyperpriors)
-    n_train = None
-    if basis == "all":
-        rv = getattr(estimator, "relevance_vectors_", None)
-        n_all = int(Phi.shape[1])
-        n_train = (
-            n_all - 1
-            if len(np.asarray(estimator.alpha_))
-            == len(np.asarray(estimator.relevance_indices_)) + 1
-            else n_all
-        )
-        del rv
-    init, names = _estimator_init(estimator, model, basis, n_train)
+    init, names = _estimator_init(estimator, model, basis)
     frozen = copy.deepcopy(estimator)
     return sample_posterior(
         model,
