@@ -55,6 +55,7 @@ import copy
 import functools
 import math
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, NamedTuple
@@ -63,7 +64,7 @@ import numpy as np
 import pyro
 import pyro.distributions as dist
 import torch
-from pyro.infer import MCMC, NUTS, SVI, Trace_ELBO
+from pyro.infer import MCMC, NUTS, SVI, JitTrace_ELBO, Trace_ELBO
 from pyro.infer.autoguide import AutoMultivariateNormal
 from pyro.infer.autoguide.initialization import init_to_value
 from scipy import stats
@@ -1005,11 +1006,10 @@ def _run_svi(
     particles: int,
     num_draws: int,
     seed: int,
+    jit: bool,
     progress: bool,
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Full-rank Gaussian SVI on the non-centred model; returns (1, S, ...) draws + ELBO trace."""
-    pyro.set_rng_seed(seed)
-    pyro.clear_param_store()
     fn = model.noncentred_model
     values = {"alpha": torch.exp(init["log_alpha"])}
     if "log_beta" in init:
@@ -1020,15 +1020,43 @@ def _run_svi(
     else:
         w = model.weights_from_latent(init["log_alpha"], init["v"])
         values["z"] = w * torch.exp(0.5 * init["log_alpha"])
-    guide = AutoMultivariateNormal(fn, init_loc_fn=init_to_value(values=values), init_scale=0.01)
-    optim = pyro.optim.ClippedAdam({"lr": lr, "lrd": 0.05 ** (1.0 / steps), "clip_norm": 10.0})
-    elbo = Trace_ELBO(num_particles=particles, vectorize_particles=True, max_plate_nesting=1)
-    svi = SVI(fn, guide, optim, elbo)
+    options = {"num_particles": particles, "vectorize_particles": True, "max_plate_nesting": 1}
+
+    def build(use_jit: bool) -> tuple[AutoMultivariateNormal, SVI]:
+        pyro.set_rng_seed(seed)
+        pyro.clear_param_store()
+        guide = AutoMultivariateNormal(
+            fn, init_loc_fn=init_to_value(values=values), init_scale=0.01
+        )
+        optim = pyro.optim.ClippedAdam({"lr": lr, "lrd": 0.05 ** (1.0 / steps), "clip_norm": 10.0})
+        loss = (
+            JitTrace_ELBO(ignore_jit_warnings=True, **options) if use_jit else Trace_ELBO(**options)
+        )
+        return guide, SVI(fn, guide, optim, loss)
+
     losses = np.empty(steps)
-    for i in range(steps):
-        losses[i] = svi.step()
-        if progress and (i + 1) % max(1, steps // 10) == 0:
-            print(f"SVI step {i + 1}/{steps}: loss {losses[i]:.4g}")
+    with warnings.catch_warnings():
+        # JitTrace_ELBO relies on torch.jit.trace, deprecated (not removed) in recent torch
+        warnings.filterwarnings(
+            "ignore", message=".*torch.jit.trace.*", category=DeprecationWarning
+        )
+        guide, svi = build(jit)
+        try:
+            losses[0] = svi.step()
+        except (RuntimeError, TypeError, NotImplementedError) as exc:
+            if not jit:
+                raise
+            warnings.warn(
+                f"JitTrace_ELBO failed ({exc}); falling back to Trace_ELBO",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+            guide, svi = build(False)
+            losses[0] = svi.step()
+        for i in range(1, steps):
+            losses[i] = svi.step()
+            if progress and (i + 1) % max(1, steps // 10) == 0:
+                print(f"SVI step {i + 1}/{steps}: loss {losses[i]:.4g}")
     predictive = pyro.infer.Predictive(
         fn,
         guide=guide,
@@ -1070,6 +1098,7 @@ def sample_posterior(
     svi_steps: int = 2000,
     svi_lr: float = 0.03,
     svi_particles: int = 4,
+    svi_jit: bool = True,
     progress: bool = False,
     basis: str = "design",
     basis_names: Sequence[str] | None = None,
@@ -1095,7 +1124,9 @@ def sample_posterior(
         (classification); default ``model.default_init()``.
         Each chain starts at ``init`` plus ``N(0, init_jitter^2)`` noise.
     target_accept_prob, max_tree_depth, full_mass : NUTS settings.
-    svi_steps, svi_lr, svi_particles : SVI settings (ClippedAdam, learning rate decaying 20x).
+    svi_steps, svi_lr, svi_particles, svi_jit : SVI settings (ClippedAdam with a learning rate
+        decaying 20x; ``svi_particles`` vectorised ELBO particles; ``svi_jit`` traces the ELBO
+        with ``JitTrace_ELBO``, about 2x faster).
     progress : bool
         Show progress bars / ELBO.
     basis, basis_names, design, classes
@@ -1171,6 +1202,7 @@ def sample_posterior(
             particles=_check_int("svi_particles", svi_particles, 1),
             num_draws=num_samples * num_chains,
             seed=seed,
+            jit=bool(svi_jit),
             progress=progress,
         )
         log_alpha, weights, log_beta = raw["log_alpha"], raw["weights"], raw.get("log_beta")
