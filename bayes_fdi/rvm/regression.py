@@ -138,7 +138,7 @@ class RVR(RegressorMixin, RVMBase):
         )
 
     def _solve(self, X: Tensor, t: Tensor, width: float | None) -> tuple[SBLResult, Kernel | None]:
-        design, kern = self._design(X, width)
+        design, kern = self._design(X, width, rhs=t)
         solver = fast_gaussian if self.method == "fast" else em_gaussian
         return solver(design, t, max_iter=self._max_iter(), tol=float(self.tol)), kern
 

@@ -291,7 +291,7 @@ def fast_gaussian(
     N, P = design.n_samples, design.n_basis
     dtype, device = design.dtype, design.device
     norms, valid = _unit_columns(design)
-    Bt_t = design.rmatmul(t[:, None])[:, 0] / norms
+    Bt_t = design.rhs_product(t) / norms
     t_var = float(t.var(unbiased=False))
     t_sq = float(t @ t)
     var_floor = max(t_var, 1e-12 * t_sq / N, 1e-300)
@@ -306,7 +306,9 @@ def fast_gaussian(
     alpha = torch.tensor([a0 if a0 > 0 else 1e3], dtype=dtype, device=device)
     active = [j]
     Phi = phi[:, None]
-    BtPhi = design.rmatmul(Phi) / norms[:, None]
+    # B^T Phi cache: screening precision for candidates, exact among active columns
+    BtPhi = design.rmatmul(Phi, exact=False) / norms[:, None]
+    BtPhi[j, 0] = phi @ phi
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
     pos = torch.zeros(P, dtype=torch.long, device=device)
@@ -366,7 +368,12 @@ def fast_gaussian(
                 alpha[jj] = new_alpha[nu]
             elif action == 0:  # add
                 b_i = design.columns([nu])[:, 0] / norms[nu]
-                BtBi = design.rmatmul(b_i[:, None])[:, 0] / norms
+                BtBi = design.rmatmul(b_i[:, None], exact=False)[:, 0] / norms
+                gram = Phi.T @ b_i  # exact Gram entries with the active columns
+                act_t = torch.tensor(active, dtype=torch.long, device=device)
+                BtBi[act_t] = gram
+                BtBi[nu] = b_i @ b_i
+                BtPhi[nu] = gram
                 u = beta * (Sigma @ BtPhi[nu])
                 a_new = float(new_alpha[nu])
                 s_ii = 1.0 / (a_new + float(S[nu]))
@@ -616,7 +623,7 @@ def fast_bernoulli(
     P, device = design.n_basis, design.device
     norms, valid = _unit_columns(design)
     tp = 2.0 * t - 1.0
-    Bt_tp = design.rmatmul(tp[:, None])[:, 0] / norms
+    Bt_tp = design.rmatmul(tp[:, None], exact=False)[:, 0] / norms
     j = int(torch.where(valid, Bt_tp.abs(), -1.0).argmax())
     Phi = design.columns([j]) / norms[j]
     target = (tp * 0.9 + 1.0) / 2.0
@@ -624,7 +631,7 @@ def fast_bernoulli(
     mu = torch.linalg.lstsq(Phi, logit[:, None]).solution[:, 0]
     alpha = (1.0 / (mu * mu).clamp_min(1e-300)).clamp(1e-3, 1e3)
     active = [j]
-    BtPhi = design.rmatmul(Phi) / norms[:, None]
+    BtPhi = design.rmatmul(Phi, exact=False) / norms[:, None]
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
     pos = torch.zeros(P, dtype=torch.long, device=device)
@@ -634,9 +641,9 @@ def fast_bernoulli(
     def full_statistics(Phi: Tensor, alpha: Tensor, mu: Tensor):
         mode = posterior_mode(Phi, t, alpha, mu)
         V = torch.cat([mode.w[:, None] * Phi, (t - mode.y)[:, None]], dim=1)
-        BtV = design.rmatmul(V) / norms[:, None]
+        BtV = design.rmatmul(V, exact=False) / norms[:, None]
         BtWPhi, Q = BtV[:, :-1], BtV[:, -1]
-        S = design.sq_rmatmul(mode.w) / (norms * norms)
+        S = design.sq_rmatmul(mode.w, exact=False) / (norms * norms)
         S = S - ((BtWPhi @ mode.Sigma) * BtWPhi).sum(1)
         return mode, S, Q
 
@@ -670,7 +677,7 @@ def fast_bernoulli(
             mu = mode.mu
         elif action == 0:
             b_i = design.columns([nu]) / norms[nu]
-            BtBi = design.rmatmul(b_i)[:, 0] / norms
+            BtBi = design.rmatmul(b_i, exact=False)[:, 0] / norms
             a_new = float(new_alpha[nu])
             mu_i = float(Q[nu]) / (a_new + float(S[nu]))
             Phi = torch.cat([Phi, b_i], dim=1)
