@@ -479,6 +479,7 @@ def em_gaussian(
         (active.numel(),), active.numel() / max(t_sq, 1e-300), dtype=dtype, device=device
     )
     keep = torch.arange(active.numel(), device=device)  # positions in Phi_all
+    alpha_floor = 1e-10 / max(t_sq, 1e-300)  # prior sd at most 1e5 |t| on a unit column
     trace: list[float] = []
     converged = False
     it = 0
@@ -493,8 +494,8 @@ def em_gaussian(
         log_ml = _gaussian_log_ml(N, beta, ee, alpha, mu, fac)
         gain = log_ml - trace[-1] if trace else math.inf
         trace.append(log_ml)
-        gamma = 1.0 - alpha * Sigma.diagonal()
-        new_alpha = gamma / (mu * mu).clamp_min(1e-300)
+        gamma = (1.0 - alpha * Sigma.diagonal()).clamp(0.0, 1.0)
+        new_alpha = (gamma / (mu * mu).clamp_min(1e-300)).clamp_min(alpha_floor)
         new_beta = min((N - float(gamma.sum())) / max(ee, 1e-300), beta_max)
         new_beta = max(new_beta, 1e-300)
         d_alpha = float((torch.log(new_alpha) - torch.log(alpha)).abs().max())
