@@ -65,6 +65,7 @@ __all__ = [
     "main",
     "make_data",
     "rbf_kernel_sigma",
+    "render_saved",
     "replace_marked_block",
     "run_worker",
     "sigma_to_gamma",
@@ -544,6 +545,9 @@ def format_report(rows: Sequence[Mapping[str, Any]], meta: Mapping[str, Any]) ->
     versions = sorted({r["version"] for r in rows if r.get("status") == "ok" and "version" in r})
     if versions:
         parts += ["", "Versions: " + "; ".join(versions) + "."]
+    if meta.get("command"):
+        total = f" (total {meta['total_s']:.0f} s wall)" if meta.get("total_s") else ""
+        parts += ["", f"Command: `{meta['command']}`{total}."]
     return "\n".join(parts) + "\n"
 
 
@@ -594,6 +598,16 @@ def snapshot_source(rev: str, out: Path) -> Path:
         subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
         (dest / "SOURCE_COMMIT").write_text(f"git {sha}\n")
     return dest
+
+
+def render_saved(path: Path) -> str:
+    """The Markdown report of a saved ``rvm_fit.json`` (rows, meta)."""
+    payload = json.loads(Path(path).read_text())
+    rows = [
+        {k: v for k, v in r.items() if not k.endswith("_ratio") and not k.startswith("best_")}
+        for r in payload["rows"]
+    ]
+    return format_report(rows, payload["meta"])
 
 
 def _source_description(root: Path) -> str:
@@ -658,7 +672,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="write the report into benchmarks/README.md and docs/rvm-benchmark.md",
     )
+    ap.add_argument(
+        "--render",
+        type=Path,
+        nargs="+",
+        metavar="JSON",
+        help="run nothing: re-render saved rvm_fit.json results (several: one section each)",
+    )
     args = ap.parse_args(argv)
+    if args.render:
+        report = "\n".join(render_saved(path) for path in args.render)
+        print(report)
+        if args.update_docs:
+            for path in DOC_FILES:
+                path.write_text(replace_marked_block(path.read_text(), report))
+        return 0
 
     sizes = args.sizes or (QUICK_SIZES if args.quick else SIZES)
     methods = [METHODS[m] for m in args.methods.split(",") if m]

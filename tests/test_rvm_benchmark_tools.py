@@ -263,3 +263,13 @@ def test_replace_marked_block_keeps_surroundings_and_rejects_bad_markers():
     assert bench.replace_marked_block(new, "| new |") == new  # idempotent
     with pytest.raises(ValueError, match="marker"):
         bench.replace_marked_block("no markers", "x")
+
+
+def test_render_saved_reproduces_the_report(tmp_path):
+    rows = [_row("bayes_fdi", 5000, 2.5, 0.101), _row("fastrvm", 5000, 5.0, 0.1)]
+    meta = {"sigma": 0.5, "gamma": 2.0, "n_test": 2000, "command": "python x.py", "total_s": 9.0}
+    path = tmp_path / "r.json"
+    path.write_text(bench.json.dumps({"meta": meta, "rows": bench.add_ratios(rows)}))
+    assert bench.render_saved(path) == bench.format_report(rows, meta)
+    assert "| 5000 | fit CPU s | 3 | 2.500 | PASS |" in bench.render_saved(path)
+    assert "Command: `python x.py` (total 9 s wall)." in bench.render_saved(path)

@@ -149,3 +149,18 @@ def test_errors(data, clf):
         clf.predict(X[:, :1])
     with pytest.raises(ValueError, match="moderated"):
         RVC(moderated="yes").fit(X, y)
+
+
+def test_float32_screening_bernoulli(data):
+    """Screening S, Q in float32 changes nothing that matters for the fitted classifier."""
+    from bayes_fdi.rvm import RBF
+    from bayes_fdi.rvm.design import Design
+    from bayes_fdi.rvm.sparse_bayes import fast_bernoulli
+
+    X, y, _, _ = data
+    Xt, t = torch.tensor(X), torch.tensor(y, dtype=torch.float64)
+    exact = fast_bernoulli(Design(kernel=RBF(1.0), X=Xt, screen=False), t)
+    screen = fast_bernoulli(Design(kernel=RBF(1.0), X=Xt, screen=True), t)
+    assert abs(screen.log_evidence - exact.log_evidence) < 0.05
+    np.testing.assert_array_equal(screen.active.numpy(), exact.active.numpy())
+    np.testing.assert_allclose(screen.mean.numpy(), exact.mean.numpy(), rtol=1e-3)

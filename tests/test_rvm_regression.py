@@ -262,3 +262,35 @@ def test_em_iteration_limit_warns(sinc):
     with pytest.warns(ConvergenceWarning, match="did not converge"):
         m = RVR(method="em", max_iter=3).fit(X, y)
     assert m.n_iter_ == 3 and not m.converged_
+
+
+def test_float32_screening_keeps_the_model_exact():
+    """The float32 screening copy only ranks candidates: the fitted model stays exact."""
+    from bayes_fdi.rvm.design import Design
+    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+
+    rng = np.random.default_rng(17)
+    X = rng.uniform(0, 1, (700, 3))
+    y = np.sin(3 * X[:, 0]) * np.cos(2 * X[:, 1]) + 0.5 * X[:, 2] ** 2
+    y = y + 0.05 * rng.standard_normal(700)
+    Xt, t = torch.tensor(X), torch.tensor(y)
+    exact = Design(kernel=RBF(0.3), X=Xt, bias=True, rhs=t, screen=False)
+    screen = Design(kernel=RBF(0.3), X=Xt, bias=True, rhs=t, screen=True)
+    assert exact.F is not None and screen.F is None and screen.F_screen.dtype == torch.float32
+    np.testing.assert_allclose(
+        screen.column_norms().numpy(), exact.column_norms().numpy(), rtol=1e-13
+    )
+    np.testing.assert_allclose(
+        screen.rhs_product(t).numpy(), exact.rhs_product(t).numpy(), rtol=1e-12
+    )
+    r_exact, r_screen = fast_gaussian(exact, t), fast_gaussian(screen, t)
+    # same optimum up to the ranking of near-equal candidates
+    assert abs(r_screen.log_evidence - r_exact.log_evidence) < 1e-3 * abs(r_exact.log_evidence)
+    # and the reported posterior/evidence are exact for the selected basis
+    Phi = exact.columns(r_screen.active).numpy()
+    alpha = r_screen.alpha.numpy()
+    Sigma = np.linalg.inv(np.diag(alpha) + r_screen.beta * Phi.T @ Phi)
+    np.testing.assert_allclose(r_screen.covariance.numpy(), Sigma, rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(r_screen.mean.numpy(), r_screen.beta * Sigma @ Phi.T @ y, rtol=1e-7)
+    ev = gaussian_log_evidence(Phi, alpha, r_screen.beta, y)
+    assert r_screen.log_evidence == pytest.approx(ev, abs=1e-6)

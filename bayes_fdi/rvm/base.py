@@ -224,11 +224,14 @@ class RVMBase(BaseEstimator):
         return value.detach().cpu().numpy()
 
     # ------------------------------------------------------------------ design
-    def _design(self, X: Tensor, width: float | None) -> tuple[Design, Kernel | None]:
+    def _design(
+        self, X: Tensor, width: float | None, rhs: Tensor | None = None
+    ) -> tuple[Design, Kernel | None]:
         kern = self._resolve_kernel(width)
         if kern is None:
             return Design(matrix=X, bias=self.bias), None
-        return Design(kernel=kern, X=X, bias=self.bias, max_bytes=self.max_kernel_bytes), kern
+        design = Design(kernel=kern, X=X, bias=self.bias, max_bytes=self.max_kernel_bytes, rhs=rhs)
+        return design, kern
 
     def _set_state(
         self,

@@ -11,6 +11,13 @@ where ``F`` is either a dense matrix or the symmetric training kernel matrix
 ``kernel(X, X)``.  The kernel matrix is materialised only when it fits the memory
 budget ``max_bytes``; otherwise it is recomputed in row blocks, so memory grows like
 ``N x (block + active set)`` instead of ``N^2``.
+
+Screening copy.  For float64 kernel designs with at least :data:`SCREEN_MIN_SAMPLES`
+rows the materialised matrix is a *float32* copy used only by
+``rmatmul(V, exact=False)``: the ``B^T b_i`` products that screen candidate columns in the
+fast solver (half the memory traffic of float64, which dominates an addition).  Everything
+that enters the model -- active columns, ``B^T t``, column norms, and (by the solver's
+exact correction) the Gram entries between active columns -- stays exact float64.
 """
 
 from __future__ import annotations
@@ -23,7 +30,9 @@ from bayes_fdi.rvm.kernels import Kernel
 __all__ = ["DEFAULT_MAX_BYTES", "Design"]
 
 #: default memory budget (bytes) for materialising a kernel matrix
-DEFAULT_MAX_BYTES = 1_500_000_000
+DEFAULT_MAX_BYTES = 2_000_000_000
+#: float64 kernel designs with at least this many rows keep a float32 screening copy
+SCREEN_MIN_SAMPLES = 2000
 #: bytes per row block when the kernel matrix is computed on the fly
 _BLOCK_BYTES = 64_000_000
 
@@ -53,6 +62,8 @@ class Design:
         X: Tensor | None = None,
         bias: bool = True,
         max_bytes: int = DEFAULT_MAX_BYTES,
+        rhs: Tensor | None = None,
+        screen: bool | None = None,
     ) -> None:
         if (matrix is None) == (kernel is None):
             raise ValueError("give exactly one of `matrix` and `kernel`")
@@ -60,29 +71,74 @@ class Design:
         self.offset = 1 if self.bias else 0
         self.kernel = kernel
         self.X = X
+        self.F: Tensor | None = None
+        self.F_screen: Tensor | None = None
+        self._rhs = rhs
+        self._rhs_product: Tensor | None = None
+        self._norms: Tensor | None = None
         if matrix is not None:
-            self.F: Tensor | None = matrix
+            self.F = matrix
             ref = matrix
         else:
             if X is None:
                 raise ValueError("`kernel` needs the training inputs `X`")
             ref = X
-            n = X.shape[0]
-            itemsize = torch.empty((), dtype=X.dtype).element_size()
-            self.F = kernel(X, X) if n * n * itemsize <= max_bytes else None
         self.n_samples = ref.shape[0]
-        self.n_features = self.F.shape[1] if self.F is not None else self.n_samples
-        self.n_basis = self.n_features + self.offset
         self.dtype = ref.dtype
         self.device = ref.device
         itemsize = torch.empty((), dtype=self.dtype).element_size()
         self._block = max(1, _BLOCK_BYTES // max(1, self.n_samples * itemsize))
         self._F_sq: Tensor | None = None
+        if kernel is not None:
+            n = self.n_samples
+            if screen is None:
+                screen = self.dtype == torch.float64 and n >= SCREEN_MIN_SAMPLES
+            if screen and n * n * 4 <= max_bytes:
+                self._build_screening()
+            elif not screen and n * n * itemsize <= max_bytes:
+                self.F = kernel(X, X)
+        self.n_features = self.F.shape[1] if self.F is not None else self.n_samples
+        self.n_basis = self.n_features + self.offset
+
+    def _build_screening(self) -> None:
+        """One blockwise pass: float32 copy, exact column norms and exact ``K^T rhs``."""
+        n = self.n_samples
+        self.F_screen = torch.empty(n, n, dtype=torch.float32, device=self.device)
+        sq = torch.zeros(n, dtype=self.dtype, device=self.device)
+        prod = None
+        if self._rhs is not None:
+            rhs = self._rhs.reshape(n, -1).to(self.dtype)
+            prod = torch.empty(n, rhs.shape[1], dtype=self.dtype, device=self.device)
+        for start in range(0, n, self._block):
+            stop = min(start + self._block, n)
+            rows = self._kernel_rows(start, stop)
+            self.F_screen[start:stop] = rows
+            if prod is not None:
+                prod[start:stop] = rows @ rhs  # K symmetric: (K^T rhs) rows
+            sq += rows.square_().sum(0)
+        norms = sq.sqrt()
+        if self.bias:
+            norms = torch.cat([norms.new_full((1,), float(n) ** 0.5), norms])
+        self._norms = norms
+        if prod is not None:
+            assert self._rhs is not None
+            head = (
+                [self._rhs.reshape(n, -1).to(self.dtype).sum(0, keepdim=True)] if self.bias else []
+            )
+            self._rhs_product = torch.cat([*head, prod], dim=0)
 
     @property
     def materialised(self) -> bool:
-        """Whether ``F`` is held in memory (``False``: computed in row blocks)."""
-        return self.F is not None
+        """Whether ``F`` (or its float32 screening copy) is held in memory."""
+        return self.F is not None or self.F_screen is not None
+
+    def rhs_product(self, rhs: Tensor) -> Tensor:
+        """Exact ``B^T rhs`` (``(N_B,)`` or ``(N_B, k)``), cached at construction if possible."""
+        if self._rhs_product is not None and rhs is self._rhs:
+            out = self._rhs_product
+        else:
+            out = self.rmatmul(rhs.reshape(self.n_samples, -1))
+        return out[:, 0] if rhs.ndim == 1 else out
 
     def _kernel_rows(self, start: int, stop: int) -> Tensor:
         assert self.kernel is not None and self.X is not None
@@ -105,28 +161,36 @@ class Design:
             out[:, (~is_bias).to(self.device)] = cols
         return out
 
-    def rmatmul(self, V: Tensor) -> Tensor:
-        """``B^T V`` for an ``(N, k)`` matrix ``V``; returns ``(N_B, k)``."""
+    def rmatmul(self, V: Tensor, *, exact: bool = True) -> Tensor:
+        """``B^T V`` for an ``(N, k)`` matrix ``V``; returns ``(N_B, k)``.
+
+        ``exact=False`` may use the float32 screening copy (relative error ~1e-6).
+        """
         out = torch.empty(self.n_basis, V.shape[1], dtype=self.dtype, device=self.device)
         if self.bias:
             out[0] = V.sum(0)
         if self.F is not None:
             torch.matmul(self.F.T, V, out=out[self.offset :])
+        elif self.F_screen is not None and not exact:
+            out[self.offset :] = self.F_screen @ V.to(torch.float32)  # K symmetric
         else:  # symmetric kernel matrix: K^T V = K V, row block by row block
             for start in range(0, self.n_samples, self._block):
                 stop = min(start + self._block, self.n_samples)
                 out[self.offset + start : self.offset + stop] = self._kernel_rows(start, stop) @ V
         return out
 
-    def sq_rmatmul(self, w: Tensor) -> Tensor:
-        """``(B * B)^T w`` for a length-``N`` vector ``w``; returns ``(N_B,)``."""
+    def sq_rmatmul(self, w: Tensor, *, exact: bool = True) -> Tensor:
+        """``(B * B)^T w`` for a length-``N`` vector ``w``; returns ``(N_B,)``.
+
+        ``exact=False`` may use the float32 screening copy.
+        """
         out = torch.empty(self.n_basis, dtype=self.dtype, device=self.device)
         if self.bias:
             out[0] = w.sum()
-        if self.F is not None:
+        if self.F is not None or (self.F_screen is not None and not exact):
             if self._F_sq is None:
-                self._F_sq = self.F * self.F
-            out[self.offset :] = self._F_sq.T @ w
+                self._F_sq = self.F.square() if self.F is not None else self.F_screen.square()
+            out[self.offset :] = self._F_sq.T @ w.to(self._F_sq.dtype)
         else:
             for start in range(0, self.n_samples, self._block):
                 stop = min(start + self._block, self.n_samples)
@@ -135,12 +199,15 @@ class Design:
         return out
 
     def column_norms(self) -> Tensor:
-        """Euclidean norms of all ``N_B`` columns."""
+        """Exact Euclidean norms of all ``N_B`` columns."""
+        if self._norms is not None:
+            return self._norms
         if self.F is not None:
             norms = torch.linalg.vector_norm(self.F, dim=0)
             if self.bias:
                 norms = torch.cat([norms.new_full((1,), float(self.n_samples) ** 0.5), norms])
-            return norms
-        return self.sq_rmatmul(
-            torch.ones(self.n_samples, dtype=self.dtype, device=self.device)
-        ).sqrt()
+        else:
+            ones = torch.ones(self.n_samples, dtype=self.dtype, device=self.device)
+            norms = self.sq_rmatmul(ones).sqrt()
+        self._norms = norms
+        return norms

@@ -103,6 +103,8 @@ class RBF(Kernel):
 
     def forward(self, X: Tensor, Z: Tensor) -> Tensor:
         d2 = _squared_distances(X, Z)
+        if Z is X:  # exact zeros on the diagonal of a Gram matrix
+            d2.fill_diagonal_(0.0)
         return torch.exp_(d2.mul_(-0.5 / self.width**2))
 
     def to_dict(self) -> dict[str, Any]:

@@ -60,9 +60,11 @@ class RVR(RegressorMixin, RVMBase):
         Floating-point type of all computations.
     device : str, torch.device or None, default None
         Compute device; None uses the device of torch inputs (CPU for numpy inputs).
-    max_kernel_bytes : int, default 1.5e9
-        Materialise the training kernel matrix only up to this size; larger problems
-        compute kernel rows in blocks (memory ``O(N M)``, slower additions).
+    max_kernel_bytes : int, default 2e9
+        Materialise the training kernel matrix only up to this size (for float64 models
+        with ``N >= 2000`` as a float32 copy that only screens candidates; the model itself
+        stays exact); larger problems compute kernel rows in blocks (memory ``O(N M)``,
+        slower additions).
     random_state : int or None, default None
         Unused (the algorithm is deterministic); accepted for API compatibility.
 
@@ -138,7 +140,7 @@ class RVR(RegressorMixin, RVMBase):
         )
 
     def _solve(self, X: Tensor, t: Tensor, width: float | None) -> tuple[SBLResult, Kernel | None]:
-        design, kern = self._design(X, width)
+        design, kern = self._design(X, width, rhs=t)
         solver = fast_gaussian if self.method == "fast" else em_gaussian
         return solver(design, t, max_iter=self._max_iter(), tol=float(self.tol)), kern
 

@@ -192,57 +192,43 @@ def _gains(
     S: Tensor,
     Q: Tensor,
     in_model: Tensor,
-    pos: Tensor,
-    alpha: Tensor,
+    alpha_full: Tensor,
     addable: Tensor,
     n_active: int,
 ) -> tuple[Tensor, Tensor, Tensor, bool]:
-    """Evidence gains ``Delta L`` of the best action for every candidate.
+    """Evidence gains ``Delta L`` of the best action for every candidate (vectorised).
 
+    ``alpha_full`` holds the precisions of active candidates (any positive value elsewhere).
     Returns ``(delta_ml, new_alpha, kind, any_delete)`` with ``kind`` 0 = add,
     1 = re-estimate, 2 = delete and ``delta_ml = -inf`` where no action applies.
     """
-    s = S.clone()
-    q = Q.clone()
-    act = in_model.nonzero().squeeze(1)
-    a = alpha[pos[act]]
-    Sa = S[act]
-    s[act] = a * Sa / (a - Sa)
-    q[act] = a * Q[act] / (a - Sa)
+    a = alpha_full
+    denom = torch.where(in_model, a - S, 1.0)
+    s = torch.where(in_model, a * S / denom, S)
+    q = torch.where(in_model, a * Q / denom, Q)
     theta = q * q - s
     useful = theta > _ZERO_FACTOR
     new_alpha = torch.where(useful, s * s / torch.where(useful, theta, 1.0), math.inf)
-
-    delta_ml = torch.full_like(S, -math.inf)
-    kind = torch.full(S.shape, -1, dtype=torch.long, device=S.device)
-    # re-estimate
-    re = in_model & useful
-    if bool(re.any()):
-        idx = re.nonzero().squeeze(1)
-        a_old = alpha[pos[idx]]
-        delta = 1.0 / new_alpha[idx] - 1.0 / a_old
-        S_i, Q_i = S[idx], Q[idx]
-        delta_ml[idx] = 0.5 * (delta * Q_i * Q_i / (S_i * delta + 1.0) - torch.log1p(S_i * delta))
-        kind[idx] = 1
-    # delete (never the last basis)
-    de = in_model & ~useful
-    any_delete = False
-    if n_active > 1 and bool(de.any()):
-        idx = de.nonzero().squeeze(1)
-        a_old = alpha[pos[idx]]
-        s_i, q_i = s[idx], q[idx]
-        delta_ml[idx] = -0.5 * (q_i * q_i / (s_i + a_old) - torch.log1p(s_i / a_old))
-        kind[idx] = 2
-        any_delete = bool((delta_ml[idx] > 0).any())
+    Q2 = Q * Q
+    # re-estimate: with delta = 1/new - 1/old
+    delta = 1.0 / new_alpha - 1.0 / a
+    re_gain = 0.5 * (delta * Q2 / (S * delta + 1.0) - torch.log1p(S * delta))
+    # delete
+    de_gain = -0.5 * (q * q / (s + a) - torch.log1p(s / a))
     # add
+    S_pos = torch.where(S > 0, S, 1.0)
+    Q2_pos = torch.where(Q2 > 0, Q2, 1.0)
+    add_gain = 0.5 * ((Q2_pos - S_pos) / S_pos + torch.log(S_pos / Q2_pos))
+    re = in_model & useful
+    de = in_model & ~useful if n_active > 1 else torch.zeros_like(in_model)
     ad = ~in_model & useful & addable & (S > 0)
-    if bool(ad.any()):
-        idx = ad.nonzero().squeeze(1)
-        S_i, Q2 = S[idx], Q[idx] * Q[idx]
-        delta_ml[idx] = 0.5 * ((Q2 - S_i) / S_i + torch.log(S_i / Q2))
-        kind[idx] = 0
+    minus_inf = torch.full_like(S, -math.inf)
+    any_delete = bool((de & (de_gain > 0)).any())
     if any_delete:  # deletions pre-empt (SparseBayes PriorityDeletion)
-        delta_ml = torch.where(kind == 2, delta_ml, -math.inf)
+        delta_ml = torch.where(de, de_gain, minus_inf)
+    else:
+        delta_ml = torch.where(re, re_gain, torch.where(ad, add_gain, minus_inf))
+    kind = torch.where(re, 1, torch.where(de, 2, torch.where(ad, 0, -1)))
     return delta_ml, new_alpha, kind, any_delete
 
 
@@ -291,7 +277,7 @@ def fast_gaussian(
     N, P = design.n_samples, design.n_basis
     dtype, device = design.dtype, design.device
     norms, valid = _unit_columns(design)
-    Bt_t = design.rmatmul(t[:, None])[:, 0] / norms
+    Bt_t = design.rhs_product(t) / norms
     t_var = float(t.var(unbiased=False))
     t_sq = float(t @ t)
     var_floor = max(t_var, 1e-12 * t_sq / N, 1e-300)
@@ -306,10 +292,13 @@ def fast_gaussian(
     alpha = torch.tensor([a0 if a0 > 0 else 1e3], dtype=dtype, device=device)
     active = [j]
     Phi = phi[:, None]
-    BtPhi = design.rmatmul(Phi) / norms[:, None]
+    # B^T Phi cache: screening precision for candidates, exact among active columns
+    BtPhi = design.rmatmul(Phi, exact=False) / norms[:, None]
+    BtPhi[j, 0] = phi @ phi
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
-    pos = torch.zeros(P, dtype=torch.long, device=device)
+    alpha_full = torch.ones(P, dtype=dtype, device=device)  # alpha of active candidates
+    alpha_full[j] = alpha[0]
     align = _Alignment(P, device)
     align.add(BtPhi[:, 0])
 
@@ -332,17 +321,16 @@ def fast_gaussian(
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        pos[torch.tensor(active, device=device)] = torch.arange(len(active), device=device)
         addable = valid & align.free
         delta_ml, new_alpha, kind, any_delete = _gains(
-            S, Q, in_model, pos, alpha, addable, len(active)
+            S, Q, in_model, alpha_full, addable, len(active)
         )
         nu = int(delta_ml.argmax())
         gain = float(delta_ml[nu])
         action = int(kind[nu])
         last = not gain > 0
         if not last and action == 1:
-            jj = int(pos[nu])
+            jj = active.index(nu)
             if (
                 abs(math.log(float(new_alpha[nu])) - math.log(float(alpha[jj]))) < tol
                 and not any_delete
@@ -351,7 +339,7 @@ def fast_gaussian(
         if not last:
             BPB = beta * BtPhi
             if action == 1:  # re-estimate
-                jj = int(pos[nu])
+                jj = active.index(nu)
                 sj = Sigma[:, jj].clone()
                 mu_j = float(mu[jj])
                 kappa = 1.0 / (
@@ -364,9 +352,15 @@ def fast_gaussian(
                 Q = Q + kappa * mu_j * v
                 alpha = alpha.clone()
                 alpha[jj] = new_alpha[nu]
+                alpha_full[nu] = new_alpha[nu]
             elif action == 0:  # add
                 b_i = design.columns([nu])[:, 0] / norms[nu]
-                BtBi = design.rmatmul(b_i[:, None])[:, 0] / norms
+                BtBi = design.rmatmul(b_i[:, None], exact=False)[:, 0] / norms
+                gram = Phi.T @ b_i  # exact Gram entries with the active columns
+                act_t = torch.tensor(active, dtype=torch.long, device=device)
+                BtBi[act_t] = gram
+                BtBi[nu] = b_i @ b_i
+                BtPhi[nu] = gram
                 u = beta * (Sigma @ BtPhi[nu])
                 a_new = float(new_alpha[nu])
                 s_ii = 1.0 / (a_new + float(S[nu]))
@@ -387,9 +381,10 @@ def fast_gaussian(
                 alpha = torch.cat([alpha, alpha.new_tensor([a_new])])
                 active.append(nu)
                 in_model[nu] = True
+                alpha_full[nu] = a_new
                 align.add(BtBi)
             else:  # delete
-                jj = int(pos[nu])
+                jj = active.index(nu)
                 Sjj = float(Sigma[jj, jj])
                 sj = Sigma[:, jj].clone()
                 mu_j = float(mu[jj])
@@ -406,6 +401,7 @@ def fast_gaussian(
                 BtPhi, Phi = BtPhi[:, keep_t], Phi[:, keep_t]
                 del active[jj]
                 in_model[nu] = False
+                alpha_full[nu] = 1.0
             log_ml += gain
         if it <= _BETA_UPDATE_START or it % _BETA_UPDATE_FREQUENCY == 0 or last:
             resid = t - Phi @ mu
@@ -483,6 +479,7 @@ def em_gaussian(
         (active.numel(),), active.numel() / max(t_sq, 1e-300), dtype=dtype, device=device
     )
     keep = torch.arange(active.numel(), device=device)  # positions in Phi_all
+    alpha_floor = 1e-10 / max(t_sq, 1e-300)  # prior sd at most 1e5 |t| on a unit column
     trace: list[float] = []
     converged = False
     it = 0
@@ -497,8 +494,8 @@ def em_gaussian(
         log_ml = _gaussian_log_ml(N, beta, ee, alpha, mu, fac)
         gain = log_ml - trace[-1] if trace else math.inf
         trace.append(log_ml)
-        gamma = 1.0 - alpha * Sigma.diagonal()
-        new_alpha = gamma / (mu * mu).clamp_min(1e-300)
+        gamma = (1.0 - alpha * Sigma.diagonal()).clamp(0.0, 1.0)
+        new_alpha = (gamma / (mu * mu).clamp_min(1e-300)).clamp_min(alpha_floor)
         new_beta = min((N - float(gamma.sum())) / max(ee, 1e-300), beta_max)
         new_beta = max(new_beta, 1e-300)
         d_alpha = float((torch.log(new_alpha) - torch.log(alpha)).abs().max())
@@ -613,10 +610,10 @@ def fast_bernoulli(
     max_iter, tol
         As in :func:`fast_gaussian`.
     """
-    P, device = design.n_basis, design.device
+    P, dtype, device = design.n_basis, design.dtype, design.device
     norms, valid = _unit_columns(design)
     tp = 2.0 * t - 1.0
-    Bt_tp = design.rmatmul(tp[:, None])[:, 0] / norms
+    Bt_tp = design.rmatmul(tp[:, None], exact=False)[:, 0] / norms
     j = int(torch.where(valid, Bt_tp.abs(), -1.0).argmax())
     Phi = design.columns([j]) / norms[j]
     target = (tp * 0.9 + 1.0) / 2.0
@@ -624,19 +621,20 @@ def fast_bernoulli(
     mu = torch.linalg.lstsq(Phi, logit[:, None]).solution[:, 0]
     alpha = (1.0 / (mu * mu).clamp_min(1e-300)).clamp(1e-3, 1e3)
     active = [j]
-    BtPhi = design.rmatmul(Phi) / norms[:, None]
+    BtPhi = design.rmatmul(Phi, exact=False) / norms[:, None]
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
-    pos = torch.zeros(P, dtype=torch.long, device=device)
+    alpha_full = torch.ones(P, dtype=dtype, device=device)  # alpha of active candidates
+    alpha_full[j] = alpha[0]
     align = _Alignment(P, device)
     align.add(BtPhi[:, 0])
 
     def full_statistics(Phi: Tensor, alpha: Tensor, mu: Tensor):
         mode = posterior_mode(Phi, t, alpha, mu)
         V = torch.cat([mode.w[:, None] * Phi, (t - mode.y)[:, None]], dim=1)
-        BtV = design.rmatmul(V) / norms[:, None]
+        BtV = design.rmatmul(V, exact=False) / norms[:, None]
         BtWPhi, Q = BtV[:, :-1], BtV[:, -1]
-        S = design.sq_rmatmul(mode.w) / (norms * norms)
+        S = design.sq_rmatmul(mode.w, exact=False) / (norms * norms)
         S = S - ((BtWPhi @ mode.Sigma) * BtWPhi).sum(1)
         return mode, S, Q
 
@@ -646,10 +644,9 @@ def fast_bernoulli(
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        pos[torch.tensor(active, device=device)] = torch.arange(len(active), device=device)
         addable = valid & align.free
         delta_ml, new_alpha, kind, any_delete = _gains(
-            S, Q, in_model, pos, alpha, addable, len(active)
+            S, Q, in_model, alpha_full, addable, len(active)
         )
         nu = int(delta_ml.argmax())
         gain = float(delta_ml[nu])
@@ -658,7 +655,7 @@ def fast_bernoulli(
             converged = True
             break
         if action == 1:
-            jj = int(pos[nu])
+            jj = active.index(nu)
             if (
                 abs(math.log(float(new_alpha[nu])) - math.log(float(alpha[jj]))) < tol
                 and not any_delete
@@ -667,10 +664,11 @@ def fast_bernoulli(
                 break
             alpha = alpha.clone()
             alpha[jj] = new_alpha[nu]
+            alpha_full[nu] = new_alpha[nu]
             mu = mode.mu
         elif action == 0:
             b_i = design.columns([nu]) / norms[nu]
-            BtBi = design.rmatmul(b_i)[:, 0] / norms
+            BtBi = design.rmatmul(b_i, exact=False)[:, 0] / norms
             a_new = float(new_alpha[nu])
             mu_i = float(Q[nu]) / (a_new + float(S[nu]))
             Phi = torch.cat([Phi, b_i], dim=1)
@@ -679,15 +677,17 @@ def fast_bernoulli(
             mu = torch.cat([mode.mu, mode.mu.new_tensor([mu_i])])
             active.append(nu)
             in_model[nu] = True
+            alpha_full[nu] = a_new
             align.add(BtBi)
         else:
-            jj = int(pos[nu])
+            jj = active.index(nu)
             keep_t = torch.tensor([k for k in range(len(active)) if k != jj], device=device)
             align.remove(BtPhi[:, jj])
             Phi, BtPhi = Phi[:, keep_t], BtPhi[:, keep_t]
             alpha, mu = alpha[keep_t], mode.mu[keep_t]
             del active[jj]
             in_model[nu] = False
+            alpha_full[nu] = 1.0
         mode, S, Q = full_statistics(Phi, alpha, mu)
         trace.append(mode.log_ml)
         if mode.log_ml > best[0] + _STALL_GAIN:
