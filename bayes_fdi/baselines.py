@@ -68,7 +68,9 @@ class SVMClassifier(ClassifierMixin, BaseEstimator):
             raise ValueError(f"sigma must be positive, got {self.sigma}")
         classes, counts = np.unique(y, return_counts=True)
         if classes.size < 2:
-            raise ValueError(f"SVMClassifier needs at least 2 classes; got {classes.tolist()}")
+            raise ValueError(
+                f"SVMClassifier needs at least 2 classes; got 1 class {classes.tolist()}"
+            )
         folds = min(int(self.cv), int(counts.min()))
         if folds < 2:
             raise ValueError(
@@ -157,7 +159,9 @@ class KernelRidgeRegressor(RegressorMixin, BaseEstimator):
         if alphas.size == 0 or not (alphas > 0).all():
             raise ValueError("alphas must be a non-empty sequence of positive numbers")
         if X.shape[0] < 2:
-            raise ValueError("KernelRidgeRegressor needs at least 2 samples")
+            raise ValueError(
+                f"KernelRidgeRegressor needs at least 2 samples, got n_samples={X.shape[0]}"
+            )
         self.intercept_ = float(y.mean())
         t = y - self.intercept_
         lam, U = eigh(self._kernel(X, X))
