@@ -1,14 +1,14 @@
 """Non-Bayesian baselines that plug into the same pipeline as the RVMs.
 
-- :func:`svm_classifier`: the paper's SVM node classifier (Gaussian kernel, sigma = 2), for
-  :class:`bayes_fdi.tree.HierarchicalClassifier`. Its probabilities are Platt-scaled
+- `svm_classifier`: the paper's SVM node classifier (Gaussian kernel, sigma = 2), for
+  `bayes_fdi.tree.HierarchicalClassifier`. Its probabilities are Platt-scaled
   on 5-fold out-of-fold decision values (deterministic folds).
-- :class:`KernelRidgeRegressor`: Gaussian-kernel ridge regression for the normal models, with a
+- `KernelRidgeRegressor`: Gaussian-kernel ridge regression for the normal models, with a
   regularisation chosen by exact leave-one-out error and a *homoscedastic* predictive standard
   deviation: the leave-one-out root-mean-square error. Unlike the RVR's eq. (14) std, it does
   not grow away from the training data; it is an honest average out-of-sample error, not a
   posterior.
-- :func:`svm_fault_diagnoser`: the whole SVM baseline (kernel ridge normal models, SVM tree).
+- `svm_fault_diagnoser`: the whole SVM baseline (kernel ridge normal models, SVM tree).
 """
 
 from __future__ import annotations
@@ -106,7 +106,7 @@ class SVMClassifier(ClassifierMixin, BaseEstimator):
 def svm_classifier(sigma: float = 2.0, C: float = 1.0, cv: int = 5) -> SVMClassifier:
     """The paper's SVM node classifier: Gaussian kernel with ``sigma`` (2 in the paper).
 
-    Returns an unfitted :class:`SVMClassifier` (Platt-scaled probabilities, deterministic).
+    Returns an unfitted `SVMClassifier` (Platt-scaled probabilities, deterministic).
     """
     if not sigma > 0:
         raise ValueError(f"sigma must be positive, got {sigma}")
@@ -201,11 +201,11 @@ def svm_fault_diagnoser(
     random_state: int | None = 0,
     **kwargs: Any,
 ) -> Any:
-    """The paper's SVM baseline as a :class:`bayes_fdi.diagnosis.FaultDiagnoser`.
+    """The paper's SVM baseline as a `bayes_fdi.diagnosis.FaultDiagnoser`.
 
-    Kernel ridge normal models (:class:`KernelRidgeRegressor`, fitted on at most
+    Kernel ridge normal models (`KernelRidgeRegressor`, fitted on at most
     ``max_train_samples`` fault-free samples: its cost is cubic) and a
-    :class:`~bayes_fdi.tree.HierarchicalClassifier` of :func:`svm_classifier` nodes, on the
+    `bayes_fdi.tree.HierarchicalClassifier` of `svm_classifier` nodes, on the
     same features as the RVM pipeline. Extra keyword arguments go to ``FaultDiagnoser``.
     """
     from bayes_fdi.diagnosis import FaultDiagnoser

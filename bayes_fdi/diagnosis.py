@@ -1,15 +1,15 @@
 """The fault-diagnosis pipeline: normal models -> residual features -> hierarchical classifier.
 
-:class:`FaultDiagnoser` follows the paper's Figure 21:
+`FaultDiagnoser` follows the paper's Figure 21:
 
-1. fit the fault-free models ``g1``, ``g2`` (:class:`bayes_fdi.residuals.NormalModels`) on
+1. fit the fault-free models ``g1``, ``g2`` (`bayes_fdi.residuals.NormalModels`) on
    fault-free runs;
 2. compute the residuals of the labelled runs and their features (by default the paper's mean
-   ``r1`` and mean ``r2`` over each run, :mod:`bayes_fdi.features`);
+   ``r1`` and mean ``r2`` over each run, `bayes_fdi.features`);
 3. standardise the features (mean 0, std 1 over the labelled training runs) so that the paper's
    fixed Gaussian kernel width sigma = 2 means "two training standard deviations" whatever the
    units, and fit the classifier (default: a k-means-designed
-   :class:`~bayes_fdi.tree.HierarchicalClassifier` of RVCs).
+   `bayes_fdi.tree.HierarchicalClassifier` of RVCs).
 
 ``diagnose(runs)`` returns, per run (or per window), the most probable state, the full class
 distribution and the residuals with their predictive standard deviations.
@@ -53,7 +53,7 @@ class FaultDiagnoser(BaseEstimator):
         ``predict_proba``, ``classes_``). ``None``:
         ``HierarchicalClassifier(RVC(kernel="rbf", width=2.0))`` with a k-means tree.
     features
-        Registered feature names (:data:`bayes_fdi.features.FEATURES`); default the paper's
+        Registered feature names (`bayes_fdi.features.FEATURES`); default the paper's
         ``("mean_r1", "mean_r2")``.
     window, step
         Feature window and hop in samples; ``None`` = one feature vector per run (the paper).
@@ -63,7 +63,7 @@ class FaultDiagnoser(BaseEstimator):
         Standardise the features with the labelled training runs' mean and std before the
         classifier (keeps a fixed kernel width meaningful).
     width_search, max_train_samples
-        Passed to :class:`~bayes_fdi.residuals.NormalModels`.
+        Passed to `bayes_fdi.residuals.NormalModels`.
     random_state
         Seed for subsampling, the GA and the tree design.
 

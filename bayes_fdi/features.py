@@ -3,7 +3,7 @@
 The paper classifies each run by two numbers, the mean of the position residual ``r1`` and
 the mean of the flow residual ``r2`` over the run (``mean_r1``, ``mean_r2``; the defaults).
 Other statistics are registered here and can be selected by name, and new ones are added
-with :func:`register_feature`::
+with `register_feature`::
 
     import numpy as np
     from bayes_fdi.features import register_feature
@@ -14,7 +14,7 @@ with :func:`register_feature`::
         return np.nanpercentile(np.abs(res["r2"].values), 95, axis=1)
 
 A feature function receives the residual dataset (as returned by
-:meth:`bayes_fdi.residuals.NormalModels.residuals`) restricted to one window, with dims
+`bayes_fdi.residuals.NormalModels.residuals`) restricted to one window, with dims
 ``(run, time)``, and returns one value per run. NaN residuals (gaps in plant records) are
 ignored by the built-in statistics (``nanmean`` etc.); a window with no finite residual gives
 NaN, which the diagnoser reports as an error rather than guessing.
@@ -166,7 +166,7 @@ def extract_features(
     names
         Registered feature names (see ``FEATURES``).
     window, step
-        Window length and hop in samples (see :func:`window_bounds`); ``None`` = whole run.
+        Window length and hop in samples (see `window_bounds`); ``None`` = whole run.
 
     Returns
     -------

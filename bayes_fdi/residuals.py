@@ -3,9 +3,7 @@
 The paper (eqs. 16-20) models the two measured outputs of a fault-free actuator, the stem
 position ``X`` and the flow ``F``, as functions of three inputs,
 
-.. math::
-
-    \\hat X = g_1(CV, \\sqrt{P1 - P2}, T1), \\qquad \\hat F = g_2(CV, \\sqrt{P1 - P2}, T1),
+    X_hat = g1(CV, sqrt(P1 - P2), T1),    F_hat = g2(CV, sqrt(P1 - P2), T1),
 
 each a relevance vector regression fitted on fault-free runs, and diagnoses faults from the
 residuals ``r1 = X - X_hat`` and ``r2 = F - F_hat``. Because the RVR is Bayesian, each
@@ -14,7 +12,7 @@ prediction has a predictive standard deviation, so standardised residuals
 
 Pressure drop: where ``P1 < P2`` (reverse flow under fault f17, or bad data), the square root
 is replaced by the signed root ``sign(D) * sqrt(|D|)`` with ``D = P1 - P2``; such samples are
-kept (never dropped) and counted, with a :class:`NegativePressureDropWarning`.
+kept (never dropped) and counted, with a `NegativePressureDropWarning`.
 
 Missing values: samples with a NaN input are not passed to the regressors; their predictions
 and residuals are NaN (counted in the output's attributes). In ``fit``, samples with a NaN
@@ -44,7 +42,7 @@ __all__ = [
     "model_inputs",
 ]
 
-#: Names of the three regression inputs (columns of :func:`model_inputs`).
+#: Names of the three regression inputs (columns of `model_inputs`).
 MODEL_INPUTS: tuple[str, ...] = ("CV", "sqrt_dP", "T1")
 
 
@@ -60,7 +58,7 @@ def model_inputs(ds: xr.Dataset, *, warn: bool = True) -> tuple[np.ndarray, int]
     ds
         Dataset in the project's format with channels ``CV``, ``P1``, ``P2``, ``T1``.
     warn
-        Emit a :class:`NegativePressureDropWarning` when some samples have ``P1 < P2``.
+        Emit a `NegativePressureDropWarning` when some samples have ``P1 < P2``.
 
     Returns
     -------
@@ -89,7 +87,7 @@ def model_inputs(ds: xr.Dataset, *, warn: bool = True) -> tuple[np.ndarray, int]
 
 
 class GAResult(NamedTuple):
-    """Result of :func:`genetic_width_search`.
+    """Result of `genetic_width_search`.
 
     Attributes
     ----------
@@ -239,7 +237,7 @@ class NormalModels(BaseEstimator):
     width_search
         ``None`` (keep the regressor's own width, e.g. the RVR's evidence-optimal ``"auto"``)
         or ``"ga"``: choose the width parameter of each output's regressor with
-        :func:`genetic_width_search`, minimising the MSE on held-out fault-free runs (the
+        `genetic_width_search`, minimising the MSE on held-out fault-free runs (the
         paper's method), then refit on all fault-free runs with that width.
     width_param
         Name of the regressor's kernel-width parameter set by the GA.
@@ -462,7 +460,7 @@ class NormalModels(BaseEstimator):
         Returns
         -------
         xarray.Dataset
-            The :meth:`predict` variables plus ``r1``, ``r2``, ``z1``, ``z2``.
+            The `predict` variables plus ``r1``, ``r2``, ``z1``, ``z2``.
         """
         validate_dataset(runs, require=INPUT_CHANNELS + OUTPUT_CHANNELS, allow_nan=True)
         out = self.predict(runs)

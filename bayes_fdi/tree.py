@@ -5,20 +5,18 @@ a binary probabilistic classifier trained on the samples of its classes only (le
 right = 1). A class probability is the product of the node probabilities along the root-to-leaf
 path,
 
-.. math::
-
-    p(c \\mid x) = \\prod_{n \\in \\text{path}(c)} p_n(\\text{side}_n(c) \\mid x),
+    p(c | x) = product over the nodes n on the path to c of p_n(side of c at n | x),
 
 so the leaves carry a full class distribution that sums to one; ``predict`` is its argmax.
 
 The tree is either designed from the data by recursive 2-means on the class centroids of the
 training features (as the paper did) or given explicitly as a nested tuple of labels. The
-paper's tree is :data:`PAPER_TREE`::
+paper's tree is `PAPER_TREE`::
 
     ("f17", ("f1", (("f3", ("f6", "f18")), ("f15", ("fn", ("f11", ("f2", "f12")))))))
 
 Features are used as given: put a ``StandardScaler`` in front (as
-:class:`bayes_fdi.diagnosis.FaultDiagnoser` does) to make a fixed kernel width meaningful.
+`bayes_fdi.diagnosis.FaultDiagnoser` does) to make a fixed kernel width meaningful.
 """
 
 from __future__ import annotations
@@ -41,7 +39,7 @@ PAPER_TREE: tuple = (
 
 
 class TreeNode(NamedTuple):
-    """One fitted internal node of a :class:`HierarchicalClassifier`.
+    """One fitted internal node of a `HierarchicalClassifier`.
 
     Attributes
     ----------
@@ -164,11 +162,11 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
     base_estimator
         Unfitted binary probabilistic classifier (``fit``, ``predict_proba``), cloned at every
         node. ``None``: ``bayes_fdi.rvm.RVC(kernel="rbf", width=2.0)`` (the paper's method).
-        For the paper's SVM baseline use :func:`bayes_fdi.baselines.svm_classifier`.
+        For the paper's SVM baseline use `bayes_fdi.baselines.svm_classifier`.
     structure
         ``"kmeans"`` (design the tree by recursive 2-means on the class centroids of the
-        training features, see :func:`design_tree`) or a nested tuple of pairs of class labels
-        (e.g. :data:`PAPER_TREE`) that must hold every training class exactly once.
+        training features, see `design_tree`) or a nested tuple of pairs of class labels
+        (e.g. `PAPER_TREE`) that must hold every training class exactly once.
     n_init
         k-means restarts per split.
     random_state
@@ -177,7 +175,7 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
     Attributes
     ----------
     classes_ : numpy.ndarray
-        Sorted class labels; columns of :meth:`predict_proba`.
+        Sorted class labels; columns of `predict_proba`.
     tree_ : tuple or label
         The tree actually used, as nested pairs of labels.
     nodes_ : list of TreeNode
@@ -335,12 +333,12 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
         return out
 
     def predict_log_proba(self, X: Any) -> np.ndarray:
-        """Logarithm of :meth:`predict_proba`."""
+        """Logarithm of `predict_proba`."""
         with np.errstate(divide="ignore"):
             return np.log(self.predict_proba(X))
 
     def predict(self, X: Any) -> np.ndarray:
-        """Most probable class (argmax of :meth:`predict_proba`)."""
+        """Most probable class (argmax of `predict_proba`)."""
         proba = self.predict_proba(X)
         return self.classes_[np.argmax(proba, axis=1)]
 
