@@ -37,6 +37,7 @@ __all__ = [
     "per_state_table",
     "plot_features",
     "plot_residuals",
+    "render_report",
     "to_jsonable",
     "tree_text",
     "write_json",
@@ -557,3 +558,237 @@ def plot_features(
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _num(value: Any, fmt: str = ".4f") -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return format(value, fmt)
+
+
+def _why_below(
+    name: str, method: Mapping[str, Any], all_states: Mapping[str, Any] | None, target: float
+) -> list[str]:
+    """Lines explaining the states identified below ``target``: whom they are confused with."""
+    classes = method["confusion"]["classes"]
+    matrix = np.asarray(method["confusion"]["matrix"])
+    lines = []
+    err = None
+    if all_states is not None:
+        sep_states = list(all_states["states"])
+        err = np.asarray(all_states["pairwise_error"], dtype=float)
+    for i, s in enumerate(classes):
+        ratio = method["per_class"][s]
+        if ratio is None or ratio >= target:
+            continue
+        wrong = sorted(
+            ((int(matrix[i, j]), classes[j]) for j in range(len(classes)) if j != i),
+            reverse=True,
+        )
+        parts = []
+        for n, other in wrong:
+            if n == 0:
+                break
+            note = f"{n} as {other}"
+            if err is not None and s in sep_states and other in sep_states:
+                e = err[sep_states.index(s), sep_states.index(other)]
+                note += f" (pairwise k-NN error of the training features {e:.2f})"
+            parts.append(note)
+        lines.append(
+            f"- **{s}** ({format_percent(ratio)}): " + ("; ".join(parts) if parts else "–")
+        )
+    return lines
+
+
+def render_report(results: Mapping[str, Any]) -> str:
+    """The Markdown report of a :func:`bayes_fdi.reproduce.reproduce` run.
+
+    Parameters
+    ----------
+    results
+        The JSON-ready results (``datasets``, ``figures``, ``seed``, ``small``, ...).
+
+    Returns
+    -------
+    str
+        Markdown text; figures are linked by their file names (same folder).
+    """
+    datasets = results["datasets"]
+    figures = results.get("figures", {})
+    md: list[str] = [
+        "# Reproduction of Feng & Wang: SEVA actuator fault diagnosis with RVMs",
+        "",
+        f"bayes_fdi {results.get('bayes_fdi_version', '?')}, seed {results.get('seed')}"
+        + (
+            ", **small campaigns** (quick check, not the paper's sizes)"
+            if results.get("small")
+            else ""
+        )
+        + f", {_num(results.get('seconds'), '.0f')} s in total.",
+        "",
+        "Protocol (the paper's Section 5): per state, the first "
+        f"{results.get('n_train_per_state', 20)} runs fit the normal models (fault-free runs) "
+        "and train the classifiers; every other run is a test run. Features: the mean residuals "
+        "`mean_r1`, `mean_r2` of each run. RVM = k-means designed tree of RVM classifiers "
+        "(Gaussian kernel, sigma = 2 on standardised features); SVM = the same tree with SVMs.",
+        "",
+        "## Overall identification ratio",
+        "",
+        comparison_table({k: {m: v[m] for m in ("rvm", "svm")} for k, v in datasets.items()}),
+    ]
+    checks = []
+    for name, d in datasets.items():
+        paper = PAPER_ACCURACY.get(name, {}).get("rvm")
+        rvm, svm = d["rvm"]["accuracy"], d["svm"]["accuracy"]
+        if paper is not None:
+            verdict = "meets" if rvm >= paper else "is below"
+            checks.append(
+                f"- {name}: RVM {format_percent(rvm)} {verdict} the paper's "
+                f"{format_percent(paper)}; "
+                f"RVM {'>=' if rvm >= svm else '<'} SVM ({format_percent(svm)})."
+            )
+        rv = [n["vectors"] for n in d["rvm"]["nodes"] if n["vectors"] is not None]
+        sv = [n["vectors"] for n in d["svm"]["nodes"] if n["vectors"] is not None]
+        if rv and sv:
+            checks.append(
+                f"- {name}: relevance vectors per node {min(rv)}–{max(rv)} "
+                f"(total {sum(rv)}), support vectors per node {min(sv)}–{max(sv)} "
+                f"(total {sum(sv)})."
+            )
+    md += [*checks, ""]
+    md += [
+        "Log loss (natural log) and Brier score (mean over runs of the squared distance between "
+        "the probability vector and the one-hot truth, 0 best, 2 worst) score the full class "
+        "distribution; ECE is the top-label expected calibration error (15 equal-width bins). "
+        "Fit and predict times are for the classifier trees on the features (the normal models "
+        "are shared; their time is in the per-dataset timing below).",
+        "",
+    ]
+    for name, d in datasets.items():
+        figs = figures.get(name, {})
+        md += [f"## {name}", ""]
+        info = d.get("campaign", {})
+        split = d.get("split", {})
+        md += [
+            f"Campaign `{info.get('campaign_file', name)}` "
+            f"(sha256 {str(info.get('campaign_sha256', ''))[:16]}…), "
+            + (
+                "loaded from the cache"
+                if info.get("cached")
+                else f"simulated in {_num(info.get('simulate_seconds'), '.0f')} s"
+            )
+            + f". Normal models: {split.get('normal_model_runs', '?')} fault-free runs, "
+            f"{split.get('normal_model_samples', '?')} samples.",
+            "",
+            "### Fault strengths used",
+            "",
+        ]
+        rows = [
+            [s, v["runs"], f"{v['min']:.3g}", f"{v['max']:.3g}", ", ".join(v["profiles"])]
+            for s, v in d.get("strength", {}).items()
+        ]
+        if rows:
+            md += [
+                markdown_table(["State", "Runs", "Strength min", "Strength max", "Profiles"], rows)
+            ]
+        if "residuals" in figs:
+            md += [
+                "### Residuals (as the paper's Figures 12-19)",
+                "",
+                f"![residuals]({figs['residuals']})",
+                "",
+            ]
+        for method, prefix, vname, table in (
+            ("rvm", "RVM", "RV", "2/6"),
+            ("svm", "SVM", "SV", "4/8"),
+        ):
+            m = d[method]
+            md += [
+                f"### {prefix}: identification results of the test runs (as Tables {table})",
+                "",
+                confusion_table(m["confusion"]["matrix"], m["confusion"]["classes"]),
+                f"Log loss {_num(m['log_loss'])}, Brier {_num(m['brier'])}, ECE {_num(m['ece'])}; "
+                f"fit {_num(m['fit_seconds'], '.2f')} s, "
+                f"predict {_num(m['predict_seconds'], '.3f')} s.",
+                "",
+                f"### {prefix} nodes",
+                "",
+                node_table(
+                    m["nodes"],
+                    prefix=prefix,
+                    vector_name=vname,
+                    paper=PAPER_NODE_VECTORS.get(name, {}).get(method),
+                ),
+                "(`Paper` = the paper's node sizes; its tree is not necessarily the same.)",
+                "",
+                "```text",
+                m.get("tree", tree_text(m["nodes"], prefix=prefix)).rstrip(),
+                "```",
+                "",
+            ]
+        target = PAPER_ACCURACY.get(name, {}).get("rvm")
+        if target is not None:
+            why = _why_below(name, d["rvm"], d.get("all_states"), target)
+            md += ["### States identified below the paper's overall ratio (RVM)", ""]
+            md += why if why else ["None: every state reaches it."]
+            md += [""]
+        if "features" in figs:
+            md += [f"![features]({figs['features']})", ""]
+        block = d.get("all_states")
+        if block:
+            md += ["### Beyond the paper: all states", ""]
+            md += [
+                "Two states are linked when a 5-nearest-neighbour rule trained on the training "
+                "features of just those two states misclassifies at least "
+                f"{format_percent(block['threshold'], 0)} of them (leave-one-out, balanced); "
+                "groups are the connected components of that graph. A group's states are not "
+                "separable from `mean_r1`, `mean_r2` by any classifier at the paper's accuracy.",
+                "",
+                groups_table(block["groups"], block.get("paper_groups")),
+            ]
+            for method in ("rvm", "svm"):
+                if method not in block:
+                    continue
+                m = block[method]
+                md += [
+                    f"**{method.upper()} on all {len(m['confusion']['classes'])} states**: "
+                    f"accuracy {format_percent(m['accuracy'])}, on the separable states "
+                    f"{format_percent(m['separable_accuracy'])}, group-level accuracy "
+                    f"{format_percent(m['group_accuracy'])}, mean probability on the true "
+                    f"state's group {_num(m['group_mass'], '.3f')}; "
+                    f"log loss {_num(m['log_loss'])}, "
+                    f"ECE {_num(m['ece'])}.",
+                    "",
+                ]
+            if "rvm" in block:
+                m = block["rvm"]
+                md += [
+                    per_state_table(m["per_class"], block["groups"], m["per_state_group_mass"]),
+                    "",
+                    "<details><summary>RVM confusion on all states</summary>",
+                    "",
+                    confusion_table(m["confusion"]["matrix"], m["confusion"]["classes"]),
+                    "</details>",
+                    "",
+                ]
+            sep = list(block["states"])
+            err = np.asarray(block["pairwise_error"], dtype=float)
+            md += [
+                "<details><summary>Pairwise k-NN error of the training features</summary>",
+                "",
+                markdown_table(
+                    ["", *sep],
+                    [[s, *(f"{e:.2f}" for e in err[i])] for i, s in enumerate(sep)],
+                ),
+                "</details>",
+                "",
+            ]
+            if "all_features" in figs:
+                md += [f"![all states]({figs['all_features']})", ""]
+        timing = d.get("timing", {})
+        if timing:
+            md += [
+                "Timing (s): " + ", ".join(f"{k} {_num(v, '.2f')}" for k, v in timing.items()),
+                "",
+            ]
+    return "\n".join(md).rstrip() + "\n"
