@@ -564,10 +564,17 @@ def _fit_tree(
     return clf, scaler, proba, fit_s, predict_s
 
 
+def _state_key(state: str) -> tuple[int, int]:
+    """Sort key of the paper's tables: f1, f2, ..., f19, then fn."""
+    return (1, 0) if state == "fn" else (0, int(state[1:]))
+
+
 def _method_result(
     clf: Any, y_test: np.ndarray, proba: np.ndarray, fit_s: float, predict_s: float, prefix: str
 ) -> dict[str, Any]:
-    classes = [str(c) for c in clf.classes_]
+    fitted = [str(c) for c in clf.classes_]
+    classes = sorted(fitted, key=_state_key)
+    proba = proba[:, [fitted.index(c) for c in classes]]
     out = classification_metrics(y_test, proba, classes)
     out["nodes"] = _tree_nodes(clf, prefix)
     out["tree"] = clf.export_text(names=prefix)
@@ -886,17 +893,35 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="a small, fast version (fewer runs per state) for tests and CI",
     )
+    parser.add_argument(
+        "--campaign",
+        action="append",
+        metavar="TOML",
+        help="campaign file or shipped name to run instead of the paper's two "
+        "(repeatable; default: paper-simulated and paper-lublin)",
+    )
+    parser.add_argument(
+        "--states",
+        default=",".join(PAPER_STATES),
+        help="comma-separated states of the paper protocol (default: the paper's ten)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress messages")
 
 
 def run_from_cli(args: argparse.Namespace) -> int:
     """Run :func:`reproduce` from parsed arguments; print where the report is."""
+    states = [s.strip() for s in args.states.split(",") if s.strip()]
+    unknown = sorted(set(states) - set(ALL_STATES))
+    if unknown:
+        raise SystemExit(f"bayes-fdi reproduce: unknown state(s) {unknown}; use fn, f1..f19")
     results = reproduce(
         args.out,
         seed=args.seed,
         cache_dir=args.cache_dir,
         small=args.small,
+        states=states,
         progress=not args.no_progress,
+        datasets=tuple(args.campaign) if args.campaign else DATASETS,
     )
     print(f"report: {Path(args.out) / 'report.md'}")
     for name, ds in results["datasets"].items():
