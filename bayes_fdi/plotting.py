@@ -1,0 +1,221 @@
+"""Plots of actuator runs: the normalised signals of chosen runs, like the paper's Figures 4–11.
+
+:func:`plot_runs` draws, for each chosen channel, one panel with the selected runs over time
+(``ax=`` a single Axes overlays all channels in it, as the paper's figures do). The ``bayes-fdi
+plot FILE.nc`` command wraps it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+import xarray as xr
+
+from bayes_fdi.datasets import CHANNELS, load_dataset, validate_dataset
+
+__all__ = ["configure_parser", "plot_runs", "run_from_cli", "select_runs"]
+
+#: Axis labels of the normalised channels.
+CHANNEL_LABELS: dict[str, str] = {
+    "CV": "CV (control value)",
+    "P1": "P1' (inlet pressure)",
+    "P2": "P2' (outlet pressure)",
+    "T1": "T1' (temperature)",
+    "X": "X' (stem position)",
+    "F": "F' (flow)",
+}
+
+
+def select_runs(
+    ds: xr.Dataset, runs: Sequence[int] | int | None = None, states: Sequence[str] | None = None
+) -> list[int]:
+    """Positional indices of the runs to plot.
+
+    Parameters
+    ----------
+    ds
+        A dataset in the project's format.
+    runs
+        Run positions (0-based); default the first run (or, with ``states``, the first run of each
+        listed state).
+    states
+        State labels; the first run of each state is chosen (added to ``runs``).
+
+    Returns
+    -------
+    list of int
+    """
+    n = ds.sizes["run"]
+    chosen: list[int] = []
+    if runs is not None:
+        for r in np.atleast_1d(runs).tolist():
+            if not isinstance(r, int | np.integer) or isinstance(r, bool):
+                raise ValueError(f"runs must be integers, got {r!r}")
+            if not -n <= r < n:
+                raise ValueError(f"run {r} out of range: the dataset has {n} run(s)")
+            chosen.append(int(r) % n)
+    if states is not None:
+        labels = np.asarray(ds["state"].values).astype(str) if "state" in ds.coords else None
+        if labels is None:
+            raise ValueError("the dataset has no 'state' coordinate to select by")
+        for s in states:
+            hits = np.flatnonzero(labels == s)
+            if not len(hits):
+                raise ValueError(f"no run with state {s!r} (states here: {sorted(set(labels))})")
+            chosen.append(int(hits[0]))
+    if not chosen:
+        chosen = [0]
+    return chosen
+
+
+def _run_label(ds: xr.Dataset, r: int) -> str:
+    if "state" not in ds.coords:
+        return f"run {r}"
+    state = str(ds["state"].values[r])
+    if state == "fn" or "strength" not in ds.coords:
+        return f"run {r}: {state}"
+    text = f"run {r}: {state} ({float(ds['strength'].values[r]):+.2f}"
+    if "profile" in ds.coords and str(ds["profile"].values[r]) == "incipient":
+        text += f", ramp {float(ds['ramp'].values[r]):g} s"
+    if "onset" in ds.coords and float(ds["onset"].values[r]) > 0:
+        text += f", from {float(ds['onset'].values[r]):g} s"
+    return text + ")"
+
+
+def plot_runs(
+    ds: xr.Dataset,
+    runs: Sequence[int] | int | None = None,
+    channels: Sequence[str] | None = None,
+    ax=None,
+    *,
+    states: Sequence[str] | None = None,
+    title: str | None = None,
+):
+    """Plot the normalised signals of chosen runs against time.
+
+    Parameters
+    ----------
+    ds
+        A dataset in the project's format (NaN gaps are drawn as breaks).
+    runs
+        Run positions to draw (default the first run); see :func:`select_runs`.
+    channels
+        Channels to draw, default every channel present in ``CHANNELS`` order.
+    ax
+        ``None``: a new figure with one panel per channel (shared time axis). A single
+        ``matplotlib.axes.Axes``: every channel overlaid in it, as in the paper's Figures 4–11.
+        A sequence of Axes: one per channel.
+    states
+        Also draw the first run of each of these states.
+    title
+        Figure (or axes) title; default the campaign name.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.axes import Axes
+
+    validate_dataset(ds, require=(), allow_nan=True)
+    if channels is None:
+        channels = [c for c in CHANNELS if c in ds.data_vars]
+    channels = list(channels)
+    if not channels:
+        raise ValueError("no channel to plot")
+    unknown = [c for c in channels if c not in ds.data_vars]
+    if unknown:
+        raise ValueError(
+            f"channel(s) {unknown} not in the dataset (it has {list(map(str, ds.data_vars))})"
+        )
+    chosen = select_runs(ds, runs, states)
+    time = ds["time"].values
+    title = ds.attrs.get("campaign", "") if title is None else title
+
+    if isinstance(ax, Axes):
+        fig = ax.figure
+        for c in channels:
+            for r in chosen:
+                label = c if len(chosen) == 1 else f"{c}, {_run_label(ds, r)}"
+                ax.plot(time, ds[c].values[r], lw=1.0, label=label)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("normalised value")
+        ax.legend(fontsize="small", loc="best")
+        ax.set_title(title + (f" — {_run_label(ds, chosen[0])}" if len(chosen) == 1 else ""))
+        return fig
+
+    if ax is None:
+        fig, axes = plt.subplots(
+            len(channels), 1, sharex=True, figsize=(8.0, 1.6 + 1.4 * len(channels)), squeeze=False
+        )
+        axes = list(axes[:, 0])
+    else:
+        axes = list(ax)
+        if len(axes) != len(channels):
+            raise ValueError(f"got {len(axes)} axes for {len(channels)} channel(s)")
+        fig = axes[0].figure
+    for a, c in zip(axes, channels, strict=True):
+        for r in chosen:
+            a.plot(time, ds[c].values[r], lw=1.0, label=_run_label(ds, r))
+        a.set_ylabel(CHANNEL_LABELS.get(c, c), fontsize="small")
+        a.grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].legend(fontsize="small", loc="best")
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``bayes-fdi plot``."""
+    parser.add_argument("dataset", help="a dataset file (.nc) written by `bayes-fdi simulate`")
+    parser.add_argument(
+        "--runs", type=int, nargs="+", default=None, help="run positions to draw (default 0)"
+    )
+    parser.add_argument(
+        "--states", nargs="+", default=None, help="also draw the first run of each state"
+    )
+    parser.add_argument(
+        "--channels",
+        nargs="+",
+        default=None,
+        choices=CHANNELS,
+        help="channels to draw (default all)",
+    )
+    parser.add_argument(
+        "--overlay", action="store_true", help="draw every channel in one panel (as the paper)"
+    )
+    parser.add_argument("--out", default=None, help="image file (default: DATASET stem + .png)")
+    parser.add_argument("--dpi", type=int, default=120)
+
+
+def run_from_cli(args: argparse.Namespace) -> int:
+    """Run ``bayes-fdi plot``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    try:
+        ds = load_dataset(args.dataset)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"bayes-fdi plot: {exc}", file=sys.stderr)
+        return 2
+    try:
+        if args.overlay:
+            fig, ax = plt.subplots(figsize=(8.0, 4.5))
+            plot_runs(ds, runs=args.runs, channels=args.channels, ax=ax, states=args.states)
+        else:
+            fig = plot_runs(ds, runs=args.runs, channels=args.channels, states=args.states)
+    except ValueError as exc:
+        print(f"bayes-fdi plot: {exc}", file=sys.stderr)
+        return 2
+    out = args.out or os.path.splitext(args.dataset)[0] + ".png"
+    fig.savefig(out, dpi=args.dpi, bbox_inches="tight")
+    plt.close(fig)
+    print(out)
+    return 0
