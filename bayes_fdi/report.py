@@ -738,11 +738,13 @@ def render_report(results: Mapping[str, Any]) -> str:
         if block:
             md += ["### Beyond the paper: all states", ""]
             md += [
-                "Two states are linked when a 5-nearest-neighbour rule trained on the training "
-                "features of just those two states misclassifies at least "
-                f"{format_percent(block['threshold'], 0)} of them (leave-one-out, balanced); "
-                "groups are the connected components of that graph. A group's states are not "
-                "separable from `mean_r1`, `mean_r2` by any classifier at the paper's accuracy.",
+                "Two states are confusable when a 5-nearest-neighbour rule trained on the "
+                "training features of just those two states misclassifies at least "
+                f"{format_percent(block['threshold'], 0)} of them (leave-one-out, balanced). "
+                "Groups come from complete-linkage clustering: every pair of states in a group "
+                "is confusable. A group's states cannot be told apart from `mean_r1`, "
+                "`mean_r2` at the paper's accuracy by any classifier; a state alone is "
+                "separable.",
                 "",
                 groups_table(block["groups"], block.get("paper_groups")),
             ]

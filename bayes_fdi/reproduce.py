@@ -428,48 +428,65 @@ def pairwise_separability(
 
 
 def find_groups(
-    states: Sequence[str], error: np.ndarray, *, threshold: float = SEPARABILITY_THRESHOLD
+    states: Sequence[str],
+    error: np.ndarray,
+    *,
+    threshold: float = SEPARABILITY_THRESHOLD,
+    linkage: str = "complete",
 ) -> list[list[str]]:
-    """Groups of states no classifier can split: connected components of "too confusable".
+    """Groups of states that the features cannot tell apart.
 
-    States ``a`` and ``b`` are linked when ``error[a, b] >= threshold``; each group is a
-    connected component of that graph (so a group may chain: fn~f4 and f4~f9 put fn, f4, f9
-    together). Singletons are the separable states.
+    Two states are *confusable* when ``error[a, b] >= threshold``.
+
+    - ``linkage="complete"`` (default): agglomerative clustering in which two groups merge only
+      if every pair of their states is confusable; at each step the two groups with the largest
+      smallest pairwise error merge (ties: the earliest states). Every group is thus a set of
+      mutually confusable states.
+    - ``linkage="single"``: connected components of the confusability graph. It chains: a fault
+      whose strength range makes it look like fn when weak and like f1 when strong links fn and
+      f1, though the two are perfectly separable.
 
     Parameters
     ----------
     states
         State names, in the order of ``error``.
     error
-        ``(k, k)`` pairwise error (see :func:`pairwise_separability`).
+        ``(k, k)`` symmetric pairwise error (see :func:`pairwise_separability`).
     threshold
-        Linking threshold.
+        Confusability threshold.
+    linkage
+        ``"complete"`` or ``"single"``.
 
     Returns
     -------
     list of list of str
         Groups in order of their first state; states within a group in ``states`` order.
+        Singletons are the separable states.
     """
     error = np.asarray(error, dtype=np.float64)
     k = len(states)
     if error.shape != (k, k):
         raise ValueError(f"error must be ({k}, {k}), got {error.shape}")
-    parent = list(range(k))
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for i in range(k):
-        for j in range(i + 1, k):
-            if error[i, j] >= threshold or error[j, i] >= threshold:
-                parent[root(j)] = root(i)
-    groups: dict[int, list[str]] = {}
-    for i in range(k):
-        groups.setdefault(root(i), []).append(str(states[i]))
-    return list(groups.values())
+    if not np.allclose(error, error.T, equal_nan=False):
+        raise ValueError("error must be symmetric")
+    if linkage not in ("complete", "single"):
+        raise ValueError(f"linkage must be 'complete' or 'single', got {linkage!r}")
+    clusters: list[list[int]] = [[i] for i in range(k)]
+    while len(clusters) > 1:
+        best, pair = -np.inf, None
+        for a in range(len(clusters)):
+            for b in range(a + 1, len(clusters)):
+                block = error[np.ix_(clusters[a], clusters[b])]
+                score = block.min() if linkage == "complete" else block.max()
+                if score > best:
+                    best, pair = score, (a, b)
+        if pair is None or best < threshold:
+            break
+        a, b = pair
+        clusters[a] = sorted(clusters[a] + clusters[b])
+        del clusters[b]
+    clusters.sort(key=min)
+    return [[str(states[i]) for i in c] for c in clusters]
 
 
 def group_metrics(
@@ -652,8 +669,9 @@ def evaluate_dataset(
         group scores of both methods).
     artifacts : dict
         Arrays for the figures: ``features``/``labels`` of the paper states' test runs,
-        ``residuals`` examples, ``rvm_predict`` (features -> labels), ``all_features`` and
-        ``all_labels`` (training runs, every state).
+        ``residuals`` examples (time, r1, r2 of the first test run of fn, f1, f2, f15),
+        ``rvm_predict`` (features -> labels), ``train_features`` and ``train_labels``
+        (training runs of every state).
     """
     from bayes_fdi.baselines import svm_classifier
     from bayes_fdi.diagnosis import FaultDiagnoser

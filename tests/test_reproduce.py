@@ -125,16 +125,45 @@ def test_pairwise_separability_identical_vs_distinct(rng):
         pairwise_separability(np.array([[np.nan, 0.0]] * 4), ["a", "a", "b", "b"])
 
 
-def test_find_groups_connected_components():
+def test_find_groups_single_linkage_chains():
     states = ["fn", "f4", "f9", "f1", "f2"]
     err = np.zeros((5, 5))
     err[0, 1] = err[1, 0] = 0.4  # fn ~ f4
     err[1, 2] = err[2, 1] = 0.2  # f4 ~ f9 (chains fn, f4, f9)
     err[3, 4] = err[4, 3] = 0.1  # below threshold
-    assert find_groups(states, err, threshold=0.15) == [["fn", "f4", "f9"], ["f1"], ["f2"]]
-    assert find_groups(states, err, threshold=0.05) == [["fn", "f4", "f9"], ["f1", "f2"]]
+    single = find_groups(states, err, threshold=0.15, linkage="single")
+    assert single == [["fn", "f4", "f9"], ["f1"], ["f2"]]
+    assert find_groups(states, err, threshold=0.05, linkage="single") == [
+        ["fn", "f4", "f9"],
+        ["f1", "f2"],
+    ]
     with pytest.raises(ValueError, match="must be"):
         find_groups(states, np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="symmetric"):
+        find_groups(["a", "b"], np.array([[0, 0.3], [0.1, 0]]))
+
+
+def test_find_groups_complete_linkage_needs_every_pair():
+    # f16 looks like fn when weak and like f1 when strong: fn~f16, f16~f1, but fn !~ f1.
+    states = ["fn", "f1", "f16", "f8"]
+    err = np.zeros((4, 4))
+    for a, b, e in [("fn", "f16", 0.2), ("f1", "f16", 0.3), ("fn", "f8", 0.45), ("f16", "f8", 0.2)]:
+        i, j = states.index(a), states.index(b)
+        err[i, j] = err[j, i] = e
+    # single linkage chains everything; complete linkage keeps fn and f1 apart
+    assert find_groups(states, err, linkage="single") == [["fn", "f1", "f16", "f8"]]
+    # fn~f8 (0.45) merges first, then f1~f16 (0.3) beats {fn, f8}~f16 (min 0.2); then
+    # {fn, f8} and {f1, f16} cannot merge (fn~f1 = 0)
+    assert find_groups(states, err) == [["fn", "f8"], ["f1", "f16"]]
+    err2 = err.copy()
+    i, j = states.index("f16"), states.index("f1")
+    err2[i, j] = err2[j, i] = 0.0  # f16 no longer like f1: it joins the clique {fn, f8}
+    assert find_groups(states, err2) == [["fn", "f16", "f8"], ["f1"]]
+    # the independent check: every pair inside every group is confusable
+    for groups, e in ((find_groups(states, err), err), (find_groups(states, err2), err2)):
+        for g in groups:
+            idx = [states.index(s) for s in g]
+            assert all(e[a, b] >= 0.15 for a in idx for b in idx if a != b)
 
 
 def test_group_metrics_by_hand():
