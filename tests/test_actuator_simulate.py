@@ -165,3 +165,13 @@ def test_inject_faults_adds_the_model_difference_to_the_record():
     ratio = injected.P2.values[2, 70:].mean() / record.P2.values[2, 70:].mean()
     assert ratio == pytest.approx(0.7, rel=1e-3)
     assert list(injected.state.values) == ["fn", "f18", "f17"]
+
+
+def test_progress_batches_give_the_same_data():
+    # progress=True simulates in batches of 64 runs; the result must not depend on batching
+    inputs = benchmark_inputs(n_runs=70, duration=20, vary=True, seed=9)
+    faults = [None if r % 3 else Fault("f16", 0.6, onset=5.0) for r in range(70)]
+    xr.testing.assert_identical(
+        simulate(inputs, faults, seed=1, progress=True),
+        simulate(inputs, faults, seed=1, progress=False),
+    )

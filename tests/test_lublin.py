@@ -214,3 +214,11 @@ def test_fault_events_and_labels():
     assert (lublin_fault_labels("11102001", 3) == "fn").all()
     with pytest.raises(ValueError, match="DDMM2001"):
         lublin_fault_labels("2001-11-17", 3)
+
+
+def test_padded_fields_and_windows_line_endings(tmp_path, rng):
+    values = _day_matrix(rng, n_rows=30)
+    text = "\r\n".join("\t".join(f" {v:.2f} " for v in row) for row in values) + "\r\n"
+    (tmp_path / "pad.txt").write_text(text)
+    ds = load_lublin_day(tmp_path / "pad.txt", actuator=1)
+    np.testing.assert_allclose(ds["F"].values[0], values[:, 4] / 500, rtol=1e-15)

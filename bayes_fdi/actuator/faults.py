@@ -104,7 +104,7 @@ def _number(value, field: str) -> float:
 class Fault(NamedTuple):
     """One fault of the DAMADICS actuator, switched on at ``onset``.
 
-    Parameters
+    Attributes
     ----------
     name
         ``"f1"`` .. ``"f19"`` (see :data:`FAULT_TABLE`).

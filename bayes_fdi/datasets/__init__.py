@@ -24,9 +24,13 @@ import xarray as xr
 __all__ = [
     "CHANNELS",
     "INPUT_CHANNELS",
+    "LUBLIN_FAULT_EVENTS",
     "OUTPUT_CHANNELS",
     "STATES",
+    "find_gaps",
     "load_dataset",
+    "load_lublin_day",
+    "load_lublin_example",
     "make_dataset",
     "save_dataset",
     "validate_dataset",
@@ -198,3 +202,12 @@ def load_dataset(path: str | os.PathLike) -> xr.Dataset:
         if name in ds.coords:
             ds = ds.assign_coords({name: ("run", ds[name].values.astype(str))})
     return validate_dataset(ds, require=(), allow_nan=True)
+
+
+# Real plant data (defined in their own module, which builds on the functions above).
+from bayes_fdi.datasets.lublin import (  # noqa: E402
+    LUBLIN_FAULT_EVENTS,
+    find_gaps,
+    load_lublin_day,
+    load_lublin_example,
+)

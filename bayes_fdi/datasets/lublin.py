@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 import os
 import re
 import warnings
@@ -317,7 +318,8 @@ def _parse_day_text(text: str, source: str) -> np.ndarray:
     bad = None if values is None else np.argwhere(np.isinf(values))
     if values is not None and not len(bad):
         return values
-    # Slow exact scan: locate the first offending cell.
+    # Slow exact parse: locate the first offending cell (or parse what pandas refused).
+    out = np.empty((len(rows), n_cols))
     for i, line in enumerate(rows):
         for j, field in enumerate(line.split("\t")):
             token = field.strip()
@@ -325,12 +327,13 @@ def _parse_day_text(text: str, source: str) -> np.ndarray:
                 value = float(token)
             except ValueError:
                 value = None
-            if value is None or np.isinf(value) or token.lower() in {"", "+nan", "-nan"}:
+            if value is None or math.isinf(value):
                 raise ValueError(
                     f"{source}: line {i + 1}, column {j + 1} ({DAY_COLUMNS[j]}): "
                     f"{token!r} is not a number (gaps must be written NaN)"
                 )
-    raise ValueError(f"{source}: could not parse the file")  # pragma: no cover
+            out[i, j] = value
+    return out
 
 
 def load_lublin_day(

@@ -1,1 +1,27 @@
-"""Relevance Vector Machines (sparse Bayesian learning) in torch."""
+"""Relevance Vector Machines (sparse Bayesian learning) in torch.
+
+``RVR`` (regression) and ``RVC`` (classification) are scikit-learn estimators fitted by
+Tipping & Faul's fast marginal-likelihood maximisation (``method="fast"``) or Tipping's
+re-estimation (``method="em"``); ``load`` restores a model written by ``.save``.
+"""
+
+from bayes_fdi.rvm.classification import RVC
+from bayes_fdi.rvm.kernels import RBF, Kernel, Linear, Polynomial, Product, Scaled, Sum
+from bayes_fdi.rvm.persistence import load
+from bayes_fdi.rvm.regression import RVR
+from bayes_fdi.rvm.sparse_bayes import NumericalWarning, SBLResult
+
+__all__ = [
+    "RBF",
+    "RVC",
+    "RVR",
+    "Kernel",
+    "Linear",
+    "NumericalWarning",
+    "Polynomial",
+    "Product",
+    "SBLResult",
+    "Scaled",
+    "Sum",
+    "load",
+]
