@@ -15,8 +15,8 @@ paper's tree is `PAPER_TREE`::
 
     ("f17", ("f1", (("f3", ("f6", "f18")), ("f15", ("fn", ("f11", ("f2", "f12")))))))
 
-Features are used as given: put a ``StandardScaler`` in front (as
-`bayes_fdi.diagnosis.FaultDiagnoser` does) to make a fixed kernel width meaningful.
+By default each node standardises the features of its own training samples before its
+classifier (``node_scaling=True``), so a fixed kernel width means the same at every level.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin, clone
 from sklearn.cluster import KMeans
+from sklearn.preprocessing import StandardScaler
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, validate_data
 
@@ -53,6 +54,9 @@ class TreeNode(NamedTuple):
         Index of the child node, or None where the branch is a leaf (a single class).
     estimator : object
         The fitted binary classifier.
+    scaler : sklearn.preprocessing.StandardScaler or None
+        The node's feature standardisation (``node_scaling=True``), applied before
+        ``estimator``.
     n_vectors : int or None
         Number of relevance vectors (``relevance_vectors_``) or support vectors
         (``support_vectors_``) of ``estimator``; None if it exposes neither.
@@ -67,6 +71,7 @@ class TreeNode(NamedTuple):
     left_child: int | None
     right_child: int | None
     estimator: Any
+    scaler: StandardScaler | None
     n_vectors: int | None
     n_samples: int
 
@@ -109,6 +114,8 @@ def design_tree(
     centroids: np.ndarray,
     classes: Any,
     *,
+    counts: np.ndarray | None = None,
+    variances: np.ndarray | None = None,
     n_init: int = 10,
     random_state: int | None = 0,
 ) -> tuple | Any:
@@ -119,12 +126,19 @@ def design_tree(
     from the others (largest summed distance; first on ties) is split off. The smaller group
     goes left; on equal sizes, the group holding the class listed first goes left.
 
+    With ``counts`` and ``variances`` (per-class sample counts and per-feature variances), each
+    split is made on centroids divided by the per-feature standard deviation of the node's own
+    samples (pooled from the class statistics, as a ``StandardScaler`` fitted on them would
+    compute it), matching classifiers that standardise per node.
+
     Parameters
     ----------
     centroids
         ``(n_classes, n_features)`` class centroids.
     classes
         The class labels, in the row order of ``centroids``.
+    counts, variances
+        Optional ``(n_classes,)`` sample counts and ``(n_classes, n_features)`` variances.
     n_init, random_state
         k-means restarts and seed.
 
@@ -139,12 +153,30 @@ def design_tree(
         raise ValueError("centroids must be (n_classes, n_features), one row per class")
     if len(classes) == 0:
         raise ValueError("no classes to build a tree over")
+    if (counts is None) != (variances is None):
+        raise ValueError("give both counts and variances, or neither")
+    if counts is not None:
+        counts = np.asarray(counts, dtype=np.float64)
+        variances = np.asarray(variances, dtype=np.float64)
+        if counts.shape != (len(classes),) or variances.shape != centroids.shape:
+            raise ValueError("counts must be (n_classes,) and variances like centroids")
     order = list(range(len(classes)))
+
+    def node_centroids(rows: list[int]) -> np.ndarray:
+        c = centroids[rows]
+        if counts is None:
+            return c
+        w = counts[rows][:, None]
+        mean = (w * c).sum(0) / w.sum()
+        var = (w * (variances[rows] + (c - mean) ** 2)).sum(0) / w.sum()
+        std = np.sqrt(var)
+        std[~(std > 1e-300)] = 1.0  # constant feature: left unscaled, as StandardScaler does
+        return c / std
 
     def build(rows: list[int]) -> Any:
         if len(rows) == 1:
             return classes[rows[0]]
-        mask = _split_centroids(centroids[rows], n_init, random_state)
+        mask = _split_centroids(node_centroids(rows), n_init, random_state)
         a = [r for r, m in zip(rows, mask, strict=True) if m]
         b = [r for r, m in zip(rows, mask, strict=True) if not m]
         if len(b) < len(a) or (len(a) == len(b) and min(b) < min(a)):
@@ -167,6 +199,13 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
         ``"kmeans"`` (design the tree by recursive 2-means on the class centroids of the
         training features, see `design_tree`) or a nested tuple of pairs of class labels
         (e.g. `PAPER_TREE`) that must hold every training class exactly once.
+    node_scaling
+        Standardise the features of each node's training samples (a ``StandardScaler`` per
+        node, fitted on the samples of the node's classes) before its classifier, and design
+        the k-means splits on the same node-standardised scale. A fixed kernel width (the
+        paper's sigma = 2) then means the same at every level of the tree, however much the
+        classes near the root (e.g. f17's large flow residual) stretch the feature range.
+        ``False``: features are used as given at every node.
     n_init
         k-means restarts per split.
     random_state
@@ -188,11 +227,13 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
         base_estimator: Any = None,
         *,
         structure: str | tuple = "kmeans",
+        node_scaling: bool = True,
         n_init: int = 10,
         random_state: int | None = 0,
     ) -> None:
         self.base_estimator = base_estimator
         self.structure = structure
+        self.node_scaling = node_scaling
         self.n_init = n_init
         self.random_state = random_state
 
@@ -233,8 +274,18 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
                     f"structure must be 'kmeans' or a nested tuple, got {self.structure!r}"
                 )
             centroids = np.stack([X[y == c].mean(axis=0) for c in classes])
+            stats = {}
+            if self.node_scaling:
+                stats = {
+                    "counts": np.array([(y == c).sum() for c in classes]),
+                    "variances": np.stack([X[y == c].var(axis=0) for c in classes]),
+                }
             tree = design_tree(
-                centroids, class_list, n_init=self.n_init, random_state=self.random_state
+                centroids,
+                class_list,
+                n_init=self.n_init,
+                random_state=self.random_state,
+                **stats,
             )
         elif isinstance(self.structure, tuple):
             leaves = _leaves(self.structure)
@@ -270,8 +321,12 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
             left, right = tuple(_leaves(sub[0])), tuple(_leaves(sub[1]))
             in_left = np.isin(y, np.array(left, dtype=y.dtype))
             in_node = in_left | np.isin(y, np.array(right, dtype=y.dtype))
+            Xn = X[in_node]
+            scaler = StandardScaler().fit(Xn) if self.node_scaling else None
             est = clone(base)
-            est.fit(X[in_node], np.where(in_left[in_node], 0, 1))
+            est.fit(
+                Xn if scaler is None else scaler.transform(Xn), np.where(in_left[in_node], 0, 1)
+            )
             nodes.append(
                 TreeNode(
                     index=index_of[path],
@@ -281,6 +336,7 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
                     left_child=index_of.get((*path, 0)),
                     right_child=index_of.get((*path, 1)),
                     estimator=est,
+                    scaler=scaler,
                     n_vectors=_n_vectors(est),
                     n_samples=int(in_node.sum()),
                 )
@@ -289,6 +345,8 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
         return self
 
     def _node_right_proba(self, node: TreeNode, X: np.ndarray) -> np.ndarray:
+        if node.scaler is not None:
+            X = node.scaler.transform(X)
         proba = np.asarray(node.estimator.predict_proba(X), dtype=np.float64)
         cls = list(np.asarray(node.estimator.classes_).tolist())
         if 1 not in cls:  # cannot happen: both sides have training samples

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from sklearn.linear_model import LogisticRegression
+from sklearn.preprocessing import StandardScaler
 from sklearn.utils.estimator_checks import estimator_checks_generator
 
 from bayes_fdi.baselines import svm_classifier
-from bayes_fdi.tree import PAPER_TREE, HierarchicalClassifier, design_tree
+from bayes_fdi.tree import PAPER_TREE, HierarchicalClassifier, _leaves, design_tree
 
 
 def blobs(centres: dict, n: int, rng: np.random.Generator, scale: float = 0.1):
@@ -45,12 +46,44 @@ def test_design_tree_degenerate_identical_centroids():
 def test_kmeans_tree_learnt_from_data_matches_design(rng):
     centres = {"a": (0, 0), "b": (1, 0), "c": (0, 10), "d": (100, 0), "e": (1, 10)}
     X, y = blobs(centres, 15, rng)
-    clf = HierarchicalClassifier(LogisticRegression(), random_state=0).fit(X, y)
+    clf = HierarchicalClassifier(LogisticRegression(), node_scaling=False).fit(X, y)
     assert clf.tree_ == ("d", (("a", "b"), ("c", "e")))
     assert [n.index for n in clf.nodes_] == [0, 1, 2, 3]
     root = clf.nodes_[0]
     assert root.left == ("d",) and set(root.right) == {"a", "b", "c", "e"}
     assert root.n_samples == 75 and clf.nodes_[2].n_samples == 30
+
+
+def test_node_scaled_design_splits_standardised_node_samples(rng):
+    # Second implementation: at every node, standardise that node's own samples, take the
+    # class centroids and let design_tree choose the first split; it must be the node's split.
+    centres = {"a": (0, 0), "b": (0.3, 0), "c": (0, 3), "d": (60, 0), "e": (0.3, 3), "g": (60, 9)}
+    X, y = blobs(centres, 12, rng, scale=0.2)
+    clf = HierarchicalClassifier(LogisticRegression()).fit(X, y)
+    for node in clf.nodes_:
+        classes = sorted(node.left + node.right)
+        in_node = np.isin(y, classes)
+        Z = StandardScaler().fit_transform(X[in_node])
+        cents = np.stack([Z[y[in_node] == c].mean(axis=0) for c in classes])
+        top = design_tree(cents, classes)
+        if not isinstance(top, tuple):
+            continue
+        first = {tuple(sorted(_leaves(top[0]))), tuple(sorted(_leaves(top[1])))}
+        assert first == {tuple(sorted(node.left)), tuple(sorted(node.right))}
+        np.testing.assert_allclose(node.scaler.mean_, X[in_node].mean(axis=0))
+
+
+def test_node_scaling_makes_the_tree_affine_invariant(rng):
+    centres = {"a": (0, 0), "b": (1, 0.2), "c": (0, 3), "d": (40, 0)}
+    X, y = blobs(centres, 15, rng, scale=0.5)
+    Xt = rng.normal(scale=5.0, size=(30, 2))
+    scale, shift = np.array([1e-3, 50.0]), np.array([7.0, -2.0])
+    a = HierarchicalClassifier(LogisticRegression()).fit(X, y)
+    b = HierarchicalClassifier(LogisticRegression()).fit(X * scale + shift, y)
+    assert a.tree_ == b.tree_
+    np.testing.assert_allclose(
+        a.predict_proba(Xt), b.predict_proba(Xt * scale + shift), rtol=1e-6, atol=1e-9
+    )
 
 
 def test_design_is_seeded_and_reproducible(rng):
@@ -99,13 +132,16 @@ def test_paper_figure20_tree_is_expressible(rng):
 def test_predict_proba_is_product_along_paths(rng):
     centres = {"a": (0, 0), "b": (1, 0), "c": (0, 10), "d": (100, 0), "e": (1, 10)}
     X, y = blobs(centres, 15, rng, scale=1.0)
-    clf = HierarchicalClassifier(LogisticRegression(C=0.1), random_state=0).fit(X, y)
-    assert clf.tree_ == ("d", (("a", "b"), ("c", "e")))
+    clf = HierarchicalClassifier(
+        LogisticRegression(C=0.1), structure=("d", (("a", "b"), ("c", "e")))
+    )
+    clf.fit(X, y)
     Xt = rng.normal(scale=20.0, size=(40, 2))
 
-    def right(k):  # hand computation from each node's own estimator
-        est = clf.nodes_[k].estimator
-        return est.predict_proba(Xt)[:, list(est.classes_).index(1)]
+    def right(k):  # hand computation from each node's own scaler and estimator
+        node = clf.nodes_[k]
+        Z = (Xt - node.scaler.mean_) / node.scaler.scale_
+        return node.estimator.predict_proba(Z)[:, list(node.estimator.classes_).index(1)]
 
     p0, p1, p2, p3 = (right(k) for k in range(4))
     expected = {
@@ -127,8 +163,9 @@ def test_predict_proba_is_product_along_paths(rng):
 def test_two_classes_int_labels_single_node(rng):
     X = np.concatenate([rng.normal(-2, 1, (30, 3)), rng.normal(2, 1, (30, 3))])
     y = np.repeat([7, 3], 30)
-    clf = HierarchicalClassifier(LogisticRegression()).fit(X, y)
+    clf = HierarchicalClassifier(LogisticRegression(), node_scaling=False).fit(X, y)
     assert len(clf.nodes_) == 1 and list(clf.classes_) == [3, 7]
+    assert clf.nodes_[0].scaler is None
     lr = LogisticRegression().fit(X, np.where(y == clf.nodes_[0].right[0], 1, 0))
     # With two classes the tree is the node itself: same probabilities as a direct fit.
     p_right = lr.predict_proba(X)[:, 1]
@@ -176,6 +213,7 @@ def _sklearn_checks():
     # scikit-learn's API checks, minus the array-API one (needs SCIPY_ARRAY_API; it would skip).
     for est in (
         HierarchicalClassifier(LogisticRegression()),
+        HierarchicalClassifier(LogisticRegression(), node_scaling=False),
         HierarchicalClassifier(svm_classifier(sigma=1.0)),
     ):
         for estimator, check in estimator_checks_generator(est, legacy=True):
