@@ -61,7 +61,8 @@ class FaultDiagnoser(BaseEstimator):
         run's fault ``onset`` is labelled ``"fn"`` (the fault is not yet present).
     standardize
         Standardise the features with the labelled training runs' mean and std before the
-        classifier (keeps a fixed kernel width meaningful).
+        classifier (keeps a fixed kernel width meaningful for flat classifiers; the default
+        tree, which scales per node, is invariant to it).
     width_search, max_train_samples
         Passed to `bayes_fdi.residuals.NormalModels`.
     random_state
