@@ -57,7 +57,7 @@ class FaultDiagnoser(BaseEstimator):
         ``("mean_r1", "mean_r2")``.
     window, step
         Feature window and hop in samples; ``None`` = one feature vector per run (the paper).
-        With windows, each window is a training sample; a window that ends at or before its
+        With windows, each window is a training sample; a window whose samples all precede its
         run's fault ``onset`` is labelled ``"fn"`` (the fault is not yet present).
     standardize
         Standardise the features with the labelled training runs' mean and std before the
@@ -165,13 +165,13 @@ class FaultDiagnoser(BaseEstimator):
         else:
             bounds = window_bounds(labelled_runs.sizes["time"], self.window, self.step)
             times = np.asarray(labelled_runs["time"].values, dtype=np.float64)
-            ends = times[bounds[:, 1] - 1]
+            last = times[bounds[:, 1] - 1]  # time of the last sample of each window
             onset = (
                 np.asarray(labelled_runs["onset"].values, dtype=np.float64)
                 if "onset" in labelled_runs.coords
                 else np.full(states.size, -np.inf)
             )
-            labels = np.where(ends[None, :] <= onset[:, None], "fn", states[:, None]).ravel()
+            labels = np.where(last[None, :] < onset[:, None], "fn", states[:, None]).ravel()
         X = self._flat(feats)
         if np.unique(labels).size < 2:
             raise ValueError("the labelled windows hold one class only; need at least two")

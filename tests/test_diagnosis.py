@@ -98,6 +98,11 @@ def test_windowed_diagnosis_labels_pre_onset_windows_fn(rng):
     labels = diag.training_labels_.reshape(30, 4)
     assert (labels[:, :2] == "fn").all()  # windows [0,25) and [25,50) end before the onset
     np.testing.assert_array_equal(labels[:, 2], labelled["state"].values)
+    # Boundary: with the onset at t = 49 the window [25, 50) holds one faulty sample.
+    early = labelled.assign_coords(onset=("run", np.full(30, 49.0)))
+    labels = stand_in(window=25).fit(normal, early).training_labels_.reshape(30, 4)
+    assert (labels[:, 0] == "fn").all()
+    np.testing.assert_array_equal(labels[:, 1], labelled["state"].values)
     test = campaign(states, 3, rng, onset=50.0)
     out = diag.diagnose(test)
     assert out["proba"].dims == ("run", "window", "class")
