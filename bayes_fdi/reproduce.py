@@ -42,6 +42,7 @@ __all__ = [
     "N_TRAIN",
     "PAPER_GROUPS",
     "PAPER_STATES",
+    "REGRESSION_WIDTHS",
     "SEPARABILITY_THRESHOLD",
     "SMALL_DURATION",
     "SMALL_RUNS_PER_STATE",
@@ -52,9 +53,11 @@ __all__ = [
     "find_groups",
     "group_metrics",
     "load_or_simulate",
+    "node_classifier",
     "pairwise_separability",
     "reproduce",
     "run_from_cli",
+    "select_regression_width",
     "split_train_test",
 ]
 
@@ -79,6 +82,14 @@ N_TRAIN: int = 20
 SEPARABILITY_THRESHOLD: float = 0.15
 #: Neighbours of the k-NN used by :func:`pairwise_separability`.
 SEPARABILITY_NEIGHBOURS: int = 5
+#: Candidate RBF widths of the normal models; the one of largest summed log evidence (X and F
+#: models, on a subsample of the fault-free training samples) is used. See
+#: :func:`select_regression_width`.
+REGRESSION_WIDTHS: tuple[float, ...] = (0.05, 0.1, 0.2, 0.4, 0.8)
+#: Fault-free samples used to choose the width (the final models use every sample).
+REGRESSION_WIDTH_SAMPLES: int = 600
+#: Gaussian kernel width of every node classifier (the paper: sigma = 2).
+NODE_WIDTH: float = 2.0
 #: ``small=True``: runs per state (20 train + 4 test) ...
 SMALL_RUNS_PER_STATE: int = 24
 #: ... and seconds per run (the paper: 350).
@@ -550,19 +561,121 @@ def group_metrics(
 
 
 # ----------------------------------------------------------------------------- pipelines
+def select_regression_width(
+    normal_runs: xr.Dataset,
+    *,
+    widths: Sequence[float] = REGRESSION_WIDTHS,
+    max_samples: int = REGRESSION_WIDTH_SAMPLES,
+    seed: int = 0,
+) -> tuple[float, dict[float, float]]:
+    """RBF width of the normal models by maximum evidence over a grid.
+
+    Both normal models (``X`` and ``F`` on ``(CV, sqrt(P1 - P2), T1)``) are fitted with each
+    candidate width on the same random subsample of the fault-free samples; the width with the
+    largest summed log marginal likelihood wins. (``RVR(width="auto")`` searches down to much
+    smaller widths, where a fit on thousands of samples keeps hundreds of basis functions and
+    takes minutes; the grid stays where the evidence peaks on these data.)
+
+    Parameters
+    ----------
+    normal_runs
+        Fault-free runs.
+    widths
+        Candidate widths.
+    max_samples
+        Subsample size.
+    seed
+        Subsample seed.
+
+    Returns
+    -------
+    width : float
+    log_evidence : dict
+        Width -> summed log evidence.
+    """
+    from bayes_fdi.residuals import model_inputs
+    from bayes_fdi.rvm import RVR
+
+    U, _ = model_inputs(normal_runs, warn=False)
+    targets = [np.asarray(normal_runs[c].transpose("run", "time").values).ravel() for c in "XF"]
+    ok = np.isfinite(U).all(axis=1) & np.isfinite(targets[0]) & np.isfinite(targets[1])
+    idx = np.flatnonzero(ok)
+    if idx.size < 10:
+        raise ValueError(f"only {idx.size} finite fault-free samples to choose the width")
+    if idx.size > max_samples:
+        idx = np.sort(np.random.default_rng(seed).choice(idx, size=max_samples, replace=False))
+    evidence = {
+        float(w): float(sum(RVR(kernel="rbf", width=float(w)).fit(U[idx], t[idx]).log_evidence_
+                            for t in targets))
+        for w in widths
+    }  # fmt: skip
+    return max(evidence, key=evidence.__getitem__), evidence
+
+
+def node_classifier(kind: str = "rvm", *, width: float = NODE_WIDTH) -> Any:
+    """The binary classifier at each tree node: standardise the node's features, then RVM/SVM.
+
+    Each node standardises its own training samples (mean 0, std 1), so the Gaussian kernel
+    width ``sigma`` means "``sigma`` standard deviations of this node's data" at every depth:
+    the root separates far-apart groups of states, the deepest nodes states a few hundredths
+    apart, and one fixed width (the paper's sigma = 2) fits both.
+
+    Parameters
+    ----------
+    kind
+        ``"rvm"`` (:class:`bayes_fdi.rvm.RVC`) or ``"svm"``
+        (:func:`bayes_fdi.baselines.svm_classifier`, C = 1, Platt-scaled probabilities).
+    width
+        Gaussian kernel width sigma.
+    """
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    if kind == "rvm":
+        from bayes_fdi.rvm import RVC
+
+        est = RVC(kernel="rbf", width=width)
+    elif kind == "svm":
+        from bayes_fdi.baselines import svm_classifier
+
+        est = svm_classifier(sigma=width)
+    else:
+        raise ValueError(f"kind must be 'rvm' or 'svm', got {kind!r}")
+    return make_pipeline(StandardScaler(), est)
+
+
+def _n_vectors(est: Any) -> int | None:
+    final = est.steps[-1][1] if hasattr(est, "steps") else est
+    for attr in ("relevance_vectors_", "support_vectors_"):
+        vec = getattr(final, attr, None)
+        if vec is not None:
+            return int(np.shape(vec)[0])
+    return None
+
+
 def _tree_nodes(clf: Any, prefix: str) -> list[dict[str, Any]]:
     """Nodes of a fitted HierarchicalClassifier as plain dicts (breadth first, root first)."""
-    return [
-        {
-            "name": f"{prefix}{node.index + 1}",
-            "left": [str(c) for c in node.left],
-            "right": [str(c) for c in node.right],
-            "classes": [str(c) for c in (*node.left, *node.right)],
-            "vectors": None if node.n_vectors is None else int(node.n_vectors),
-            "samples": int(node.n_samples),
-        }
-        for node in clf.nodes_
-    ]
+    out = []
+    for node in clf.nodes_:
+        n_vec = node.n_vectors if node.n_vectors is not None else _n_vectors(node.estimator)
+        out.append(
+            {
+                "name": f"{prefix}{node.index + 1}",
+                "left": [str(c) for c in node.left],
+                "right": [str(c) for c in node.right],
+                "classes": [str(c) for c in (*node.left, *node.right)],
+                "vectors": None if n_vec is None else int(n_vec),
+                "samples": int(node.n_samples),
+            }
+        )
+    return out
+
+
+def _tree_text(nodes: list[dict[str, Any]], prefix: str) -> str:
+    """The fitted tree as text with vectors/samples per node."""
+    from bayes_fdi.report import tree_text
+
+    return tree_text(nodes, prefix=prefix)
 
 
 def _fit_tree(
@@ -594,7 +707,7 @@ def _method_result(
     proba = proba[:, [fitted.index(c) for c in classes]]
     out = classification_metrics(y_test, proba, classes)
     out["nodes"] = _tree_nodes(clf, prefix)
-    out["tree"] = clf.export_text(names=prefix)
+    out["tree"] = _tree_text(out["nodes"], prefix)
     out["fit_seconds"] = float(fit_s)
     out["predict_seconds"] = float(predict_s)
     return out
@@ -657,8 +770,10 @@ def evaluate_dataset(
     progress
         Callable receiving stage messages.
     diagnoser
-        Unfitted :class:`~bayes_fdi.diagnosis.FaultDiagnoser` for the RVM method (default: its
-        defaults with ``random_state=seed``).
+        Unfitted :class:`~bayes_fdi.diagnosis.FaultDiagnoser` for the RVM method. Default: RVR
+        normal models with the width of :func:`select_regression_width` and a k-means tree of
+        :func:`node_classifier` ``("rvm")`` nodes. The SVM baseline always uses
+        :func:`node_classifier` ``("svm")`` nodes on the RVM pipeline's features.
 
     Returns
     -------
@@ -673,7 +788,6 @@ def evaluate_dataset(
         ``rvm_predict`` (features -> labels), ``train_features`` and ``train_labels``
         (training runs of every state).
     """
-    from bayes_fdi.baselines import svm_classifier
     from bayes_fdi.diagnosis import FaultDiagnoser
     from bayes_fdi.features import extract_features
     from bayes_fdi.tree import HierarchicalClassifier
@@ -691,11 +805,23 @@ def evaluate_dataset(
     in_paper_test = np.isin(y_test_all, states)
     normal = train.isel(run=np.flatnonzero(y_train_all == "fn"))
     timing: dict[str, float] = {}
+    if diagnoser is None:
+        say("normal-model kernel width by maximum evidence")
+        t0 = time.perf_counter()
+        width, evidence = select_regression_width(normal, seed=seed)
+        timing["regression_width"] = time.perf_counter() - t0
+        from bayes_fdi.rvm import RVR
 
+        diagnoser = FaultDiagnoser(
+            regressor=RVR(kernel="rbf", width=width),
+            classifier=HierarchicalClassifier(node_classifier("rvm"), random_state=seed),
+            random_state=seed,
+        )
+        regression = {"width": width, "log_evidence": evidence}
+    else:
+        regression = {}
     say(f"fitting the RVM pipeline (normal models on {normal.sizes['run']} fault-free runs)")
-    diag = (FaultDiagnoser(random_state=seed) if diagnoser is None else diagnoser).fit(
-        normal, train.isel(run=np.flatnonzero(in_paper_train))
-    )
+    diag = diagnoser.fit(normal, train.isel(run=np.flatnonzero(in_paper_train)))
     timing.update({f"rvm_fit_{k}": float(v) for k, v in diag.fit_seconds_.items()})
 
     say(f"residuals and features of {test.sizes['run']} test runs")
@@ -732,7 +858,7 @@ def evaluate_dataset(
     say("SVM tree on the same features")
 
     def make_svm() -> Any:
-        return HierarchicalClassifier(svm_classifier(), random_state=seed)
+        return HierarchicalClassifier(node_classifier("svm"), random_state=seed)
 
     svm, _, proba_svm, fit_s, pred_s = _fit_tree(make_svm, X_tr, y_tr, X_te)
     results["svm"] = _method_result(svm, y_te, proba_svm, fit_s, pred_s, "SVM")
@@ -742,6 +868,15 @@ def evaluate_dataset(
         "test_runs": {s: int((y_te == s).sum()) for s in states},
         "normal_model_runs": int(normal.sizes["run"]),
         "normal_model_samples": int(diag.normal_models_.n_train_samples_),
+    }
+    results["normal_models"] = {
+        **regression,
+        "relevance_vectors": {k: _n_vectors(r) for k, r in diag.normal_models_.regressors_.items()},
+        "noise_std": {
+            k: float(r.beta_**-0.5)
+            for k, r in diag.normal_models_.regressors_.items()
+            if getattr(r, "beta_", None)
+        },
     }
     results["strength"] = _strength_ranges(ds)
     results["features"] = list(diag.feature_names_)
@@ -771,10 +906,9 @@ def evaluate_dataset(
         }
         if len(every) > len(states):
             say(f"RVM and SVM trees on all {len(every)} states")
-            from bayes_fdi.rvm import RVC
 
             def make_rvm() -> Any:
-                return HierarchicalClassifier(RVC(kernel="rbf", width=2.0), random_state=seed)
+                return HierarchicalClassifier(node_classifier("rvm"), random_state=seed)
 
             for method, make, prefix in (("rvm", make_rvm, "RVM"), ("svm", make_svm, "SVM")):
                 clf, _, p, fit_s, pred_s = _fit_tree(make, feats_train_all, y_train_all, feats_test)

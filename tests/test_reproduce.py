@@ -234,7 +234,7 @@ def test_evaluate_dataset_on_known_offsets():
         assert m["separable_states"] == ["f1", "f2", "f3"]
         assert m["separable_accuracy"] == 1.0
         assert m["group_accuracy"] == 1.0
-        assert m["group_mass"] > 0.9
+        assert m["group_mass"] > 0.8  # chance (uniform over 5 states) would be 0.2 to 0.4
         # fn and f4 cannot be told apart: together they are right about half the time
         both = (m["per_class"]["fn"] + m["per_class"]["f4"]) / 2
         assert 0.2 <= both <= 0.8
