@@ -1,0 +1,474 @@
+"""Residual generation: normal (fault-free) models of the actuator outputs.
+
+The paper (eqs. 16-20) models the two measured outputs of a fault-free actuator, the stem
+position ``X`` and the flow ``F``, as functions of three inputs,
+
+    X_hat = g1(CV, sqrt(P1 - P2), T1),    F_hat = g2(CV, sqrt(P1 - P2), T1),
+
+each a relevance vector regression fitted on fault-free runs, and diagnoses faults from the
+residuals ``r1 = X - X_hat`` and ``r2 = F - F_hat``. Because the RVR is Bayesian, each
+prediction has a predictive standard deviation, so standardised residuals
+``z1 = r1 / X_hat_std`` and ``z2 = r2 / F_hat_std`` are available too.
+
+Pressure drop: where ``P1 < P2`` (reverse flow under fault f17, or bad data), the square root
+is replaced by the signed root ``sign(D) * sqrt(|D|)`` with ``D = P1 - P2``; such samples are
+kept (never dropped) and counted, with a `NegativePressureDropWarning`.
+
+Missing values: samples with a NaN input are not passed to the regressors; their predictions
+and residuals are NaN (counted in the output's attributes). In ``fit``, samples with a NaN
+input or output are left out of the training set with a warning giving their number.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+import xarray as xr
+from sklearn.base import BaseEstimator, clone
+
+from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
+
+__all__ = [
+    "MODEL_INPUTS",
+    "GAResult",
+    "NegativePressureDropWarning",
+    "NormalModels",
+    "genetic_width_search",
+    "model_inputs",
+]
+
+#: Names of the three regression inputs (columns of `model_inputs`).
+MODEL_INPUTS: tuple[str, ...] = ("CV", "sqrt_dP", "T1")
+
+
+class NegativePressureDropWarning(UserWarning):
+    """Some samples have ``P1 < P2``; the signed root ``sign(D) sqrt(|D|)`` was used."""
+
+
+def model_inputs(ds: xr.Dataset, *, warn: bool = True) -> tuple[np.ndarray, int]:
+    """Regression inputs ``(CV, sign(D) sqrt(|D|), T1)`` with ``D = P1 - P2``, one row a sample.
+
+    Parameters
+    ----------
+    ds
+        Dataset in the project's format with channels ``CV``, ``P1``, ``P2``, ``T1``.
+    warn
+        Emit a `NegativePressureDropWarning` when some samples have ``P1 < P2``.
+
+    Returns
+    -------
+    inputs : numpy.ndarray
+        ``(n_runs * n_times, 3)``, runs stacked in order (row ``r * n_times + t``). NaN inputs
+        stay NaN.
+    n_negative : int
+        Number of samples with ``P1 < P2`` (signed root used; samples kept).
+    """
+    validate_dataset(ds, require=INPUT_CHANNELS, allow_nan=True)
+
+    def flat(name: str) -> np.ndarray:
+        return np.asarray(ds[name].transpose("run", "time").values, dtype=np.float64).ravel()
+
+    dp = flat("P1") - flat("P2")
+    n_negative = int(np.sum(dp < 0))
+    if n_negative and warn:
+        warnings.warn(
+            f"{n_negative} of {dp.size} samples have P1 < P2; using the signed root "
+            "sign(P1-P2)*sqrt(|P1-P2|) for them (samples kept)",
+            NegativePressureDropWarning,
+            stacklevel=2,
+        )
+    root = np.sign(dp) * np.sqrt(np.abs(dp))
+    return np.column_stack([flat("CV"), root, flat("T1")]), n_negative
+
+
+class GAResult(NamedTuple):
+    """Result of `genetic_width_search`.
+
+    Attributes
+    ----------
+    width : float
+        The best kernel width found.
+    mse : float
+        Its validation mean squared error.
+    history : numpy.ndarray
+        ``(generations + 1, 2)``: best width and best MSE after each generation (row 0: the
+        initial population).
+    n_evaluations : int
+        Number of distinct model fits.
+    """
+
+    width: float
+    mse: float
+    history: np.ndarray
+    n_evaluations: int
+
+
+def genetic_width_search(
+    make_estimator: Callable[[float], Any],
+    X_train: np.ndarray,
+    y_train: np.ndarray,
+    X_val: np.ndarray,
+    y_val: np.ndarray,
+    *,
+    bounds: tuple[float, float] = (1e-3, 10.0),
+    population: int = 12,
+    generations: int = 10,
+    random_state: int | None = 0,
+) -> GAResult:
+    """Minimise validation MSE over a kernel width with a small real-coded genetic algorithm.
+
+    The genome is ``log10(width)`` within ``bounds``. Each generation keeps the best individual
+    (elitism), fills the rest by binary-tournament selection, blend crossover (BLX-0.5) and
+    Gaussian mutation (probability 0.3, standard deviation 10 % of the log-range), clipped to
+    the bounds. Fitness is the mean squared error of ``make_estimator(width)`` fitted on
+    ``(X_train, y_train)`` and evaluated on ``(X_val, y_val)``; a fit that raises is given
+    infinite MSE. The paper tuned its RVR kernel width the same way (its section 3.2).
+
+    Parameters
+    ----------
+    make_estimator
+        ``width -> unfitted regressor``.
+    X_train, y_train, X_val, y_val
+        Training and validation data.
+    bounds
+        ``(low, high)`` search range of the width (both > 0).
+    population, generations
+        GA sizes; the cost is at most ``population * (generations + 1)`` fits.
+    random_state
+        Seed of the GA's own generator.
+
+    Returns
+    -------
+    GAResult
+    """
+    low, high = (float(b) for b in bounds)
+    if not (0 < low < high) or not (math.isfinite(low) and math.isfinite(high)):
+        raise ValueError(f"bounds must satisfy 0 < low < high, got {bounds}")
+    if population < 2 or generations < 0:
+        raise ValueError("population must be >= 2 and generations >= 0")
+    rng = np.random.default_rng(random_state)
+    lo, hi = math.log10(low), math.log10(high)
+    cache: dict[float, float] = {}
+
+    def fitness(g: float) -> float:
+        key = round(float(g), 10)
+        if key not in cache:
+            try:
+                est = make_estimator(10.0**key)
+                est.fit(X_train, y_train)
+                pred = np.asarray(est.predict(X_val), dtype=np.float64).ravel()
+                mse = float(np.mean((pred - y_val) ** 2))
+                cache[key] = mse if math.isfinite(mse) else math.inf
+            except (ValueError, np.linalg.LinAlgError, RuntimeError):
+                cache[key] = math.inf
+        return cache[key]
+
+    genomes = (
+        np.linspace(lo, hi, population)
+        + rng.uniform(-0.5, 0.5, population) * (hi - lo) / population
+    )
+    genomes = np.clip(genomes, lo, hi)
+    scores = np.array([fitness(g) for g in genomes])
+    history = [(10.0 ** genomes[np.argmin(scores)], scores.min())]
+    sigma_mut = 0.1 * (hi - lo)
+    for _ in range(generations):
+        best = int(np.argmin(scores))
+        children = [genomes[best]]
+        while len(children) < population:
+            parents = []
+            for _k in range(2):
+                i, j = rng.integers(0, population, 2)
+                parents.append(genomes[i] if scores[i] <= scores[j] else genomes[j])
+            a, b = min(parents), max(parents)
+            span = b - a
+            child = rng.uniform(a - 0.5 * span, b + 0.5 * span)
+            if rng.random() < 0.3:
+                child += rng.normal(0.0, sigma_mut)
+            children.append(float(np.clip(child, lo, hi)))
+        genomes = np.array(children)
+        scores = np.array([fitness(g) for g in genomes])
+        history.append((10.0 ** genomes[np.argmin(scores)], scores.min()))
+    best = int(np.argmin(scores))
+    if not math.isfinite(scores[best]):
+        raise ValueError("every kernel width tried by the genetic search failed to fit")
+    return GAResult(
+        width=float(10.0 ** genomes[best]),
+        mse=float(scores[best]),
+        history=np.array(history, dtype=np.float64),
+        n_evaluations=len(cache),
+    )
+
+
+def _default_regressor() -> Any:
+    from bayes_fdi.rvm import RVR
+
+    return RVR(kernel="rbf", width="auto")
+
+
+def _predict_with_std(est: Any, X: np.ndarray, chunk: int) -> tuple[np.ndarray, np.ndarray]:
+    means, stds = [], []
+    for start in range(0, X.shape[0], chunk):
+        out = est.predict(X[start : start + chunk], return_std=True)
+        if not (isinstance(out, tuple) and len(out) == 2):
+            raise ValueError(
+                f"{type(est).__name__}.predict(X, return_std=True) must return (mean, std)"
+            )
+        means.append(np.asarray(out[0], dtype=np.float64).ravel())
+        stds.append(np.asarray(out[1], dtype=np.float64).ravel())
+    if not means:
+        return np.empty(0), np.empty(0)
+    return np.concatenate(means), np.concatenate(stds)
+
+
+class NormalModels(BaseEstimator):
+    """Fault-free models ``X_hat = g1(u)``, ``F_hat = g2(u)`` with ``u = (CV, sqrt(P1-P2), T1)``.
+
+    Parameters
+    ----------
+    regressor
+        Unfitted regressor with ``fit(X, y)`` and ``predict(X, return_std=True)``, cloned once
+        per output. ``None``: ``bayes_fdi.rvm.RVR(kernel="rbf", width="auto")`` (kernel width
+        by maximum evidence).
+    width_search
+        ``None`` (keep the regressor's own width, e.g. the RVR's evidence-optimal ``"auto"``)
+        or ``"ga"``: choose the width parameter of each output's regressor with
+        `genetic_width_search`, minimising the MSE on held-out fault-free runs (the
+        paper's method), then refit on all fault-free runs with that width.
+    width_param
+        Name of the regressor's kernel-width parameter set by the GA.
+    ga_bounds, ga_population, ga_generations
+        GA search range (of the width) and sizes.
+    ga_validation_fraction
+        Fraction of the fault-free runs held out for the GA's validation MSE (at least one run;
+        the GA needs two or more runs).
+    ga_max_samples
+        Training samples per GA fit (random subset; keeps the search affordable).
+    max_train_samples
+        If set, fit each regressor on a random subset of this many fault-free samples
+        (without replacement); ``None`` uses every sample. The paper used 20 runs x 350 s.
+    chunk_size
+        Samples per ``predict`` call (bounds memory).
+    random_state
+        Seed for subsampling, the GA's validation split and the GA itself.
+
+    Attributes
+    ----------
+    regressors_ : dict
+        ``{"X": fitted g1, "F": fitted g2}``.
+    ga_results_ : dict
+        ``{"X": GAResult, "F": GAResult}`` when ``width_search="ga"``, else empty.
+    n_train_samples_ : int
+        Samples used to fit each regressor.
+    n_negative_pressure_drop_ : int
+        Fault-free training samples with ``P1 < P2`` (signed root used).
+    n_dropped_nan_ : int
+        Training samples left out because an input or output was NaN.
+    fit_seconds_ : dict
+        Wall-clock seconds: ``"X"``, ``"F"`` (final fits) and ``"ga"`` (search, if any).
+    """
+
+    def __init__(
+        self,
+        regressor: Any = None,
+        *,
+        width_search: str | None = None,
+        width_param: str = "width",
+        ga_bounds: tuple[float, float] = (1e-3, 10.0),
+        ga_population: int = 12,
+        ga_generations: int = 10,
+        ga_validation_fraction: float = 0.25,
+        ga_max_samples: int = 1000,
+        max_train_samples: int | None = None,
+        chunk_size: int = 20000,
+        random_state: int | None = 0,
+    ) -> None:
+        self.regressor = regressor
+        self.width_search = width_search
+        self.width_param = width_param
+        self.ga_bounds = ga_bounds
+        self.ga_population = ga_population
+        self.ga_generations = ga_generations
+        self.ga_validation_fraction = ga_validation_fraction
+        self.ga_max_samples = ga_max_samples
+        self.max_train_samples = max_train_samples
+        self.chunk_size = chunk_size
+        self.random_state = random_state
+
+    # ------------------------------------------------------------------ fitting
+    def _base(self) -> Any:
+        return _default_regressor() if self.regressor is None else self.regressor
+
+    def fit(self, normal_runs: xr.Dataset) -> NormalModels:
+        """Fit ``g1`` and ``g2`` on fault-free runs.
+
+        Parameters
+        ----------
+        normal_runs
+            Dataset with channels ``CV, P1, P2, T1, X, F``. If it has a ``state`` coordinate,
+            every run must be ``"fn"``.
+
+        Returns
+        -------
+        NormalModels
+            ``self``.
+        """
+        validate_dataset(normal_runs, require=INPUT_CHANNELS + OUTPUT_CHANNELS, allow_nan=True)
+        if "state" in normal_runs.coords:
+            states = sorted(set(map(str, normal_runs["state"].values)) - {"fn"})
+            if states:
+                raise ValueError(
+                    f"normal models must be fitted on fault-free runs; got states {states}"
+                )
+        if self.width_search not in (None, "ga"):
+            raise ValueError(f"width_search must be None or 'ga', got {self.width_search!r}")
+        if self.max_train_samples is not None and int(self.max_train_samples) < 2:
+            raise ValueError("max_train_samples must be at least 2")
+        rng = np.random.default_rng(self.random_state)
+        base = self._base()
+        U, n_neg = model_inputs(normal_runs)
+        n_runs, n_times = normal_runs.sizes["run"], normal_runs.sizes["time"]
+        run_of = np.repeat(np.arange(n_runs), n_times)
+        targets = {
+            name: np.asarray(normal_runs[name].transpose("run", "time").values).ravel()
+            for name in OUTPUT_CHANNELS
+        }
+        finite = np.isfinite(U).all(axis=1)
+        for y in targets.values():
+            finite &= np.isfinite(y)
+        n_dropped = int((~finite).sum())
+        if n_dropped:
+            warnings.warn(
+                f"{n_dropped} fault-free sample(s) with NaN inputs/outputs are not used to fit "
+                "the normal models",
+                UserWarning,
+                stacklevel=2,
+            )
+        idx = np.flatnonzero(finite)
+        if idx.size < 2:
+            raise ValueError("fewer than 2 finite fault-free samples to fit the normal models")
+
+        self.ga_results_: dict[str, GAResult] = {}
+        self.fit_seconds_: dict[str, float] = {}
+        widths: dict[str, float] = {}
+        if self.width_search == "ga":
+            if self.width_param not in base.get_params():
+                raise ValueError(
+                    f"{type(base).__name__} has no parameter {self.width_param!r} for the GA"
+                )
+            if n_runs < 2:
+                raise ValueError("the genetic width search needs at least 2 fault-free runs")
+            n_val = max(1, round(self.ga_validation_fraction * n_runs))
+            n_val = min(n_val, n_runs - 1)
+            val_runs = rng.choice(n_runs, size=n_val, replace=False)
+            is_val = np.isin(run_of[idx], val_runs)
+            tr, va = idx[~is_val], idx[is_val]
+            if tr.size > self.ga_max_samples:
+                tr = rng.choice(tr, size=int(self.ga_max_samples), replace=False)
+            if va.size > self.ga_max_samples:
+                va = rng.choice(va, size=int(self.ga_max_samples), replace=False)
+            t0 = time.perf_counter()
+            for name, y in targets.items():
+
+                def make(width: float, _base: Any = base) -> Any:
+                    return clone(_base).set_params(**{self.width_param: width})
+
+                res = genetic_width_search(
+                    make,
+                    U[tr],
+                    y[tr],
+                    U[va],
+                    y[va],
+                    bounds=self.ga_bounds,
+                    population=self.ga_population,
+                    generations=self.ga_generations,
+                    random_state=self.random_state,
+                )
+                self.ga_results_[name] = res
+                widths[name] = res.width
+            self.fit_seconds_["ga"] = time.perf_counter() - t0
+
+        if self.max_train_samples is not None and idx.size > self.max_train_samples:
+            idx = np.sort(rng.choice(idx, size=int(self.max_train_samples), replace=False))
+        self.regressors_: dict[str, Any] = {}
+        for name, y in targets.items():
+            est = clone(base)
+            if name in widths:
+                est.set_params(**{self.width_param: widths[name]})
+            t0 = time.perf_counter()
+            est.fit(U[idx], y[idx])
+            self.fit_seconds_[name] = time.perf_counter() - t0
+            self.regressors_[name] = est
+        self.n_train_samples_ = int(idx.size)
+        self.n_negative_pressure_drop_ = n_neg
+        self.n_dropped_nan_ = n_dropped
+        self.n_features_in_ = len(MODEL_INPUTS)
+        return self
+
+    # --------------------------------------------------------------- prediction
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "regressors_"):
+            raise ValueError("NormalModels is not fitted; call fit(normal_runs) first")
+
+    def predict(self, runs: xr.Dataset) -> xr.Dataset:
+        """Predicted fault-free outputs and their predictive standard deviations.
+
+        Parameters
+        ----------
+        runs
+            Dataset with at least ``CV, P1, P2, T1``.
+
+        Returns
+        -------
+        xarray.Dataset
+            ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std`` with dims ``(run, time)`` and the
+            coordinates of ``runs``; attrs ``n_negative_pressure_drop`` and ``n_nan_inputs``.
+        """
+        self._check_fitted()
+        U, n_neg = model_inputs(runs)
+        shape = (runs.sizes["run"], runs.sizes["time"])
+        ok = np.isfinite(U).all(axis=1)
+        data = {}
+        for name, est in self.regressors_.items():
+            mean = np.full(U.shape[0], np.nan)
+            std = np.full(U.shape[0], np.nan)
+            if ok.any():
+                mean[ok], std[ok] = _predict_with_std(est, U[ok], int(self.chunk_size))
+            data[f"{name}_hat"] = (("run", "time"), mean.reshape(shape))
+            data[f"{name}_hat_std"] = (("run", "time"), std.reshape(shape))
+        coords = {k: v for k, v in runs.coords.items() if set(v.dims) <= {"run", "time"}}
+        return xr.Dataset(
+            data,
+            coords=coords,
+            attrs={"n_negative_pressure_drop": n_neg, "n_nan_inputs": int((~ok).sum())},
+        )
+
+    def residuals(self, runs: xr.Dataset) -> xr.Dataset:
+        """Predictions plus residuals ``r1 = X - X_hat``, ``r2 = F - F_hat`` and ``z1``, ``z2``.
+
+        ``z = r / predictive std`` (NaN where the std is not positive or the sample is NaN).
+
+        Parameters
+        ----------
+        runs
+            Dataset with ``CV, P1, P2, T1, X, F``.
+
+        Returns
+        -------
+        xarray.Dataset
+            The `predict` variables plus ``r1``, ``r2``, ``z1``, ``z2``.
+        """
+        validate_dataset(runs, require=INPUT_CHANNELS + OUTPUT_CHANNELS, allow_nan=True)
+        out = self.predict(runs)
+        for k, name in enumerate(OUTPUT_CHANNELS, start=1):
+            r = runs[name].transpose("run", "time").values - out[f"{name}_hat"].values
+            std = out[f"{name}_hat_std"].values
+            z = np.full_like(r, np.nan)
+            np.divide(r, std, out=z, where=np.isfinite(std) & (std > 0))
+            out[f"r{k}"] = (("run", "time"), r)
+            out[f"z{k}"] = (("run", "time"), z)
+        return out

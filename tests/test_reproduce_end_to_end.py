@@ -1,0 +1,101 @@
+"""``bayes-fdi reproduce`` end to end on a small simulated campaign (simulator + RVMs)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bayes_fdi.cli import main
+from bayes_fdi.report import confusion_table
+
+# Five states of the paper whose faults move the flow residual strongly in the DAMADICS
+# model (f1: valve clogging, f17: pressure change, f18: bypass open; see the reference's
+# effect table), plus fn and f2.
+STATES = ["fn", "f1", "f2", "f17", "f18"]
+CAMPAIGN = """
+[campaign]
+name = "tiny"
+seed = 5
+duration = 100
+source = "benchmark-inputs"
+runs_per_state = 24
+states = {states}
+batch_size = 60
+
+[inputs]
+vary = true
+
+[faults]
+strength = [0.5, 1.0]
+onset = 0.0
+profile = "abrupt"
+ramp = 0.0
+"""
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    from bayes_fdi.reproduce import reproduce
+
+    tmp = tmp_path_factory.mktemp("reproduce")
+    toml = tmp / "tiny.toml"
+    toml.write_text(CAMPAIGN.format(states=json.dumps(STATES)))
+    kwargs = dict(seed=3, cache_dir=tmp / "cache", states=STATES, progress=False)
+    first = reproduce(tmp / "out1", datasets=[toml], **kwargs)
+    return tmp, toml, first, kwargs
+
+
+def test_outputs_written_and_consistent(run):
+    tmp, _, results, _ = run
+    out = tmp / "out1"
+    on_disk = json.loads((out / "results.json").read_text())
+    assert on_disk == results  # the returned dict is exactly what was written
+    d = results["datasets"]["tiny"]
+    for method in ("rvm", "svm"):
+        m = d[method]
+        cm = np.array(m["confusion"]["matrix"])
+        assert m["confusion"]["classes"] == ["f1", "f2", "f17", "f18", "fn"]
+        assert cm.sum() == 5 * 4  # 4 test runs per state (24 - 20)
+        assert m["accuracy"] == pytest.approx(np.trace(cm) / cm.sum())
+        assert len(m["nodes"]) == 4  # binary tree over 5 classes
+        assert m["nodes"][0]["samples"] == 100  # root: 20 training runs x 5 states
+        for node in m["nodes"]:
+            assert 0 < node["vectors"] <= node["samples"]
+        assert 0.0 <= m["ece"] <= 1.0 and 0.0 <= m["brier"] <= 2.0 and m["log_loss"] >= 0.0
+        assert m["fit_seconds"] > 0 and m["predict_seconds"] > 0
+    # faults with large flow effects are told from the fault-free state
+    assert d["rvm"]["accuracy"] >= 0.8
+    assert d["split"]["normal_model_runs"] == 20
+    assert {s: v["runs"] for s, v in d["strength"].items()} == {s: 24 for s in STATES}
+    assert all(
+        0.5 <= abs(v["min"]) <= abs(v["max"]) <= 1.0 for s, v in d["strength"].items() if s != "fn"
+    )
+    report = (out / "report.md").read_text()
+    assert (
+        confusion_table(d["rvm"]["confusion"]["matrix"], d["rvm"]["confusion"]["classes"]) in report
+    )
+    for fig in results["figures"]["tiny"].values():
+        assert (out / fig).stat().st_size > 1000
+        assert f"]({fig})" in report
+
+
+def test_cli_same_seed_same_numbers_from_the_cache(tmp_path, capsys, run):
+    tmp, toml, first, _ = run
+    cached = list((tmp / "cache").glob("tiny-*-seed3.nc"))
+    assert len(cached) == 1
+    argv = ["reproduce", "--out", str(tmp_path / "o"), "--seed", "3", "--no-progress"]
+    argv += ["--cache-dir", str(tmp / "cache"), "--campaign", str(toml)]
+    assert main([*argv, "--states", ",".join(STATES)]) == 0
+    second = json.loads((tmp_path / "o" / "results.json").read_text())
+    a, b = first["datasets"]["tiny"], second["datasets"]["tiny"]
+    assert b["campaign"]["cached"] and not a["campaign"]["cached"]
+    for method in ("rvm", "svm"):
+        for key in ("accuracy", "per_class", "confusion", "log_loss", "brier", "ece", "nodes"):
+            assert a[method][key] == b[method][key]
+    assert a["all_states"]["groups"] == b["all_states"]["groups"]
+    assert a["normal_models"]["width"] == b["normal_models"]["width"]
+    assert "tiny: RVM" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="unknown state"):
+        main([*argv, "--states", "fn,f42"])
