@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import os
 
+# scikit-learn's array-API check (part of `parametrize_with_checks`) only runs when SciPy's
+# array-API mode is on, and it must be set before SciPy is first imported.
+os.environ.setdefault("SCIPY_ARRAY_API", "1")
+
 import numpy as np
 import pytest
 import torch
