@@ -17,6 +17,7 @@ from pyro.infer import MCMC, NUTS
 from pyro.infer.mcmc.util import initialize_model
 from scipy import stats
 from scipy.special import expit, logsumexp
+from sklearn.exceptions import ConvergenceWarning
 
 from bayes_fdi.rvm.posterior import (
     Hyperpriors,
@@ -353,3 +354,15 @@ def test_bad_input_raises_value_error(rng):
         sample_posterior(model, num_samples=0)
     with pytest.raises(ValueError, match="init"):
         sample_posterior(model, init={"log_alpha": np.zeros(3), "log_beta": 0.0})
+
+
+def test_unconverged_chains_warn():
+    """Chains started far apart without warm-up cannot agree: R-hat flags it with a warning."""
+    Phi, y = _bump_problem()
+    model = SparseBayesRegressionModel(Phi, y)
+    init = {"log_alpha": np.array([-8.0, 8.0]), "log_beta": 0.0}
+    with pytest.warns(ConvergenceWarning, match="R-hat"):
+        post = sample_posterior(
+            model, num_samples=8, warmup_steps=0, seed=0, init=init, init_jitter=6.0
+        )
+    assert post.diagnostics.max_r_hat > 1.01

@@ -68,6 +68,7 @@ from pyro.infer import MCMC, NUTS, SVI, JitTrace_ELBO, Trace_ELBO
 from pyro.infer.autoguide import AutoMultivariateNormal
 from pyro.infer.autoguide.initialization import init_to_value
 from scipy import stats
+from sklearn.exceptions import ConvergenceWarning
 
 __all__ = [
     "Hyperpriors",
@@ -1193,6 +1194,16 @@ def sample_posterior(
             step_size=tuple(st["step_size"]),
             wall_time_s=elapsed,
         )
+        bad_r_hat = num_chains > 1 and diagnostics.max_r_hat > 1.01
+        if bad_r_hat or diagnostics.n_divergences:
+            warnings.warn(
+                f"NUTS chains may not have converged ({diagnostics}); check "
+                "posterior.diagnostics, run longer or with more chains. Large R-hat with many "
+                "overlapping basis functions usually means a multimodal posterior (chains switch "
+                "on different subsets of similar basis functions).",
+                ConvergenceWarning,
+                stacklevel=2,
+            )
     else:
         raw, elbo = _run_svi(
             model,
