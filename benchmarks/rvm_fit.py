@@ -69,6 +69,7 @@ __all__ = [
     "run_worker",
     "sigma_to_gamma",
     "skip_reason",
+    "snapshot_source",
     "summarise_repeats",
     "target_function",
 ]
@@ -263,12 +264,15 @@ def run_worker(
     *,
     timeout_s: float,
     mem_limit_mb: float,
+    ours_root: Path = ROOT,
+    tmp_dir: Path | None = None,
 ) -> dict[str, Any]:
     """Run one fit in a fresh single-threaded process, guarded by a time and an RSS limit.
 
     The process is killed when its CPU time exceeds ``timeout_s`` (so that a loaded machine does
     not turn a slow fit into a timeout), when its wall time exceeds ``WALL_FACTOR * timeout_s``,
-    or when its resident set exceeds ``mem_limit_mb``.
+    or when its resident set exceeds ``mem_limit_mb``. ``ours_root`` goes first on the worker's
+    ``PYTHONPATH`` (the ``bayes_fdi`` source to benchmark); scratch files go to ``tmp_dir``.
 
     Returns the worker's result dict (``status == "ok"``) or a dict with ``status`` one of
     ``"timeout"``, ``"OOM"``, ``"error"`` and a ``detail`` string.
@@ -276,14 +280,16 @@ def run_worker(
     env = dict(os.environ)
     env.update(THREAD_ENV)
     extra = env.get("PYTHONPATH")
-    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + extra if extra else "")
-    with tempfile.TemporaryDirectory(prefix="rvm_fit_") as tmp:
+    env["PYTHONPATH"] = str(ours_root) + (os.pathsep + extra if extra else "")
+    with tempfile.TemporaryDirectory(prefix="rvm_fit_", dir=tmp_dir) as tmp_name:
+        tmp = str(Path(tmp_name).resolve())
         out = Path(tmp) / "result.json"
         err_path = Path(tmp) / "stderr.txt"
-        cmd = [str(python), str(WORKER), "--method", method, "--data", str(data_path)]
+        data_arg = str(Path(data_path).resolve())
+        cmd = [str(python), str(WORKER), "--method", method, "--data", data_arg]
         cmd += ["--n", str(n), "--sigma", repr(float(sigma)), "--out", str(out)]
         with open(err_path, "w", encoding="utf-8") as err:
-            proc = subprocess.Popen(cmd, env=env, stdout=err, stderr=err, cwd=str(ROOT))
+            proc = subprocess.Popen(cmd, env=env, stdout=err, stderr=err, cwd=tmp)
             t0 = time.monotonic()
             status, detail, max_rss = None, "", 0.0
             while proc.poll() is None:
@@ -301,6 +307,7 @@ def run_worker(
                 time.sleep(0.05)
         base = {"method": method, "n": n, "sigma": sigma}
         if status is not None:
+            detail += f"; RSS reached {max_rss:.0f} MB" if status == "timeout" else ""
             return {**base, "status": status, "detail": detail, "watch_rss_mb": max_rss}
         if proc.returncode != 0 or not out.exists():
             lines = [ln for ln in err_path.read_text().splitlines() if ln.strip()]
@@ -521,7 +528,8 @@ def format_report(rows: Sequence[Mapping[str, Any]], meta: Mapping[str, Any]) ->
         f"{meta.get('load_start', '–')}, at end {meta.get('load_end', '–')} · "
         f"single-threaded fresh process per fit · sigma = {meta.get('sigma')} "
         f"(sklearn gamma = {meta.get('gamma'):.4g}) · {meta.get('n_test')} test points · "
-        f"noise std {meta.get('noise_std')} · seed {meta.get('seed')}",
+        f"noise std {meta.get('noise_std')} · seed {meta.get('seed')} · "
+        f"bayes_fdi source {meta.get('bayes_fdi_source', '?')}",
         "",
         format_table(rows),
         "",
@@ -566,6 +574,51 @@ def _cpu_name() -> str:
     return platform.processor() or platform.machine()
 
 
+def snapshot_source(rev: str, out: Path) -> Path:
+    """Extract ``bayes_fdi/`` at git revision ``rev`` into ``out/src-<sha>``; return that folder.
+
+    The benchmark then measures a fixed commit even while the working tree is being edited.
+    """
+    sha = subprocess.run(
+        ["git", "-C", str(ROOT), "rev-parse", "--short", rev],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
+    dest = out / f"src-{sha}"
+    if not (dest / "SOURCE_COMMIT").exists():
+        dest.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(
+            ["git", "-C", str(ROOT), "archive", sha, "bayes_fdi"], capture_output=True, check=True
+        ).stdout
+        subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+        (dest / "SOURCE_COMMIT").write_text(f"git {sha}\n")
+    return dest
+
+
+def _source_description(root: Path) -> str:
+    """The benchmarked bayes_fdi source: ``root/SOURCE_COMMIT`` (a snapshot) or its git HEAD."""
+    marker = root / "SOURCE_COMMIT"
+    if marker.exists():
+        return marker.read_text().strip()
+    try:
+        rev = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--", "bayes_fdi"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return str(root)
+    return f"git {rev}" + (" + uncommitted changes in bayes_fdi/" if dirty else "")
+
+
 def _parse_sizes(text: str) -> tuple[int, ...]:
     sizes = tuple(int(s) for s in text.split(",") if s.strip())
     if not sizes or min(sizes) < 10:
@@ -591,6 +644,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=OUT_DIR, help="output folder")
     ap.add_argument("--peers-python", type=Path, help="python of an existing peers' environment")
     ap.add_argument(
+        "--ours-root",
+        type=Path,
+        default=ROOT,
+        help="folder holding the bayes_fdi package to benchmark (e.g. a snapshot of a commit)",
+    )
+    ap.add_argument(
+        "--ours-commit",
+        help="benchmark bayes_fdi as of this git revision (extracted under --out), not the tree",
+    )
+    ap.add_argument(
         "--update-docs",
         action="store_true",
         help="write the report into benchmarks/README.md and docs/rvm-benchmark.md",
@@ -605,8 +668,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     mem_limit_mb = args.mem_limit_gb * 1024.0
     args.out.mkdir(parents=True, exist_ok=True)
 
+    if args.ours_commit:
+        args.ours_root = snapshot_source(args.ours_commit, args.out)
     data_path = args.out / "rvm_fit_data.npz"
-    data = make_data(max(sizes), args.n_test, seed=args.seed)
+    # always the set for the largest default size, so that a --sizes/--quick run fits exactly the
+    # rows (and scores on the test set) of the full run
+    data = make_data(max(*sizes, *SIZES), args.n_test, seed=args.seed)
     np.savez(data_path, **data)
 
     pythons = {"ours": Path(sys.executable)}
@@ -626,6 +693,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "timeout_s": args.timeout,
         "mem_limit_mb": mem_limit_mb,
         "python": platform.python_version(),
+        "bayes_fdi_source": _source_description(args.ours_root.resolve()),
         "command": " ".join(["python", "benchmarks/rvm_fit.py", *(argv or sys.argv[1:])]),
     }
     rows: list[dict[str, Any]] = []
@@ -647,6 +715,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     args.sigma,
                     timeout_s=args.timeout,
                     mem_limit_mb=mem_limit_mb,
+                    ours_root=args.ours_root.resolve(),
+                    tmp_dir=args.out,
                 )
                 if res.get("status") != "ok":
                     results = [res]

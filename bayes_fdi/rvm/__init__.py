@@ -5,12 +5,15 @@ Tipping & Faul's fast marginal-likelihood maximisation (``method="fast"``) or Ti
 re-estimation (``method="em"``); ``load`` restores a model written by ``.save``.
 """
 
+from bayes_fdi.rvm.classification import RVC
 from bayes_fdi.rvm.kernels import RBF, Kernel, Linear, Polynomial, Product, Scaled, Sum
+from bayes_fdi.rvm.persistence import load
 from bayes_fdi.rvm.regression import RVR
 from bayes_fdi.rvm.sparse_bayes import NumericalWarning, SBLResult
 
 __all__ = [
     "RBF",
+    "RVC",
     "RVR",
     "Kernel",
     "Linear",
@@ -20,4 +23,5 @@ __all__ = [
     "SBLResult",
     "Scaled",
     "Sum",
+    "load",
 ]

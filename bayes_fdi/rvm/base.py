@@ -231,10 +231,16 @@ class RVMBase(BaseEstimator):
         return Design(kernel=kern, X=X, bias=self.bias, max_bytes=self.max_kernel_bytes), kern
 
     def _set_state(
-        self, result: SBLResult, X: Tensor, kern: Kernel | None, width: float | None
+        self,
+        result: SBLResult,
+        X: Tensor,
+        kern: Kernel | None,
+        width: float | None,
+        *,
+        warn: bool = True,
     ) -> None:
         """Store a solver result as the fitted state (torch internals, numpy attributes)."""
-        if not result.converged:
+        if warn and not result.converged:
             warnings.warn(
                 f"{type(self).__name__} (method={self.method!r}) did not converge in "
                 f"{result.n_iter} iterations; increase max_iter or tol",
@@ -306,6 +312,11 @@ class RVMBase(BaseEstimator):
         check_is_fitted(self)
         if basis not in ("active", "all"):
             raise ValueError(f"basis must be 'active' or 'all', got {basis!r}")
+        if basis == "active" and getattr(self, "estimators_", None):
+            raise ValueError(
+                "a one-vs-rest model has one active basis per class: use "
+                "estimators_[k].design_matrix(X) or basis='all'"
+            )
         Xv = self._validate_predict(X)
         Xt = self._to_tensor(Xv)
         if basis == "active":

@@ -62,7 +62,7 @@ def search_width(
     scale: float,
     *,
     bounds: tuple[float, float] = (1.0 / 30.0, 10.0),
-    n_grid: int = 9,
+    n_grid: int = 13,
     xatol: float = 0.02,
 ) -> WidthSearch:
     """Maximise ``log_evidence(width)`` over ``width`` in ``scale * bounds``.
