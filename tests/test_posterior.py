@@ -366,3 +366,15 @@ def test_unconverged_chains_warn():
             model, num_samples=8, warmup_steps=0, seed=0, init=init, init_jitter=6.0
         )
     assert post.diagnostics.max_r_hat > 1.01
+
+
+def test_classification_labels_default_to_0_and_1(rng):
+    x = rng.uniform(-3, 3, 60)
+    Phi = np.column_stack([np.ones(60), x])
+    t = (x > 0).astype(float)
+    model = SparseBayesClassificationModel(Phi, t)
+    post = sample_posterior(model, inference="svi", num_samples=50, svi_steps=100, seed=0)
+    labels = post.predict(Phi)
+    proba = post.predict_proba(Phi)
+    np.testing.assert_array_equal(labels, (proba[:, 1] > 0.5).astype(int))
+    assert np.mean(labels == t) > 0.9

@@ -848,7 +848,8 @@ class RVMPosterior:
             idx = np.asarray(
                 proba.argmax(1).cpu() if isinstance(proba, torch.Tensor) else proba.argmax(1)
             )
-            return self.classes[idx]
+            labels = self.classes if self.classes is not None else np.array([0, 1])
+            return labels[idx]
         f, as_torch = self._latent(X)
         mean = f.mean(1)
         if not return_std:
