@@ -40,6 +40,7 @@ __all__ = [
     "CoverageResult",
     "ECEResult",
     "NodeCalibration",
+    "StdScaler",
     "TemperatureScaler",
     "brier",
     "crps_gaussian",
@@ -874,3 +875,57 @@ def crps_gaussian(y: Any, mean: Any, std: Any) -> np.ndarray:
     y_, m_, s_ = _check_gaussian(y, mean, std)
     z = (y_ - m_) / s_
     return s_ * (z * (2.0 * stats.norm.cdf(z) - 1.0) + 2.0 * stats.norm.pdf(z) - 1 / np.sqrt(np.pi))
+
+
+class StdScaler:
+    """Recalibrate Gaussian predictive standard deviations with one factor.
+
+    ``std_new = scale_ * std``. The factor is fitted on held-out fault-free data
+    ``(y, mean, std)``: ``method="mle"`` (default) maximises the Gaussian likelihood,
+    ``scale_ = sqrt(mean(((y - mean) / std) ** 2))``; ``method="coverage"`` matches the
+    empirical central coverage at ``level``, ``scale_ = quantile(|y - mean| / std, level) /
+    z_{(1+level)/2}``. The mean is not changed, so a bias is not fixed (look at the PIT).
+
+    Parameters
+    ----------
+    method
+        ``"mle"`` or ``"coverage"``.
+    level
+        Coverage level matched by ``method="coverage"`` (default 0.95).
+
+    Attributes
+    ----------
+    scale_ : float
+    n_samples_ : int
+    """
+
+    def __init__(self, *, method: str = "mle", level: float = 0.95) -> None:
+        self.method = method
+        self.level = level
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """Constructor parameters (scikit-learn convention)."""
+        return {"method": self.method, "level": self.level}
+
+    def fit(self, y: Any, mean: Any, std: Any) -> StdScaler:
+        """Fit the factor on held-out observations and predictions (finite, ``std > 0``)."""
+        y_, m_, s_ = _check_gaussian(y, mean, std)
+        z = np.abs(y_ - m_).ravel() / s_.ravel()
+        if self.method == "mle":
+            self.scale_ = float(np.sqrt(np.mean(z**2)))
+        elif self.method == "coverage":
+            if not 0 < self.level < 1:
+                raise ValueError(f"level must lie in (0, 1), got {self.level}")
+            self.scale_ = float(np.quantile(z, self.level) / stats.norm.ppf(0.5 + self.level / 2))
+        else:
+            raise ValueError(f"method must be 'mle' or 'coverage', got {self.method!r}")
+        if not self.scale_ > 0:
+            raise ValueError("the fitted scale is 0: predictions equal the observations exactly")
+        self.n_samples_ = int(z.size)
+        return self
+
+    def transform(self, std: Any) -> np.ndarray:
+        """Recalibrated standard deviations ``scale_ * std``."""
+        if not hasattr(self, "scale_"):
+            raise ValueError("StdScaler is not fitted; call fit first")
+        return self.scale_ * np.asarray(std, dtype=np.float64)

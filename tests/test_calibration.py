@@ -10,6 +10,7 @@ import pytest
 from scipy import stats
 
 from bayes_fdi.calibration import (
+    StdScaler,
     TemperatureScaler,
     brier,
     crps_gaussian,
@@ -393,3 +394,19 @@ def test_reliability_diagram_classwise_quantile_needs_a_class(rng):
         reliability_diagram(res)
     ax = reliability_diagram(res, class_index=2)
     assert sorted(int(t.get_text()) for t in ax.texts) == sorted(res.bin_counts[2])
+
+
+@pytest.mark.parametrize("method", ["mle", "coverage"])
+def test_std_scaler_recovers_a_known_factor(rng, method):
+    n = 40_000
+    mean = rng.normal(size=n)
+    true_std = rng.uniform(0.5, 2.0, size=n)
+    y = mean + true_std * rng.normal(size=n)
+    stated = true_std / 1.6  # an over-confident model: every std 1.6 times too small
+    sc = StdScaler(method=method).fit(y[: n // 2], mean[: n // 2], stated[: n // 2])
+    assert sc.scale_ == pytest.approx(1.6, rel=0.03)
+    cov = interval_coverage(y[n // 2 :], mean[n // 2 :], sc.transform(stated[n // 2 :]))
+    se = np.sqrt(cov.levels * (1 - cov.levels) / (n // 2))
+    assert np.all(np.abs(cov.coverage - cov.levels) < 5 * se + 0.005)
+    with pytest.raises(ValueError, match="not fitted"):
+        StdScaler().transform([1.0])

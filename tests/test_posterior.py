@@ -17,6 +17,7 @@ from pyro.infer import MCMC, NUTS
 from pyro.infer.mcmc.util import initialize_model
 from scipy import stats
 from scipy.special import expit, logsumexp
+from sklearn.exceptions import ConvergenceWarning
 
 from bayes_fdi.rvm.posterior import (
     Hyperpriors,
@@ -353,3 +354,27 @@ def test_bad_input_raises_value_error(rng):
         sample_posterior(model, num_samples=0)
     with pytest.raises(ValueError, match="init"):
         sample_posterior(model, init={"log_alpha": np.zeros(3), "log_beta": 0.0})
+
+
+def test_unconverged_chains_warn():
+    """Chains started far apart without warm-up cannot agree: R-hat flags it with a warning."""
+    Phi, y = _bump_problem()
+    model = SparseBayesRegressionModel(Phi, y)
+    init = {"log_alpha": np.array([-8.0, 8.0]), "log_beta": 0.0}
+    with pytest.warns(ConvergenceWarning, match="R-hat"):
+        post = sample_posterior(
+            model, num_samples=8, warmup_steps=0, seed=0, init=init, init_jitter=6.0
+        )
+    assert post.diagnostics.max_r_hat > 1.01
+
+
+def test_classification_labels_default_to_0_and_1(rng):
+    x = rng.uniform(-3, 3, 60)
+    Phi = np.column_stack([np.ones(60), x])
+    t = (x > 0).astype(float)
+    model = SparseBayesClassificationModel(Phi, t)
+    post = sample_posterior(model, inference="svi", num_samples=50, svi_steps=100, seed=0)
+    labels = post.predict(Phi)
+    proba = post.predict_proba(Phi)
+    np.testing.assert_array_equal(labels, (proba[:, 1] > 0.5).astype(int))
+    assert np.mean(labels == t) > 0.9

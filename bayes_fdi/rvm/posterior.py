@@ -68,9 +68,11 @@ from pyro.infer import MCMC, NUTS, SVI, JitTrace_ELBO, Trace_ELBO
 from pyro.infer.autoguide import AutoMultivariateNormal
 from pyro.infer.autoguide.initialization import init_to_value
 from scipy import stats
+from sklearn.exceptions import ConvergenceWarning
 
 __all__ = [
     "Hyperpriors",
+    "OneVsRestPosterior",
     "PosteriorDiagnostics",
     "RVMPosterior",
     "SparseBayesClassificationModel",
@@ -846,7 +848,8 @@ class RVMPosterior:
             idx = np.asarray(
                 proba.argmax(1).cpu() if isinstance(proba, torch.Tensor) else proba.argmax(1)
             )
-            return self.classes[idx]
+            labels = self.classes if self.classes is not None else np.array([0, 1])
+            return labels[idx]
         f, as_torch = self._latent(X)
         mean = f.mean(1)
         if not return_std:
@@ -891,6 +894,84 @@ class RVMPosterior:
         for c, idx in enumerate(self.diagnostics.divergent_draws):
             out[c, list(idx)] = True
         return out
+
+
+@dataclass(frozen=True, eq=False)
+class OneVsRestPosterior:
+    """Posteriors of a multi-class RVC's one-vs-rest binary problems; immutable.
+
+    Probabilities follow ``RVC``: each binary posterior gives ``p_k(x)`` (sigmoid averaged over its
+    draws) and the class probabilities are ``p_k / sum_j p_j``.
+
+    Attributes
+    ----------
+    classes : numpy.ndarray
+        Class labels, in the order of ``posteriors``.
+    posteriors : tuple of RVMPosterior
+        Binary posterior of "class k against the rest", one per class.
+    """
+
+    classes: np.ndarray = field(repr=False)
+    posteriors: tuple[RVMPosterior, ...] = field(repr=False)
+    kind: str = "classification"
+
+    def __post_init__(self) -> None:
+        classes = np.array(self.classes, copy=True)
+        classes.flags.writeable = False
+        object.__setattr__(self, "classes", classes)
+        object.__setattr__(self, "posteriors", tuple(self.posteriors))
+        if len(self.posteriors) != classes.size or classes.size < 3:
+            raise ValueError("need one binary posterior per class, and at least 3 classes")
+
+    @property
+    def inference(self) -> str:
+        """``"nuts"`` or ``"svi"``."""
+        return self.posteriors[0].inference
+
+    @property
+    def diagnostics(self) -> tuple[PosteriorDiagnostics, ...]:
+        """Diagnostics of each one-vs-rest posterior, in class order."""
+        return tuple(p.diagnostics for p in self.posteriors)
+
+    def predict_proba(self, X: Any) -> Any:
+        """Class probabilities ``(n, n_classes)`` in ``classes`` order."""
+        cols = [p.predict_proba(X)[:, 1] for p in self.posteriors]
+        if isinstance(cols[0], torch.Tensor):
+            P = torch.stack(cols, 1)
+            return P / P.sum(1, keepdim=True)
+        P = np.stack(cols, 1)
+        return P / P.sum(1, keepdims=True)
+
+    def predict(self, X: Any, return_std: bool = False) -> Any:
+        """Most probable class labels."""
+        if return_std:
+            raise ValueError("return_std is for regression; use predict_proba for classes")
+        proba = self.predict_proba(X)
+        idx = proba.argmax(1)
+        return self.classes[np.asarray(idx.cpu() if isinstance(idx, torch.Tensor) else idx)]
+
+    def to_arviz(self) -> Any:
+        """One ``InferenceData``; variables ``log_alpha[k]``, ``weights[k]`` per class ``k``."""
+        posterior: dict[str, np.ndarray] = {}
+        coords: dict[str, Sequence[Any]] = {}
+        dims: dict[str, list[str]] = {}
+        diverging = []
+        for label, p in zip(self.classes, self.posteriors, strict=True):
+            dim = f"basis[{label}]"
+            posterior[f"log_alpha[{label}]"] = p.log_alpha
+            posterior[f"weights[{label}]"] = p.weights
+            coords[dim] = list(p.basis_names)
+            dims[f"log_alpha[{label}]"] = dims[f"weights[{label}]"] = [dim]
+            if p.inference == "nuts":
+                diverging.append(p._diverging)
+        stats_ = {"diverging": np.any(diverging, axis=0)} if diverging else {}
+        return _to_inference_data(
+            posterior,
+            stats_,
+            coords=coords,
+            dims=dims,
+            attrs={"inference": self.inference, "kind": self.kind, "one_vs_rest": 1},
+        )
 
 
 def _to_inference_data(
@@ -1193,6 +1274,16 @@ def sample_posterior(
             step_size=tuple(st["step_size"]),
             wall_time_s=elapsed,
         )
+        bad_r_hat = num_chains > 1 and diagnostics.max_r_hat > 1.01
+        if bad_r_hat or diagnostics.n_divergences:
+            warnings.warn(
+                f"NUTS chains may not have converged ({diagnostics}); check "
+                "posterior.diagnostics, run longer or with more chains. Large R-hat with many "
+                "overlapping basis functions usually means a multimodal posterior (chains switch "
+                "on different subsets of similar basis functions).",
+                ConvergenceWarning,
+                stacklevel=2,
+            )
     else:
         raw, elbo = _run_svi(
             model,
@@ -1300,8 +1391,8 @@ def fit_posterior(
     hyperpriors: Hyperpriors | None = None,
     svi_steps: int = 2000,
     **kwargs: Any,
-) -> RVMPosterior:
-    """Full posterior of a fitted ``RVR`` / binary ``RVC`` over its basis (NUTS or SVI).
+) -> RVMPosterior | OneVsRestPosterior:
+    """Full posterior of a fitted ``RVR`` / ``RVC`` over its basis (NUTS or SVI).
 
     Uses only the estimator's public API: ``design_matrix(X, basis=...)``, ``alpha_``, ``beta_``,
     ``mean_``, ``relevance_indices_`` and, for classifiers, ``classes_``. The type-II ML estimates
@@ -1310,6 +1401,7 @@ def fit_posterior(
     Parameters
     ----------
     estimator : fitted RVR or RVC
+        A multi-class RVC (one-vs-rest, ``estimators_``) gives a :class:`OneVsRestPosterior`.
     X : array-like or torch.Tensor, shape (n, d)
         Training inputs (those the estimator was fitted on, for ``basis="all"``).
     y : array-like, shape (n,)
@@ -1341,22 +1433,42 @@ def fit_posterior(
     for forbidden in ("basis", "basis_names", "design", "classes", "init"):
         if forbidden in kwargs:
             raise ValueError(f"{forbidden!r} is set by fit_posterior")
-    Phi = estimator.design_matrix(X, basis=basis)
-    n = int(Phi.shape[0])
+    n = int(X.shape[0]) if hasattr(X, "shape") else len(X)
     y_arr = y.detach().cpu().numpy() if isinstance(y, torch.Tensor) else np.asarray(y)
     if y_arr.ndim != 1 or y_arr.shape[0] != n:
         raise ValueError(f"y must be 1-D with {n} entries (one per row of X), got {y_arr.shape}")
     classes = getattr(estimator, "classes_", None)
     if classes is not None:
         classes = np.asarray(classes)
-        if classes.size != 2:
-            raise ValueError(
-                f"fit_posterior supports binary classifiers; this one has {classes.size} classes "
-                "(fit one binary RVC per class to get one-vs-rest posteriors)"
-            )
         unknown = ~np.isin(y_arr, classes)
         if unknown.any():
             raise ValueError(f"y has labels not in estimator.classes_: {np.unique(y_arr[unknown])}")
+        subs = getattr(estimator, "estimators_", None)
+        if classes.size > 2:
+            if subs is None or len(subs) != classes.size:
+                raise ValueError(
+                    f"{classes.size} classes but estimator.estimators_ does not hold one binary "
+                    "one-vs-rest classifier per class"
+                )
+            parts = []
+            for k, (label, sub) in enumerate(zip(classes, subs, strict=True)):
+                part = fit_posterior(
+                    sub,
+                    X,
+                    (y_arr == label).astype(int),
+                    inference=inference,
+                    num_samples=num_samples,
+                    warmup_steps=warmup_steps,
+                    num_chains=num_chains,
+                    seed=int(np.random.SeedSequence([seed, k]).generate_state(1)[0] >> 1),
+                    basis=basis,
+                    hyperpriors=hyperpriors,
+                    svi_steps=svi_steps,
+                    **kwargs,
+                )
+                parts.append(part)
+            return OneVsRestPosterior(classes=classes, posteriors=tuple(parts))
+        Phi = estimator.design_matrix(X, basis=basis)
         param = kwargs.pop("parametrisation", None)
         if param is None:
             param = _well_determined_from_estimator(estimator, basis, int(Phi.shape[1]))
@@ -1364,6 +1476,7 @@ def fit_posterior(
             Phi, (y_arr == classes[1]).astype(np.float64), hyperpriors, param
         )
     else:
+        Phi = estimator.design_matrix(X, basis=basis)
         model = SparseBayesRegressionModel(Phi, y_arr.astype(np.float64), hyperpriors)
     init, names = _estimator_init(estimator, model, basis)
     frozen = copy.deepcopy(estimator)
