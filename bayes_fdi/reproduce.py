@@ -220,8 +220,17 @@ def load_or_simulate(
     spec = campaigns.load_campaign(path)
     if small:
         spec = _small_campaign(spec)
+    import torch
+
+    # The simulator's parallel (numba/OpenMP) kernels raise torch's intra-op thread count for
+    # the whole process; restore it so that the models fitted next compute exactly as they do
+    # on a cached dataset (summation order depends on the thread count).
+    n_threads = torch.get_num_threads()
     t0 = time.perf_counter()
-    ds = campaigns.simulate_campaign(spec, seed=int(seed), progress=progress)
+    try:
+        ds = campaigns.simulate_campaign(spec, seed=int(seed), progress=progress)
+    finally:
+        torch.set_num_threads(n_threads)
     info["simulate_seconds"] = time.perf_counter() - t0
     validate_dataset(ds, require=("CV", "P1", "P2", "T1", "X", "F"))
     if cache_path is not None:
