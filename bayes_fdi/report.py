@@ -543,9 +543,17 @@ def plot_features(
             alpha=0.18,
             shading="auto",
         )
-    for s in states:
+    markers = "os^D"
+    for i, s in enumerate(states):
         mask = labels == s
-        ax.scatter(features[mask, 0], features[mask, 1], s=12, color=colour[s], label=s)
+        ax.scatter(
+            features[mask, 0],
+            features[mask, 1],
+            s=12,
+            color=colour[s],
+            marker=markers[(i // 10) % len(markers)],
+            label=s,
+        )
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_xlabel(feature_names[0])
@@ -600,6 +608,23 @@ def _why_below(
     return lines
 
 
+def _normal_models_text(nm: Mapping[str, Any]) -> str:
+    if not nm:
+        return ""
+    out = []
+    if "width" in nm:
+        ev = ", ".join(f"{float(w):g}: {e:.1f}" for w, e in nm.get("log_evidence", {}).items())
+        out.append(f"RBF width {nm['width']:g} by maximum evidence (summed log evidence {ev})")
+    rv = nm.get("relevance_vectors", {})
+    noise = nm.get("noise_std", {})
+    for k in rv:
+        part = f"g for {k}: {rv[k]} relevance vectors"
+        if k in noise:
+            part += f", noise std {noise[k]:.4f}"
+        out.append(part)
+    return "; " + "; ".join(out) if out else ""
+
+
 def render_report(results: Mapping[str, Any]) -> str:
     """The Markdown report of a :func:`bayes_fdi.reproduce.reproduce` run.
 
@@ -629,8 +654,10 @@ def render_report(results: Mapping[str, Any]) -> str:
         "Protocol (the paper's Section 5): per state, the first "
         f"{results.get('n_train_per_state', 20)} runs fit the normal models (fault-free runs) "
         "and train the classifiers; every other run is a test run. Features: the mean residuals "
-        "`mean_r1`, `mean_r2` of each run. RVM = k-means designed tree of RVM classifiers "
-        "(Gaussian kernel, sigma = 2 on standardised features); SVM = the same tree with SVMs.",
+        "`mean_r1`, `mean_r2` of each run. RVM = k-means designed tree of RVM classifiers; "
+        "each node standardises its own training features and uses a Gaussian kernel with "
+        "sigma = 2. SVM = the same tree with SVMs (same scaling and kernel, C = 1, Platt-scaled "
+        "probabilities) on the same features.",
         "",
         "## Overall identification ratio",
         "",
@@ -678,7 +705,9 @@ def render_report(results: Mapping[str, Any]) -> str:
                 else f"simulated in {_num(info.get('simulate_seconds'), '.0f')} s"
             )
             + f". Normal models: {split.get('normal_model_runs', '?')} fault-free runs, "
-            f"{split.get('normal_model_samples', '?')} samples.",
+            f"{split.get('normal_model_samples', '?')} samples"
+            + _normal_models_text(d.get("normal_models", {}))
+            + ".",
             "",
             "### Fault strengths used",
             "",

@@ -59,6 +59,7 @@ __all__ = [
     "run_from_cli",
     "select_regression_width",
     "split_train_test",
+    "tree_nodes",
 ]
 
 #: The ten states the paper diagnoses (Section 5).
@@ -146,6 +147,18 @@ def _file_hash(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def _simulator_hash() -> str:
+    """SHA-256 over the simulator's source files (so a changed model never reuses a cache)."""
+    from bayes_fdi import actuator, campaigns
+
+    files = [*sorted(Path(actuator.__file__).parent.glob("*.py")), Path(campaigns.__file__)]
+    digest = hashlib.sha256()
+    for f in files:
+        digest.update(f.name.encode())
+        digest.update(f.read_bytes())
+    return digest.hexdigest()
+
+
 def load_or_simulate(
     campaign: str | os.PathLike,
     *,
@@ -157,7 +170,8 @@ def load_or_simulate(
     """Simulate a campaign, or load it from the netCDF cache.
 
     The cache file name holds the campaign name, the first 16 hex digits of the SHA-256 of the
-    campaign file, the seed and ``small``; any change to the campaign file makes a new entry.
+    campaign file, 8 of the simulator's source code, the seed and ``small``; any change to the
+    campaign file or to the actuator model makes a new entry.
 
     Parameters
     ----------
@@ -195,7 +209,9 @@ def load_or_simulate(
     cache_path = None
     if cache_dir is not None:
         suffix = "-small" if small else ""
-        cache_path = Path(cache_dir) / f"{name}-{digest[:16]}-seed{int(seed)}{suffix}.nc"
+        code = _simulator_hash()[:8]
+        info["simulator_sha256_8"] = code
+        cache_path = Path(cache_dir) / f"{name}-{digest[:16]}-{code}-seed{int(seed)}{suffix}.nc"
         info["cache_file"] = os.fspath(cache_path)
         if cache_path.is_file():
             ds = load_dataset(cache_path)
@@ -204,8 +220,17 @@ def load_or_simulate(
     spec = campaigns.load_campaign(path)
     if small:
         spec = _small_campaign(spec)
+    import torch
+
+    # The simulator's parallel (numba/OpenMP) kernels raise torch's intra-op thread count for
+    # the whole process; restore it so that the models fitted next compute exactly as they do
+    # on a cached dataset (summation order depends on the thread count).
+    n_threads = torch.get_num_threads()
     t0 = time.perf_counter()
-    ds = campaigns.simulate_campaign(spec, seed=int(seed), progress=progress)
+    try:
+        ds = campaigns.simulate_campaign(spec, seed=int(seed), progress=progress)
+    finally:
+        torch.set_num_threads(n_threads)
     info["simulate_seconds"] = time.perf_counter() - t0
     validate_dataset(ds, require=("CV", "P1", "P2", "T1", "X", "F"))
     if cache_path is not None:
@@ -653,8 +678,13 @@ def _n_vectors(est: Any) -> int | None:
     return None
 
 
-def _tree_nodes(clf: Any, prefix: str) -> list[dict[str, Any]]:
-    """Nodes of a fitted HierarchicalClassifier as plain dicts (breadth first, root first)."""
+def tree_nodes(clf: Any, prefix: str) -> list[dict[str, Any]]:
+    """Nodes of a fitted HierarchicalClassifier as plain dicts (breadth first, root first).
+
+    Each has ``name`` (``prefix`` + number), ``left``, ``right``, ``classes``, ``vectors``
+    (relevance or support vectors, also inside a :func:`node_classifier` pipeline) and
+    ``samples`` (the node's training samples).
+    """
     out = []
     for node in clf.nodes_:
         n_vec = node.n_vectors if node.n_vectors is not None else _n_vectors(node.estimator)
@@ -706,7 +736,7 @@ def _method_result(
     classes = sorted(fitted, key=_state_key)
     proba = proba[:, [fitted.index(c) for c in classes]]
     out = classification_metrics(y_test, proba, classes)
-    out["nodes"] = _tree_nodes(clf, prefix)
+    out["nodes"] = tree_nodes(clf, prefix)
     out["tree"] = _tree_text(out["nodes"], prefix)
     out["fit_seconds"] = float(fit_s)
     out["predict_seconds"] = float(predict_s)
