@@ -29,6 +29,7 @@ from sklearn.preprocessing import StandardScaler
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
 from bayes_fdi.features import DEFAULT_FEATURES, extract_features, window_bounds
 from bayes_fdi.residuals import NormalModels
+from bayes_fdi.seva import NoveltyReference, SevaRecord, seva_records
 from bayes_fdi.tree import HierarchicalClassifier
 
 __all__ = ["FaultDiagnoser"]
@@ -79,6 +80,9 @@ class FaultDiagnoser(BaseEstimator):
     training_features_ : numpy.ndarray
         Unscaled training feature matrix (one row per labelled run or window).
     training_labels_ : numpy.ndarray
+    input_reference_ : bayes_fdi.seva.NoveltyReference
+        Nearest-neighbour reference of the training inputs (fault-free and labelled runs),
+        used by :meth:`seva` to flag inputs unlike anything seen in training.
     fit_seconds_ : dict
         Wall-clock seconds: ``normal_models``, ``residuals``, ``classifier``, ``total``.
     """
@@ -195,6 +199,15 @@ class FaultDiagnoser(BaseEstimator):
         self.classifier_ = clf.fit(Xs, labels)
         self.fit_seconds_["classifier"] = time.perf_counter() - t0
         self.classes_ = np.asarray(self.classifier_.classes_)
+        self.input_reference_ = NoveltyReference.from_runs(
+            xr.concat(
+                [normal_runs[list(INPUT_CHANNELS)], labelled_runs[list(INPUT_CHANNELS)]],
+                dim="run",
+                coords="minimal",
+                compat="override",
+                join="override",
+            )
+        )
         self.fit_seconds_["total"] = time.perf_counter() - t_start
         return self
 
@@ -271,3 +284,28 @@ class FaultDiagnoser(BaseEstimator):
             }
         )
         return out
+
+    def seva(self, runs: xr.Dataset, **kwargs: Any) -> list[SevaRecord]:
+        """The self-validating output: one immutable `bayes_fdi.seva.SevaRecord` per run/window.
+
+        Each record holds the measured X and F, their validated values (VMV) and uncertainties
+        (VU at ``coverage``, default 95 %), the diagnosed state with its probability, the full
+        class distribution and a status (``CLEAR``, ``BLURRED``, ``DAZZLED`` or ``BLIND``).
+
+        Parameters
+        ----------
+        runs
+            Runs to diagnose (channels ``CV, P1, P2, T1, X, F``).
+        **kwargs
+            Passed to `bayes_fdi.seva.seva_records`: ``thresholds`` (a
+            `bayes_fdi.seva.SevaThresholds`), ``coverage``, ``calibrator`` (e.g. a fitted
+            `bayes_fdi.calibration.TemperatureScaler`), ``saturation_limits``.
+
+        Returns
+        -------
+        list of SevaRecord
+            Convert with `bayes_fdi.seva.to_frame`, `~bayes_fdi.seva.to_xarray` or
+            `~bayes_fdi.seva.to_json`.
+        """
+        self._check_fitted()
+        return seva_records(self, runs, **kwargs)

@@ -92,10 +92,16 @@ class SevaThresholds(NamedTuple):
         CLEAR and BLURRED need the normalised entropy ``H(p) / log(n_classes)`` (0 = certain,
         1 = uniform) ``<= max_entropy`` (default 0.5). With 10 classes a top probability of
         0.8 already implies an entropy <= 0.41, so this binds only for lower ``p_fault``.
+    novelty_ratio
+        A sample (or a feature vector) is *novel* when its nearest-neighbour distance ratio
+        (:class:`NoveltyReference`: distance to the nearest training row over the 99 % quantile
+        of the training rows' own nearest-neighbour distances) exceeds this (default 1.5).
+        About 1 % of samples drawn like the training data exceed ratio 1, so 1 would flag
+        ordinary runs of small training sets; 1.5 leaves room for that sampling noise while
+        inputs or residual features outside the training envelope score far higher.
     novelty_fraction
         DAZZLED when more than this fraction of a window's input samples are novel
-        (nearest-neighbour distance ratio > 1, see :class:`NoveltyReference`) (default 0.2),
-        or when the run's feature vector is novel (ratio > 1).
+        (default 0.2), or when the run's feature vector is novel.
     max_missing
         BLIND when more than this fraction of a channel's samples are NaN/inf (default 0.2).
     max_saturated
@@ -118,6 +124,7 @@ class SevaThresholds(NamedTuple):
     p_clear: float = 0.9
     p_fault: float = 0.8
     max_entropy: float = 0.5
+    novelty_ratio: float = 1.5
     novelty_fraction: float = 0.2
     max_missing: float = 0.2
     max_saturated: float = 0.5
@@ -139,6 +146,8 @@ class SevaThresholds(NamedTuple):
             raise ValueError(
                 f"max_output_saturated must lie in [0, 1], got {self.max_output_saturated}"
             )
+        if not self.novelty_ratio > 0:
+            raise ValueError(f"novelty_ratio must be > 0, got {self.novelty_ratio}")
         if self.saturation_tol < 0:
             raise ValueError("saturation_tol must be >= 0")
         return self
@@ -456,13 +465,15 @@ def _status(
         return SevaStatus.DAZZLED, ["no class distribution available"]
     reasons: list[str] = []
     novel_in = np.isfinite(novel_frac) and novel_frac > th.novelty_fraction
-    novel_ft = np.isfinite(feat_nov) and feat_nov > 1.0
+    novel_ft = np.isfinite(feat_nov) and feat_nov > th.novelty_ratio
     if novel_in:
         reasons.append(
             f"inputs unlike training in {novel_frac:.0%} of samples (> {th.novelty_fraction:.0%})"
         )
     if novel_ft:
-        reasons.append(f"residual features unlike training (ratio {feat_nov:.2g} > 1)")
+        reasons.append(
+            f"residual features unlike training (ratio {feat_nov:.2g} > {th.novelty_ratio})"
+        )
     flat = ent > th.max_entropy
     if flat:
         reasons.append(f"distribution too flat (entropy {ent:.2f} > {th.max_entropy})")
@@ -599,7 +610,7 @@ def records_from_diagnosis(
                       for c in input_channels], axis=-1)  # fmt: skip
         ok = np.all(np.isfinite(U), axis=-1)
         novel_all = np.full(ok.shape, np.nan)
-        novel_all[ok] = input_reference.score(U[ok]) > 1.0
+        novel_all[ok] = input_reference.score(U[ok]) > th.novelty_ratio
 
     records = []
     for i in range(n_runs):

@@ -129,3 +129,44 @@ def test_bad_inputs_raise(data):
     broken["CV"].values[3, :] = np.nan
     with pytest.raises(ValueError, match=r"run\(s\) \[3\]"):
         diag.diagnose(broken)
+
+
+def test_seva_output_statuses(data, rng):
+    """The diagnoser's SEVA records: confident fn -> CLEAR, confident fault -> BLURRED,
+    missing signals -> BLIND, inputs far outside training -> DAZZLED; VMV/VU from the
+    normal models at the stated coverage."""
+    from bayes_fdi.seva import SevaStatus, to_frame
+
+    normal, labelled, _ = data
+    # A tree of logistic regressions: confident on these well-separated residual offsets.
+    diag = FaultDiagnoser(
+        KernelRidgeRegressor(width=0.3),
+        HierarchicalClassifier(LogisticRegression(C=100.0)),
+        max_train_samples=400,
+    ).fit(normal, labelled)
+    test = campaign(["fn", "f1"], 2, rng)
+    # Run 4: a copy of run 0 with a dead X sensor (all NaN) -> BLIND.
+    blind = test.isel(run=[0]).assign(X=test["X"].isel(run=[0]) * np.nan)
+    # Run 5: a copy of run 2 (f1) driven far outside the training inputs -> DAZZLED.
+    novel = test.isel(run=[2]).assign(P2=test["P2"].isel(run=[2]) * 0 + 0.7, T1=test["T1"] + 0.5)
+    novel = novel.isel(run=[0])
+    runs = test.assign_coords(run=np.arange(4))
+    runs = __import__("xarray").concat(
+        [runs, blind.assign_coords(run=[4]), novel.assign_coords(run=[5])], dim="run"
+    )
+    records = diag.seva(runs)
+    status = [r.status for r in records]
+    assert status[:2] == [SevaStatus.CLEAR, SevaStatus.CLEAR]
+    assert status[2:4] == [SevaStatus.BLURRED, SevaStatus.BLURRED]
+    assert status[4] == SevaStatus.BLIND
+    assert status[5] == SevaStatus.DAZZLED
+    assert all(r.state == "f1" for r in records[2:4])
+    # VMV is the normal model's mean prediction; VU is 1.96 predictive std at 95 %.
+    out = diag.diagnose(runs.isel(run=[0]))
+    rec = records[0]
+    assert rec.coverage == 0.95
+    np.testing.assert_allclose(rec.x_vmv, float(out["X_hat"].mean()), rtol=1e-9)
+    np.testing.assert_allclose(rec.x_measured, float(runs["X"].isel(run=0).mean()), rtol=1e-12)
+    assert rec.x_vu > 0 and rec.f_vu > 0
+    frame = to_frame(records)
+    assert list(frame["status"].astype(str)) == [str(s) for s in status]
