@@ -638,35 +638,36 @@ def select_regression_width(
 
 
 def node_classifier(kind: str = "rvm", *, width: float = NODE_WIDTH) -> Any:
-    """The binary classifier at each tree node: standardise the node's features, then RVM/SVM.
+    """The binary classifier at each tree node (the paper's Gaussian kernel, sigma = 2).
 
-    Each node standardises its own training samples (mean 0, std 1), so the Gaussian kernel
-    width ``sigma`` means "``sigma`` standard deviations of this node's data" at every depth:
-    the root separates far-apart groups of states, the deepest nodes states a few hundredths
-    apart, and one fixed width (the paper's sigma = 2) fits both.
+    Used inside :class:`bayes_fdi.tree.HierarchicalClassifier` with ``node_scaling=True``: each
+    node standardises its own training samples first, so ``sigma`` means "``sigma`` standard
+    deviations of this node's data" at every depth — the root separates far-apart groups of
+    states, the deepest nodes states a few hundredths apart, and one width fits both.
 
     Parameters
     ----------
     kind
         ``"rvm"`` (:class:`bayes_fdi.rvm.RVC`) or ``"svm"``
-        (:func:`bayes_fdi.baselines.svm_classifier`, C = 1, Platt-scaled probabilities).
+        (:func:`bayes_fdi.baselines.svm_classifier`: C = 1, Platt-scaled probabilities).
     width
         Gaussian kernel width sigma.
     """
-    from sklearn.pipeline import make_pipeline
-    from sklearn.preprocessing import StandardScaler
-
     if kind == "rvm":
         from bayes_fdi.rvm import RVC
 
-        est = RVC(kernel="rbf", width=width)
-    elif kind == "svm":
+        return RVC(kernel="rbf", width=width)
+    if kind == "svm":
         from bayes_fdi.baselines import svm_classifier
 
-        est = svm_classifier(sigma=width)
-    else:
-        raise ValueError(f"kind must be 'rvm' or 'svm', got {kind!r}")
-    return make_pipeline(StandardScaler(), est)
+        return svm_classifier(sigma=width)
+    raise ValueError(f"kind must be 'rvm' or 'svm', got {kind!r}")
+
+
+def _tree(kind: str, seed: int) -> Any:
+    from bayes_fdi.tree import HierarchicalClassifier
+
+    return HierarchicalClassifier(node_classifier(kind), node_scaling=True, random_state=seed)
 
 
 def _n_vectors(est: Any) -> int | None:
@@ -801,9 +802,10 @@ def evaluate_dataset(
         Callable receiving stage messages.
     diagnoser
         Unfitted :class:`~bayes_fdi.diagnosis.FaultDiagnoser` for the RVM method. Default: RVR
-        normal models with the width of :func:`select_regression_width` and a k-means tree of
-        :func:`node_classifier` ``("rvm")`` nodes. The SVM baseline always uses
-        :func:`node_classifier` ``("svm")`` nodes on the RVM pipeline's features.
+        normal models with the width of :func:`select_regression_width` and a k-means tree
+        (``node_scaling=True``) of :func:`node_classifier` ``("rvm")`` nodes — the
+        diagnoser's default tree. The SVM baseline is the same tree of ``("svm")`` nodes on the
+        RVM pipeline's features.
 
     Returns
     -------
@@ -820,7 +822,6 @@ def evaluate_dataset(
     """
     from bayes_fdi.diagnosis import FaultDiagnoser
     from bayes_fdi.features import extract_features
-    from bayes_fdi.tree import HierarchicalClassifier
 
     say = progress or (lambda _msg: None)
     states = [str(s) for s in states]
@@ -844,7 +845,7 @@ def evaluate_dataset(
 
         diagnoser = FaultDiagnoser(
             regressor=RVR(kernel="rbf", width=width),
-            classifier=HierarchicalClassifier(node_classifier("rvm"), random_state=seed),
+            classifier=_tree("rvm", seed),
             random_state=seed,
         )
         regression = {"width": width, "log_evidence": evidence}
@@ -888,7 +889,7 @@ def evaluate_dataset(
     say("SVM tree on the same features")
 
     def make_svm() -> Any:
-        return HierarchicalClassifier(node_classifier("svm"), random_state=seed)
+        return _tree("svm", seed)
 
     svm, _, proba_svm, fit_s, pred_s = _fit_tree(make_svm, X_tr, y_tr, X_te)
     results["svm"] = _method_result(svm, y_te, proba_svm, fit_s, pred_s, "SVM")
@@ -938,7 +939,7 @@ def evaluate_dataset(
             say(f"RVM and SVM trees on all {len(every)} states")
 
             def make_rvm() -> Any:
-                return HierarchicalClassifier(node_classifier("rvm"), random_state=seed)
+                return _tree("rvm", seed)
 
             for method, make, prefix in (("rvm", make_rvm, "RVM"), ("svm", make_svm, "SVM")):
                 clf, _, p, fit_s, pred_s = _fit_tree(make, feats_train_all, y_train_all, feats_test)
