@@ -34,8 +34,16 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
+
+# Numba's own thread pool rather than OpenMP: OpenMP-launched kernels set the process-wide
+# OpenMP thread count, which torch reads as its own intra-op thread count, so simulating would
+# silently change the thread count (and summation order) of every torch model fitted later.
+# Users who chose a layer themselves (NUMBA_THREADING_LAYER) keep it.
+if numba.config.THREADING_LAYER == "default":
+    numba.config.THREADING_LAYER = "workqueue"
 
 __all__ = [
     "PARAMETERS",
