@@ -672,8 +672,15 @@ class NodeCalibration(NamedTuple):
 
 
 def _default_p_right(node: Any, X: np.ndarray) -> np.ndarray:
-    """P(right) from a node's estimator, whose positive class (right) is labelled 1/True."""
+    """P(right) from a node's estimator, whose positive class (right) is labelled 1/True.
+
+    A node that standardises its inputs (``node.scaler``, as the tree's ``node_scaling``
+    does) gets them standardised exactly as in the tree's own prediction.
+    """
     est = node.estimator
+    scaler = getattr(node, "scaler", None)
+    if scaler is not None:
+        X = scaler.transform(X)
     proba = np.asarray(est.predict_proba(X), dtype=np.float64)
     labels = list(np.asarray(getattr(est, "classes_", [0, 1])).tolist())
     for pos in (1, True, "right"):

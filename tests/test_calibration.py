@@ -410,3 +410,29 @@ def test_std_scaler_recovers_a_known_factor(rng, method):
     assert np.all(np.abs(cov.coverage - cov.levels) < 5 * se + 0.005)
     with pytest.raises(ValueError, match="not fitted"):
         StdScaler().transform([1.0])
+
+
+def test_node_calibration_uses_the_nodes_own_scaling(rng):
+    """On a tree whose nodes standardise their inputs, the per-node scores must be those of
+    the probabilities the tree itself computes (`node_probabilities`)."""
+    from sklearn.linear_model import LogisticRegression
+
+    from bayes_fdi.calibration import node_calibration
+    from bayes_fdi.tree import HierarchicalClassifier
+
+    centres = {"a": (0.0, 0.0), "b": (0.03, 0.0), "c": (0.0, 0.03)}
+    y = np.repeat(list(centres), 60)
+    X = np.array([centres[k] for k in y]) + 0.004 * rng.standard_normal((y.size, 2))
+    tree = HierarchicalClassifier(LogisticRegression(), random_state=0).fit(X, y)
+    assert all(n.scaler is not None for n in tree.nodes_)
+    default = node_calibration(tree.nodes_, X, y)
+    own = tree.node_probabilities(X)
+    exact = node_calibration(tree.nodes_, X, y, p_right=lambda n, Z: own[:, n.index][_rows(n, y)])
+    for a, b in zip(default, exact, strict=True):
+        assert a.accuracy == pytest.approx(b.accuracy)
+        assert a.log_loss == pytest.approx(b.log_loss)
+    assert min(r.accuracy for r in default) > 0.95
+
+
+def _rows(node, y):
+    return np.isin(y, [*node.left, *node.right])
