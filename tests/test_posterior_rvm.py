@@ -20,7 +20,7 @@ def _sinc(n: int, seed: int, noise: float = 0.1):
 def sinc_fit():
     X, y = _sinc(60, seed=0)
     rvr = RVR(width=1.5).fit(X, y)
-    post = rvr.fit_posterior(X, y, num_samples=300, warmup_steps=300, seed=0)
+    post = rvr.fit_posterior(X, y, num_samples=800, warmup_steps=400, seed=0)
     return X, y, rvr, post
 
 
@@ -31,7 +31,7 @@ def test_rvr_nuts_posterior_converges_and_agrees_with_type2(sinc_fit):
         f"rv{i}" for i in rvr.relevance_indices_
     )
     assert post.basis_names == names
-    assert post.weights.shape == (2, 300, rvr.alpha_.size)
+    assert post.weights.shape == (2, 800, rvr.alpha_.size)
     d = post.diagnostics
     assert d.n_divergences == 0
     assert d.max_r_hat < 1.01
@@ -109,7 +109,7 @@ def test_rvr_posterior_on_all_basis_functions():
     """basis='all': every training row + bias; converges and agrees with the active basis."""
     X, y = _sinc(30, seed=4)
     rvr = RVR(width=1.5).fit(X, y)
-    full = rvr.fit_posterior(X, y, basis="all", num_samples=500, warmup_steps=500, seed=0)
+    full = rvr.fit_posterior(X, y, basis="all", num_samples=1500, warmup_steps=800, seed=0)
     assert full.weights.shape[2] == 31 and full.basis_names[0] == "bias"
     assert full.diagnostics.n_divergences == 0
     assert full.diagnostics.max_r_hat < 1.05
