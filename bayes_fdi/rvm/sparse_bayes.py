@@ -57,6 +57,8 @@ _LOG_2PI = math.log(2.0 * math.pi)
 # for _STALL_ITERATIONS iterations (not in SparseBayes, which cycles until its limit)
 _STALL_GAIN = 1e-4
 _STALL_ITERATIONS = 50
+# fast Gaussian solver with a float32 screening copy: exact re-checks of a chosen addition
+_MAX_RECHECKS = 20
 
 
 class NumericalWarning(UserWarning):
@@ -233,13 +235,15 @@ def _best_action(S: Tensor, Q: Tensor, act: Tensor, alpha: Tensor, addable: Tens
     delta = 1.0 / new_alpha_a - 1.0 / alpha
     re_gain = 0.5 * (delta * Qa * Qa / (Sa * delta + 1.0) - torch.log1p(Sa * delta))
     re_gain = torch.where(useful_a, re_gain, -math.inf)
-    # add (not in the model: s = S, q = Q)
+    # add (not in the model: s = S, q = Q): 2 Delta L = x - 1 - log x with x = Q^2 / S,
+    # increasing in x > 1, so the best addition is the admissible candidate of largest x
     Q2 = Q * Q
     ad = addable & (Q2 - S > _ZERO_FACTOR) & (S > 0)
-    add_gain = torch.where(ad, 0.5 * ((Q2 - S) / S + torch.log(S / Q2)), -math.inf)
+    x = torch.where(ad, Q2 / S, 0.0)
     ka = int(re_gain.argmax())
-    kn = int(add_gain.argmax())
-    g_re, g_add = (float(v) for v in torch.stack([re_gain[ka], add_gain[kn]]).tolist())
+    kn = int(x.argmax())
+    g_re, x_n = (float(v) for v in torch.stack([re_gain[ka], x[kn]]).tolist())
+    g_add = 0.5 * (x_n - 1.0 - math.log(x_n)) if x_n > 0 else -math.inf
     i_re = int(act[ka])
     if g_re > g_add or (g_re == g_add and i_re < kn):
         if g_re == -math.inf:
@@ -331,6 +335,7 @@ def fast_gaussian(
         return valid & align.free & ~in_model
 
     addable = addable_mask()
+    screened = design.F_screen is not None
 
     def full_statistics(beta: float, alpha: Tensor, Phi: Tensor, BtPhi: Tensor):
         fac = _factor(alpha, beta * BtPhi[act_t])
@@ -352,6 +357,27 @@ def fast_gaussian(
     for it in range(1, max_iter + 1):
         Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
         best = _best_action(S, Q, act_t, alpha, addable)
+        exact_col = None
+        if screened:
+            # An addition chosen on screening-precision factors is checked first: the
+            # candidate's S and Q are recomputed exactly (cheap: one kernel column and its
+            # Gram entries, not the O(N N_B) product of an addition) and the choice is
+            # repeated.  Rounding in S of candidates nearly in the span of the active
+            # columns otherwise produces spurious additions that are deleted again later.
+            for _ in range(_MAX_RECHECKS):
+                if best.kind != 0:
+                    break
+                nu = best.index
+                b_i = design.columns([nu])[:, 0] / norms[nu]
+                gram = Phi.T @ b_i
+                S[nu] = beta * float(b_i @ b_i) - beta * beta * float(gram @ (Sigma @ gram))
+                Q[nu] = beta * (float(Bt_t[nu]) - float(gram @ mu))
+                again = _best_action(S, Q, act_t, alpha, addable)
+                exact_col = (nu, b_i, gram)
+                if again.kind == 0 and again.index == nu:
+                    best = again
+                    break
+                best = again
         nu, gain, action, jj = best.index, best.gain, best.kind, best.position
         last = not gain > 0
         if not last and action == 1:
@@ -365,8 +391,8 @@ def fast_gaussian(
                 Sigma = Sigma - kappa * torch.outer(sj, sj)
                 mu = mu - kappa * mu_j * sj
                 v = BtPhi @ (beta * sj)
-                S = S + kappa * v * v
-                Q = Q + kappa * mu_j * v
+                S.addcmul_(v, v, value=kappa)
+                Q.add_(v, alpha=kappa * mu_j)
                 alpha = alpha.clone()
                 alpha[jj] = best.new_alpha
             elif action == 0:  # add
@@ -374,11 +400,14 @@ def fast_gaussian(
                     cap = min(P, 2 * M)
                     Phi_buf = torch.cat([Phi_buf, Phi_buf.new_empty(N, cap - M)], dim=1)
                     BtPhi_buf = torch.cat([BtPhi_buf, BtPhi_buf.new_empty(P, cap - M)], dim=1)
-                b_i = design.columns([nu])[:, 0] / norms[nu]
+                if exact_col is not None and exact_col[0] == nu:
+                    _, b_i, gram = exact_col
+                else:
+                    b_i = design.columns([nu])[:, 0] / norms[nu]
+                    gram = Phi.T @ b_i  # exact Gram entries with the active columns
                 BtBi = BtPhi_buf[:, M]
                 BtBi.copy_(design.rmatmul(b_i[:, None], exact=False)[:, 0])
                 BtBi.div_(norms)
-                gram = Phi.T @ b_i  # exact Gram entries with the active columns
                 BtBi[act_t] = gram
                 BtBi[nu] = b_i @ b_i
                 BtPhi[nu] = gram
@@ -394,8 +423,8 @@ def fast_gaussian(
                 Sigma = Sig
                 mu = torch.cat([mu - mu_i * u, mu.new_tensor([mu_i])])
                 e = beta * (BtBi - BtPhi @ u)
-                S = S - s_ii * e * e
-                Q = Q - mu_i * e
+                S.addcmul_(e, e, value=-s_ii)
+                Q.add_(e, alpha=-mu_i)
                 Phi_buf[:, M] = b_i
                 alpha = torch.cat([alpha, alpha.new_tensor([a_new])])
                 active.append(nu)
@@ -411,8 +440,8 @@ def fast_gaussian(
                 Sigma = Sigma - torch.outer(sj, sj) / Sjj
                 mu = mu - (mu_j / Sjj) * sj
                 v = BtPhi @ (beta * sj)
-                S = S + v * v / Sjj
-                Q = Q + (mu_j / Sjj) * v
+                S.addcmul_(v, v, value=1.0 / Sjj)
+                Q.add_(v, alpha=mu_j / Sjj)
                 keep_t = torch.tensor(
                     [k for k in range(M) if k != jj], dtype=torch.long, device=device
                 )
