@@ -30,7 +30,7 @@ from bayes_fdi.rvm.base import RVMBase, _is_torch
 from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES
 from bayes_fdi.rvm.kernels import RBF, Kernel
 from bayes_fdi.rvm.sparse_bayes import SBLResult, em_bernoulli, fast_bernoulli
-from bayes_fdi.rvm.width import data_scale, search_width
+from bayes_fdi.rvm.width import search_width, width_bounds
 
 __all__ = ["RVC"]
 
@@ -153,8 +153,8 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         if self.width == "auto":
             search = search_width(
                 lambda w: sum(self._solve(Xt, t, w)[0].log_evidence for t in targets),
-                data_scale(Xt),
-                bounds=(0.1, 10.0),
+                1.0,
+                bounds=width_bounds(Xt),
             )
             width: float | None = search.width
         elif self.kernel == "rbf":

@@ -23,6 +23,7 @@ exact correction) the Gram entries between active columns -- stays exact float64
 from __future__ import annotations
 
 import torch
+from scipy.linalg.blas import ssymv
 from torch import Tensor
 
 from bayes_fdi.rvm.kernels import Kernel
@@ -35,6 +36,17 @@ DEFAULT_MAX_BYTES = 2_000_000_000
 SCREEN_MIN_SAMPLES = 2000
 #: bytes per row block when the kernel matrix is computed on the fly
 _BLOCK_BYTES = 64_000_000
+
+
+def _symv(F: Tensor, v: Tensor) -> Tensor:
+    """``F v`` for a symmetric float32 CPU matrix ``F`` by BLAS ``ssymv``.
+
+    Reads one triangle only (the upper one of the row-major ``F``): a matrix-vector
+    product is memory bound, so this is ~1.5x faster than a general ``F @ v``.
+    """
+    x = v.detach().to(dtype=torch.float32, device="cpu").contiguous().numpy()
+    # F.numpy().T is the column-major view of F^T = F: no copy
+    return torch.from_numpy(ssymv(1.0, F.numpy().T, x, lower=1))
 
 
 class Design:
@@ -172,7 +184,10 @@ class Design:
         if self.F is not None:
             torch.matmul(self.F.T, V, out=out[self.offset :])
         elif self.F_screen is not None and not exact:
-            out[self.offset :] = self.F_screen @ V.to(torch.float32)  # K symmetric
+            if V.shape[1] == 1 and self.F_screen.device.type == "cpu":
+                out[self.offset :, 0] = _symv(self.F_screen, V[:, 0])
+            else:
+                out[self.offset :] = self.F_screen @ V.to(torch.float32)  # K symmetric
         else:  # symmetric kernel matrix: K^T V = K V, row block by row block
             for start in range(0, self.n_samples, self._block):
                 stop = min(start + self._block, self.n_samples)

@@ -26,7 +26,7 @@ from bayes_fdi.rvm.base import RVMBase, _is_torch
 from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES
 from bayes_fdi.rvm.kernels import RBF, Kernel
 from bayes_fdi.rvm.sparse_bayes import SBLResult, em_gaussian, fast_gaussian
-from bayes_fdi.rvm.width import data_scale, search_width
+from bayes_fdi.rvm.width import search_width, width_bounds
 
 __all__ = ["RVR"]
 
@@ -165,7 +165,9 @@ class RVR(RegressorMixin, RVMBase):
         t = torch.tensor(np.array(y, dtype=np.float64), dtype=Xt.dtype, device=Xt.device)
         search = None
         if self.width == "auto":
-            search = search_width(lambda w: self._solve(Xt, t, w)[0].log_evidence, data_scale(Xt))
+            search = search_width(
+                lambda w: self._solve(Xt, t, w)[0].log_evidence, 1.0, bounds=width_bounds(Xt)
+            )
             width: float | None = search.width
         elif self.kernel == "rbf":
             width = float(self.width)

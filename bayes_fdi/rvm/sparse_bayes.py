@@ -57,6 +57,8 @@ _LOG_2PI = math.log(2.0 * math.pi)
 # for _STALL_ITERATIONS iterations (not in SparseBayes, which cycles until its limit)
 _STALL_GAIN = 1e-4
 _STALL_ITERATIONS = 50
+# fast Gaussian solver with a float32 screening copy: exact re-checks of a chosen addition
+_MAX_RECHECKS = 20
 
 
 class NumericalWarning(UserWarning):
@@ -188,48 +190,69 @@ def _rescale(
     return active, mu, Sigma, alpha
 
 
-def _gains(
-    S: Tensor,
-    Q: Tensor,
-    in_model: Tensor,
-    alpha_full: Tensor,
-    addable: Tensor,
-    n_active: int,
-) -> tuple[Tensor, Tensor, Tensor, bool]:
-    """Evidence gains ``Delta L`` of the best action for every candidate (vectorised).
+class _Action(NamedTuple):
+    """The best action of one fast-solver iteration (see :func:`_best_action`)."""
 
-    ``alpha_full`` holds the precisions of active candidates (any positive value elsewhere).
-    Returns ``(delta_ml, new_alpha, kind, any_delete)`` with ``kind`` 0 = add,
-    1 = re-estimate, 2 = delete and ``delta_ml = -inf`` where no action applies.
+    index: int  # candidate column (-1: none)
+    gain: float  # Delta L (-inf: no action applies)
+    kind: int  # 0 add, 1 re-estimate, 2 delete, -1 none
+    new_alpha: float  # the candidate's new precision (inf for a deletion)
+    position: int  # position in the active set (re-estimate / delete), else -1
+    any_delete: bool  # a deletion with positive gain was pending
+
+
+def _best_action(S: Tensor, Q: Tensor, act: Tensor, alpha: Tensor, addable: Tensor) -> _Action:
+    """Exact evidence gains ``Delta L`` of every possible action; the best one.
+
+    Re-estimates and deletions are evaluated on the ``M`` active columns only, additions
+    on all candidates, so an iteration costs a handful of length-``N_B`` operations.
+
+    Parameters
+    ----------
+    S, Q : Tensor
+        ``(N_B,)`` candidate factors.
+    act : Tensor
+        ``(M,)`` indices of the active columns, ``alpha`` ``(M,)`` their precisions.
+    addable : Tensor
+        ``(N_B,)`` mask of candidates that may be added (not active, usable, aligned-free).
     """
-    a = alpha_full
-    denom = torch.where(in_model, a - S, 1.0)
-    s = torch.where(in_model, a * S / denom, S)
-    q = torch.where(in_model, a * Q / denom, Q)
-    theta = q * q - s
-    useful = theta > _ZERO_FACTOR
-    new_alpha = torch.where(useful, s * s / torch.where(useful, theta, 1.0), math.inf)
-    Q2 = Q * Q
+    M = act.numel()
+    Sa, Qa = S[act], Q[act]
+    denom = alpha - Sa
+    s = alpha * Sa / denom
+    q = alpha * Qa / denom
+    theta_a = q * q - s
+    useful_a = theta_a > _ZERO_FACTOR
+    new_alpha_a = torch.where(useful_a, s * s / torch.where(useful_a, theta_a, 1.0), math.inf)
+    if M > 1:
+        de = ~useful_a
+        de_gain = -0.5 * (q * q / (s + alpha) - torch.log1p(s / alpha))
+        de_gain = torch.where(de, de_gain, -math.inf)
+        k = int(de_gain.argmax())
+        if bool(de[k]) and float(de_gain[k]) > 0:  # deletions pre-empt (PriorityDeletion)
+            return _Action(int(act[k]), float(de_gain[k]), 2, math.inf, k, True)
     # re-estimate: with delta = 1/new - 1/old
-    delta = 1.0 / new_alpha - 1.0 / a
-    re_gain = 0.5 * (delta * Q2 / (S * delta + 1.0) - torch.log1p(S * delta))
-    # delete
-    de_gain = -0.5 * (q * q / (s + a) - torch.log1p(s / a))
-    # add
-    S_pos = torch.where(S > 0, S, 1.0)
-    Q2_pos = torch.where(Q2 > 0, Q2, 1.0)
-    add_gain = 0.5 * ((Q2_pos - S_pos) / S_pos + torch.log(S_pos / Q2_pos))
-    re = in_model & useful
-    de = in_model & ~useful if n_active > 1 else torch.zeros_like(in_model)
-    ad = ~in_model & useful & addable & (S > 0)
-    minus_inf = torch.full_like(S, -math.inf)
-    any_delete = bool((de & (de_gain > 0)).any())
-    if any_delete:  # deletions pre-empt (SparseBayes PriorityDeletion)
-        delta_ml = torch.where(de, de_gain, minus_inf)
-    else:
-        delta_ml = torch.where(re, re_gain, torch.where(ad, add_gain, minus_inf))
-    kind = torch.where(re, 1, torch.where(de, 2, torch.where(ad, 0, -1)))
-    return delta_ml, new_alpha, kind, any_delete
+    delta = 1.0 / new_alpha_a - 1.0 / alpha
+    re_gain = 0.5 * (delta * Qa * Qa / (Sa * delta + 1.0) - torch.log1p(Sa * delta))
+    re_gain = torch.where(useful_a, re_gain, -math.inf)
+    # add (not in the model: s = S, q = Q): 2 Delta L = x - 1 - log x with x = Q^2 / S,
+    # increasing in x > 1, so the best addition is the admissible candidate of largest x
+    Q2 = Q * Q
+    ad = addable & (Q2 - S > _ZERO_FACTOR) & (S > 0)
+    x = torch.where(ad, Q2 / S, 0.0)
+    ka = int(re_gain.argmax())
+    kn = int(x.argmax())
+    g_re, x_n = (float(v) for v in torch.stack([re_gain[ka], x[kn]]).tolist())
+    g_add = 0.5 * (x_n - 1.0 - math.log(x_n)) if x_n > 0 else -math.inf
+    i_re = int(act[ka])
+    if g_re > g_add or (g_re == g_add and i_re < kn):
+        if g_re == -math.inf:
+            return _Action(-1, -math.inf, -1, math.inf, -1, False)
+        return _Action(i_re, g_re, 1, float(new_alpha_a[ka]), ka, False)
+    if g_add == -math.inf:
+        return _Action(-1, -math.inf, -1, math.inf, -1, False)
+    s_n, q_n = (float(v) for v in torch.stack([S[kn], Q[kn]]).tolist())
+    return _Action(kn, g_add, 0, s_n * s_n / (q_n * q_n - s_n), -1, False)
 
 
 class _Alignment:
@@ -283,6 +306,9 @@ def fast_gaussian(
     var_floor = max(t_var, 1e-12 * t_sq / N, 1e-300)
     beta_max = _BETA_MAX_FACTOR / var_floor
     beta = min(1.0 / (0.1 * math.sqrt(var_floor)) ** 2, beta_max)
+    # final-beta-update tolerance: SparseBayes' 1e-6, but no finer than the rounding error
+    # of the N-term sums behind beta (float32 would otherwise cycle on rounding noise)
+    beta_tol = max(_MIN_DELTA_LOG_BETA, N * torch.finfo(dtype).eps)
 
     # initial basis: largest |b^T t| among usable columns
     j = int(torch.where(valid, Bt_t.abs(), -1.0).argmax())
@@ -291,81 +317,104 @@ def fast_gaussian(
     a0 = p * p / (q * q - p) if q * q > p else -1.0
     alpha = torch.tensor([a0 if a0 > 0 else 1e3], dtype=dtype, device=device)
     active = [j]
-    Phi = phi[:, None]
-    # B^T Phi cache: screening precision for candidates, exact among active columns
-    BtPhi = design.rmatmul(Phi, exact=False) / norms[:, None]
-    BtPhi[j, 0] = phi @ phi
+    # Phi and the cache B^T Phi live in preallocated buffers (columns in active order);
+    # B^T Phi has screening precision for candidates and is exact among active columns
+    cap = min(P, 64)
+    Phi_buf = torch.empty(N, cap, dtype=dtype, device=device)
+    BtPhi_buf = torch.empty(P, cap, dtype=dtype, device=device)
+    Phi_buf[:, 0] = phi
+    BtPhi_buf[:, :1] = design.rmatmul(phi[:, None], exact=False) / norms[:, None]
+    BtPhi_buf[j, 0] = phi @ phi
+    act_t = torch.tensor(active, dtype=torch.long, device=device)
+    align = _Alignment(P, device)
+    align.add(BtPhi_buf[:, 0])
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
-    alpha_full = torch.ones(P, dtype=dtype, device=device)  # alpha of active candidates
-    alpha_full[j] = alpha[0]
-    align = _Alignment(P, device)
-    align.add(BtPhi[:, 0])
+
+    def addable_mask() -> Tensor:
+        return valid & align.free & ~in_model
+
+    addable = addable_mask()
+    screened = design.F_screen is not None
 
     def full_statistics(beta: float, alpha: Tensor, Phi: Tensor, BtPhi: Tensor):
-        act = torch.tensor(active, dtype=torch.long, device=device)
-        fac = _factor(alpha, beta * BtPhi[act])
-        mu = beta * fac.solve(Bt_t[act])
+        fac = _factor(alpha, beta * BtPhi[act_t])
+        mu = beta * fac.solve(Bt_t[act_t])
         Sigma = fac.covariance()
         resid = t - Phi @ mu
         ee = float(resid @ resid)
         Z = BtPhi @ Sigma
         S = beta - beta * beta * (Z * BtPhi).sum(1)
-        Q = beta * Bt_t - beta * (BtPhi @ mu)
+        Q = beta * (Bt_t - BtPhi @ mu)
         log_ml = _gaussian_log_ml(N, beta, ee, alpha, mu, fac)
-        gamma = 1.0 - alpha * Sigma.diagonal()
-        return mu, Sigma, S, Q, ee, gamma, log_ml
+        return mu, Sigma, S, Q, log_ml
 
-    mu, Sigma, S, Q, ee, gamma, log_ml = full_statistics(beta, alpha, Phi, BtPhi)
+    M = 1
+    mu, Sigma, S, Q, log_ml = full_statistics(beta, alpha, Phi_buf[:, :M], BtPhi_buf[:, :M])
     trace = [log_ml]
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        addable = valid & align.free
-        delta_ml, new_alpha, kind, any_delete = _gains(
-            S, Q, in_model, alpha_full, addable, len(active)
-        )
-        nu = int(delta_ml.argmax())
-        gain = float(delta_ml[nu])
-        action = int(kind[nu])
+        Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
+        best = _best_action(S, Q, act_t, alpha, addable)
+        exact_col = None
+        if screened:
+            # An addition chosen on screening-precision factors is checked first: the
+            # candidate's S and Q are recomputed exactly (cheap: one kernel column and its
+            # Gram entries, not the O(N N_B) product of an addition) and the choice is
+            # repeated.  Rounding in S of candidates nearly in the span of the active
+            # columns otherwise produces spurious additions that are deleted again later.
+            for _ in range(_MAX_RECHECKS):
+                if best.kind != 0:
+                    break
+                nu = best.index
+                b_i = design.columns([nu])[:, 0] / norms[nu]
+                gram = Phi.T @ b_i
+                S[nu] = beta * float(b_i @ b_i) - beta * beta * float(gram @ (Sigma @ gram))
+                Q[nu] = beta * (float(Bt_t[nu]) - float(gram @ mu))
+                again = _best_action(S, Q, act_t, alpha, addable)
+                exact_col = (nu, b_i, gram)
+                if again.kind == 0 and again.index == nu:
+                    best = again
+                    break
+                best = again
+        nu, gain, action, jj = best.index, best.gain, best.kind, best.position
         last = not gain > 0
         if not last and action == 1:
-            jj = active.index(nu)
-            if (
-                abs(math.log(float(new_alpha[nu])) - math.log(float(alpha[jj]))) < tol
-                and not any_delete
-            ):
+            if abs(math.log(best.new_alpha) - math.log(float(alpha[jj]))) < tol:
                 last = True
         if not last:
-            BPB = beta * BtPhi
             if action == 1:  # re-estimate
-                jj = active.index(nu)
                 sj = Sigma[:, jj].clone()
                 mu_j = float(mu[jj])
-                kappa = 1.0 / (
-                    float(Sigma[jj, jj]) + 1.0 / (float(new_alpha[nu]) - float(alpha[jj]))
-                )
+                kappa = 1.0 / (float(Sigma[jj, jj]) + 1.0 / (best.new_alpha - float(alpha[jj])))
                 Sigma = Sigma - kappa * torch.outer(sj, sj)
                 mu = mu - kappa * mu_j * sj
-                v = BPB @ sj
-                S = S + kappa * v * v
-                Q = Q + kappa * mu_j * v
+                v = BtPhi @ (beta * sj)
+                S.addcmul_(v, v, value=kappa)
+                Q.add_(v, alpha=kappa * mu_j)
                 alpha = alpha.clone()
-                alpha[jj] = new_alpha[nu]
-                alpha_full[nu] = new_alpha[nu]
+                alpha[jj] = best.new_alpha
             elif action == 0:  # add
-                b_i = design.columns([nu])[:, 0] / norms[nu]
-                BtBi = design.rmatmul(b_i[:, None], exact=False)[:, 0] / norms
-                gram = Phi.T @ b_i  # exact Gram entries with the active columns
-                act_t = torch.tensor(active, dtype=torch.long, device=device)
+                if M == Phi_buf.shape[1]:  # grow the buffers
+                    cap = min(P, 2 * M)
+                    Phi_buf = torch.cat([Phi_buf, Phi_buf.new_empty(N, cap - M)], dim=1)
+                    BtPhi_buf = torch.cat([BtPhi_buf, BtPhi_buf.new_empty(P, cap - M)], dim=1)
+                if exact_col is not None and exact_col[0] == nu:
+                    _, b_i, gram = exact_col
+                else:
+                    b_i = design.columns([nu])[:, 0] / norms[nu]
+                    gram = Phi.T @ b_i  # exact Gram entries with the active columns
+                BtBi = BtPhi_buf[:, M]
+                BtBi.copy_(design.rmatmul(b_i[:, None], exact=False)[:, 0])
+                BtBi.div_(norms)
                 BtBi[act_t] = gram
                 BtBi[nu] = b_i @ b_i
                 BtPhi[nu] = gram
-                u = beta * (Sigma @ BtPhi[nu])
-                a_new = float(new_alpha[nu])
+                u = beta * (Sigma @ gram)
+                a_new = best.new_alpha
                 s_ii = 1.0 / (a_new + float(S[nu]))
                 mu_i = s_ii * float(Q[nu])
-                M = len(active)
                 Sig = torch.empty(M + 1, M + 1, dtype=dtype, device=device)
                 Sig[:M, :M] = Sigma + s_ii * torch.outer(u, u)
                 Sig[:M, M] = -s_ii * u
@@ -373,45 +422,51 @@ def fast_gaussian(
                 Sig[M, M] = s_ii
                 Sigma = Sig
                 mu = torch.cat([mu - mu_i * u, mu.new_tensor([mu_i])])
-                e = beta * BtBi - BPB @ u
-                S = S - s_ii * e * e
-                Q = Q - mu_i * e
-                BtPhi = torch.cat([BtPhi, BtBi[:, None]], dim=1)
-                Phi = torch.cat([Phi, b_i[:, None]], dim=1)
+                e = beta * (BtBi - BtPhi @ u)
+                S.addcmul_(e, e, value=-s_ii)
+                Q.add_(e, alpha=-mu_i)
+                Phi_buf[:, M] = b_i
                 alpha = torch.cat([alpha, alpha.new_tensor([a_new])])
                 active.append(nu)
+                act_t = torch.cat([act_t, act_t.new_tensor([nu])])
+                M += 1
                 in_model[nu] = True
-                alpha_full[nu] = a_new
                 align.add(BtBi)
+                addable = addable_mask()
             else:  # delete
-                jj = active.index(nu)
                 Sjj = float(Sigma[jj, jj])
                 sj = Sigma[:, jj].clone()
                 mu_j = float(mu[jj])
                 Sigma = Sigma - torch.outer(sj, sj) / Sjj
                 mu = mu - (mu_j / Sjj) * sj
-                v = BPB @ sj
-                S = S + v * v / Sjj
-                Q = Q + (mu_j / Sjj) * v
-                keep = [k for k in range(len(active)) if k != jj]
-                keep_t = torch.tensor(keep, dtype=torch.long, device=device)
+                v = BtPhi @ (beta * sj)
+                S.addcmul_(v, v, value=1.0 / Sjj)
+                Q.add_(v, alpha=mu_j / Sjj)
+                keep_t = torch.tensor(
+                    [k for k in range(M) if k != jj], dtype=torch.long, device=device
+                )
                 align.remove(BtPhi[:, jj])
                 Sigma = Sigma[keep_t][:, keep_t]
                 mu, alpha = mu[keep_t], alpha[keep_t]
-                BtPhi, Phi = BtPhi[:, keep_t], Phi[:, keep_t]
+                if jj < M - 1:  # close the gap in the buffers
+                    Phi_buf[:, jj : M - 1] = Phi_buf[:, jj + 1 : M].clone()
+                    BtPhi_buf[:, jj : M - 1] = BtPhi_buf[:, jj + 1 : M].clone()
+                M -= 1
                 del active[jj]
+                act_t = act_t[keep_t]
                 in_model[nu] = False
-                alpha_full[nu] = 1.0
+                addable = addable_mask()
             log_ml += gain
         if it <= _BETA_UPDATE_START or it % _BETA_UPDATE_FREQUENCY == 0 or last:
+            Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
             resid = t - Phi @ mu
             ee = float(resid @ resid)
             gamma = 1.0 - alpha * Sigma.diagonal()
             beta_old = beta
             beta = min((N - float(gamma.sum())) / max(ee, 1e-300), beta_max)
             beta = max(beta, 1e-300)
-            mu, Sigma, S, Q, ee, gamma, log_ml = full_statistics(beta, alpha, Phi, BtPhi)
-            if last and abs(math.log(beta) - math.log(beta_old)) > _MIN_DELTA_LOG_BETA:
+            mu, Sigma, S, Q, log_ml = full_statistics(beta, alpha, Phi, BtPhi)
+            if last and abs(math.log(beta) - math.log(beta_old)) > beta_tol:
                 last = False
         trace.append(log_ml)
         if last:
@@ -610,7 +665,7 @@ def fast_bernoulli(
     max_iter, tol
         As in :func:`fast_gaussian`.
     """
-    P, dtype, device = design.n_basis, design.dtype, design.device
+    P, device = design.n_basis, design.device
     norms, valid = _unit_columns(design)
     tp = 2.0 * t - 1.0
     Bt_tp = design.rmatmul(tp[:, None], exact=False)[:, 0] / norms
@@ -624,8 +679,6 @@ def fast_bernoulli(
     BtPhi = design.rmatmul(Phi, exact=False) / norms[:, None]
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
-    alpha_full = torch.ones(P, dtype=dtype, device=device)  # alpha of active candidates
-    alpha_full[j] = alpha[0]
     align = _Alignment(P, device)
     align.add(BtPhi[:, 0])
 
@@ -644,32 +697,23 @@ def fast_bernoulli(
     converged = False
     it = 0
     for it in range(1, max_iter + 1):
-        addable = valid & align.free
-        delta_ml, new_alpha, kind, any_delete = _gains(
-            S, Q, in_model, alpha_full, addable, len(active)
-        )
-        nu = int(delta_ml.argmax())
-        gain = float(delta_ml[nu])
-        action = int(kind[nu])
+        act_t = torch.tensor(active, dtype=torch.long, device=device)
+        choice = _best_action(S, Q, act_t, alpha, valid & align.free & ~in_model)
+        nu, gain, action, jj = choice.index, choice.gain, choice.kind, choice.position
         if not gain > 0:
             converged = True
             break
         if action == 1:
-            jj = active.index(nu)
-            if (
-                abs(math.log(float(new_alpha[nu])) - math.log(float(alpha[jj]))) < tol
-                and not any_delete
-            ):
+            if abs(math.log(choice.new_alpha) - math.log(float(alpha[jj]))) < tol:
                 converged = True
                 break
             alpha = alpha.clone()
-            alpha[jj] = new_alpha[nu]
-            alpha_full[nu] = new_alpha[nu]
+            alpha[jj] = choice.new_alpha
             mu = mode.mu
         elif action == 0:
             b_i = design.columns([nu]) / norms[nu]
             BtBi = design.rmatmul(b_i, exact=False)[:, 0] / norms
-            a_new = float(new_alpha[nu])
+            a_new = choice.new_alpha
             mu_i = float(Q[nu]) / (a_new + float(S[nu]))
             Phi = torch.cat([Phi, b_i], dim=1)
             BtPhi = torch.cat([BtPhi, BtBi[:, None]], dim=1)
@@ -677,17 +721,14 @@ def fast_bernoulli(
             mu = torch.cat([mode.mu, mode.mu.new_tensor([mu_i])])
             active.append(nu)
             in_model[nu] = True
-            alpha_full[nu] = a_new
             align.add(BtBi)
         else:
-            jj = active.index(nu)
             keep_t = torch.tensor([k for k in range(len(active)) if k != jj], device=device)
             align.remove(BtPhi[:, jj])
             Phi, BtPhi = Phi[:, keep_t], BtPhi[:, keep_t]
             alpha, mu = alpha[keep_t], mode.mu[keep_t]
             del active[jj]
             in_model[nu] = False
-            alpha_full[nu] = 1.0
         mode, S, Q = full_statistics(Phi, alpha, mu)
         trace.append(mode.log_ml)
         if mode.log_ml > best[0] + _STALL_GAIN:
