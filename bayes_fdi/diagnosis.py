@@ -96,7 +96,7 @@ class FaultDiagnoser(BaseEstimator):
         window: int | None = None,
         step: int | None = None,
         standardize: bool = True,
-        width_search: str | None = None,
+        width_search: str | None = "evidence",
         max_train_samples: int | None = None,
         random_state: int | None = 0,
     ) -> None:

@@ -189,3 +189,23 @@ def test_negative_pressure_drop_runs_are_kept(rng):
     assert any(issubclass(w.category, NegativePressureDropWarning) for w in caught)
     assert res.attrs["n_negative_pressure_drop"] == 7
     assert np.isfinite(res["r2"].values).all() and res.sizes["time"] == 100
+
+
+def test_evidence_width_search_on_a_subsample(rng):
+    """Default width search: the RVR's own evidence search on a seeded subsample (checked by
+    repeating it independently on the same samples), then a fit on every sample at that width."""
+    from bayes_fdi.rvm import RVR
+
+    normal = make_dataset(synthetic_runs(4, rng))
+    nm = NormalModels(RVR(width="auto"), evidence_max_samples=150, random_state=3).fit(normal)
+    U, _ = model_inputs(normal)
+    idx = np.sort(np.random.default_rng(3).choice(U.shape[0], size=150, replace=False))
+    for name in ("X", "F"):
+        y = normal[name].values.ravel()
+        expected = RVR(width="auto").fit(U[idx], y[idx]).width_
+        assert nm.widths_[name] == pytest.approx(expected)
+        assert nm.regressors_[name].get_params()["width"] == pytest.approx(expected)
+    assert nm.n_train_samples_ == U.shape[0]
+    # a fixed width is left alone
+    fixed = NormalModels(RVR(width=0.4), random_state=3).fit(normal)
+    assert fixed.widths_ == {} and fixed.regressors_["X"].width_ == 0.4
