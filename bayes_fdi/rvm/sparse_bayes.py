@@ -380,6 +380,9 @@ def fast_gaussian(
                     best = again
                     break
                 best = again
+            else:
+                if best.kind == 0:  # never add on unverified factors: best active-set action
+                    best = _best_action(S, Q, act_t, alpha, torch.zeros_like(addable))
         nu, gain, action, jj = best.index, best.gain, best.kind, best.position
         last = not gain > 0
         if not last and action == 1:
