@@ -316,3 +316,24 @@ def test_screening_product_and_monotone_evidence():
     res = fast_gaussian(screen, t)
     assert res.converged
     assert np.diff(res.evidence_trace.numpy()).min() > -1e-8 * abs(res.log_evidence)
+
+
+def test_buffer_growth_does_not_change_the_fit(monkeypatch):
+    """Phi / B^T Phi buffers that must grow (capacity 2) give the same fit as roomy ones."""
+    from bayes_fdi.rvm import sparse_bayes
+    from bayes_fdi.rvm.design import Design
+    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+
+    rng = np.random.default_rng(5)
+    X = torch.tensor(rng.uniform(-10, 10, (300, 1)))
+    t = torch.sinc(X[:, 0] / torch.pi) + 0.05 * torch.tensor(rng.standard_normal(300))
+    for screen in (False, True):
+        design = Design(kernel=RBF(1.0), X=X, bias=True, rhs=t, screen=screen)
+        roomy = fast_gaussian(design, t)
+        monkeypatch.setattr(sparse_bayes, "_INITIAL_CAPACITY", 2)
+        tight = fast_gaussian(design, t)
+        monkeypatch.undo()
+        assert roomy.active.numel() > 4  # the tight buffers had to grow
+        assert torch.equal(tight.active, roomy.active)
+        torch.testing.assert_close(tight.mean, roomy.mean, rtol=1e-9, atol=1e-12)
+        assert tight.log_evidence == pytest.approx(roomy.log_evidence, rel=1e-12)

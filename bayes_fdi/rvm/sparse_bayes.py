@@ -59,6 +59,8 @@ _STALL_GAIN = 1e-4
 _STALL_ITERATIONS = 50
 # fast Gaussian solver with a float32 screening copy: exact re-checks of a chosen addition
 _MAX_RECHECKS = 20
+# initial number of columns of the fast Gaussian solver's Phi / B^T Phi buffers
+_INITIAL_CAPACITY = 64
 
 
 class NumericalWarning(UserWarning):
@@ -319,7 +321,7 @@ def fast_gaussian(
     active = [j]
     # Phi and the cache B^T Phi live in preallocated buffers (columns in active order);
     # B^T Phi has screening precision for candidates and is exact among active columns
-    cap = min(P, 64)
+    cap = min(P, _INITIAL_CAPACITY)
     Phi_buf = torch.empty(N, cap, dtype=dtype, device=device)
     BtPhi_buf = torch.empty(P, cap, dtype=dtype, device=device)
     Phi_buf[:, 0] = phi
@@ -378,6 +380,9 @@ def fast_gaussian(
                     best = again
                     break
                 best = again
+            else:
+                if best.kind == 0:  # never add on unverified factors: best active-set action
+                    best = _best_action(S, Q, act_t, alpha, torch.zeros_like(addable))
         nu, gain, action, jj = best.index, best.gain, best.kind, best.position
         last = not gain > 0
         if not last and action == 1:
@@ -400,6 +405,7 @@ def fast_gaussian(
                     cap = min(P, 2 * M)
                     Phi_buf = torch.cat([Phi_buf, Phi_buf.new_empty(N, cap - M)], dim=1)
                     BtPhi_buf = torch.cat([BtPhi_buf, BtPhi_buf.new_empty(P, cap - M)], dim=1)
+                    Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
                 if exact_col is not None and exact_col[0] == nu:
                     _, b_i, gram = exact_col
                 else:
