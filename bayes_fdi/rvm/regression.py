@@ -23,7 +23,6 @@ from sklearn.metrics import r2_score
 from torch import Tensor
 
 from bayes_fdi.rvm.base import RVMBase, _is_torch
-from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES
 from bayes_fdi.rvm.kernels import RBF, Kernel
 from bayes_fdi.rvm.sparse_bayes import SBLResult, em_gaussian, fast_gaussian
 from bayes_fdi.rvm.width import search_width, width_bounds
@@ -108,36 +107,6 @@ class RVR(RegressorMixin, RVMBase):
     >>> model = RVR(width=2.0).fit(X, y)
     >>> mean, std = model.predict(X[:3], return_std=True)
     """
-
-    def __init__(
-        self,
-        kernel: str | Kernel = "rbf",
-        width: float | str = 2.0,
-        method: str = "fast",
-        bias: bool = True,
-        max_iter: int | None = None,
-        tol: float = 1e-3,
-        degree: int = 3,
-        coef0: float = 1.0,
-        dtype: str = "float64",
-        device: str | torch.device | None = None,
-        max_kernel_bytes: int = DEFAULT_MAX_BYTES,
-        random_state: int | None = None,
-    ) -> None:
-        super().__init__(
-            kernel=kernel,
-            width=width,
-            method=method,
-            bias=bias,
-            max_iter=max_iter,
-            tol=tol,
-            degree=degree,
-            coef0=coef0,
-            dtype=dtype,
-            device=device,
-            max_kernel_bytes=max_kernel_bytes,
-            random_state=random_state,
-        )
 
     def _solve(self, X: Tensor, t: Tensor, width: float | None) -> tuple[SBLResult, Kernel | None]:
         design, kern = self._design(X, width, rhs=t)
