@@ -58,7 +58,7 @@ _LOG_2PI = math.log(2.0 * math.pi)
 _STALL_GAIN = 1e-4
 _STALL_ITERATIONS = 50
 # fast Gaussian solver with a float32 screening copy: exact re-checks of a chosen addition
-_MAX_RECHECKS = 20
+_MAX_RECHECKS = 100
 # initial number of columns of the fast Gaussian solver's Phi / B^T Phi buffers
 _INITIAL_CAPACITY = 64
 
