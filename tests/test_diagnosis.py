@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import xarray as xr
 from sklearn.linear_model import LogisticRegression
 
 from bayes_fdi.baselines import KernelRidgeRegressor, svm_classifier, svm_fault_diagnoser
@@ -148,10 +149,10 @@ def test_seva_output_statuses(data, rng):
     # Run 4: a copy of run 0 with a dead X sensor (all NaN) -> BLIND.
     blind = test.isel(run=[0]).assign(X=test["X"].isel(run=[0]) * np.nan)
     # Run 5: a copy of run 2 (f1) driven far outside the training inputs -> DAZZLED.
-    novel = test.isel(run=[2]).assign(P2=test["P2"].isel(run=[2]) * 0 + 0.7, T1=test["T1"] + 0.5)
-    novel = novel.isel(run=[0])
+    novel = test.isel(run=[2])
+    novel = novel.assign(P2=novel["P2"] * 0 + 0.7, T1=novel["T1"] + 0.5)
     runs = test.assign_coords(run=np.arange(4))
-    runs = __import__("xarray").concat(
+    runs = xr.concat(
         [runs, blind.assign_coords(run=[4]), novel.assign_coords(run=[5])], dim="run"
     )
     records = diag.seva(runs)

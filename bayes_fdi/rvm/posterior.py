@@ -155,6 +155,17 @@ def _as_tensor(x: Any, name: str, ndim: int) -> torch.Tensor:
     return out
 
 
+def _design_and_targets(Phi: Any, t: Any) -> tuple[torch.Tensor, torch.Tensor]:
+    """Validated ``(Phi, t)``: finite ``(n, m)`` design (``n >= 2``, ``m >= 1``) and n targets."""
+    Phi_t, t_t = _as_tensor(Phi, "Phi", 2), _as_tensor(t, "t", 1)
+    n, m = Phi_t.shape
+    if t_t.shape[0] != n:
+        raise ValueError(f"Phi has {n} rows but t has {t_t.shape[0]} entries")
+    if n < 2 or m < 1:
+        raise ValueError(f"need at least 2 rows and 1 basis column, got Phi shape {(n, m)}")
+    return Phi_t, t_t
+
+
 def _np_cholesky(H: np.ndarray) -> np.ndarray:
     """Cholesky factor of a batch of SPD matrices, adding diagonal jitter only if needed."""
     try:
@@ -224,13 +235,7 @@ class SparseBayesRegressionModel:
     latent_names = ("log_alpha", "log_beta")
 
     def __init__(self, Phi: Any, t: Any, hyperpriors: Hyperpriors | None = None) -> None:
-        self.Phi = _as_tensor(Phi, "Phi", 2)
-        self.t = _as_tensor(t, "t", 1)
-        n, m = self.Phi.shape
-        if self.t.shape[0] != n:
-            raise ValueError(f"Phi has {n} rows but t has {self.t.shape[0]} entries")
-        if n < 2 or m < 1:
-            raise ValueError(f"need at least 2 rows and 1 basis column, got Phi shape {(n, m)}")
+        self.Phi, self.t = _design_and_targets(Phi, t)
         var = float(self.t.var())
         self.target_scale = var if var > 0 else 1.0
         self.hyperpriors = (hyperpriors or Hyperpriors()).resolve(self.target_scale)
@@ -415,18 +420,13 @@ class SparseBayesClassificationModel:
         hyperpriors: Hyperpriors | None = None,
         parametrisation: Any = "auto",
     ) -> None:
-        self.Phi = _as_tensor(Phi, "Phi", 2)
-        self.t = _as_tensor(t, "t", 1)
-        n, m = self.Phi.shape
-        if self.t.shape[0] != n:
-            raise ValueError(f"Phi has {n} rows but t has {self.t.shape[0]} entries")
-        if n < 2 or m < 1:
-            raise ValueError(f"need at least 2 rows and 1 basis column, got Phi shape {(n, m)}")
+        self.Phi, self.t = _design_and_targets(Phi, t)
         if not bool(((self.t == 0) | (self.t == 1)).all()):
             raise ValueError("classification targets t must be 0 or 1")
         self.target_scale = 1.0
         self.hyperpriors = (hyperpriors or Hyperpriors()).resolve(1.0)
         self._Phi_np, self._t_np = self.Phi.numpy(), self.t.numpy()
+        m = self.Phi.shape[1]
         if isinstance(parametrisation, str):
             if parametrisation == "centred":
                 mask = np.ones(m, dtype=bool)
