@@ -152,9 +152,7 @@ def test_seva_output_statuses(data, rng):
     novel = test.isel(run=[2])
     novel = novel.assign(P2=novel["P2"] * 0 + 0.7, T1=novel["T1"] + 0.5)
     runs = test.assign_coords(run=np.arange(4))
-    runs = xr.concat(
-        [runs, blind.assign_coords(run=[4]), novel.assign_coords(run=[5])], dim="run"
-    )
+    runs = xr.concat([runs, blind.assign_coords(run=[4]), novel.assign_coords(run=[5])], dim="run")
     records = diag.seva(runs)
     status = [r.status for r in records]
     assert status[:2] == [SevaStatus.CLEAR, SevaStatus.CLEAR]
