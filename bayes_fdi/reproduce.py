@@ -22,12 +22,14 @@ Everything is written to ``--out DIR``: ``report.md`` (and the PNG figures it li
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
+import json
 import math
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +49,7 @@ __all__ = [
     "SMALL_DURATION",
     "SMALL_RUNS_PER_STATE",
     "brier_score",
+    "calibration_headlines",
     "campaign_file",
     "classification_metrics",
     "configure_parser",
@@ -58,6 +61,7 @@ __all__ = [
     "reproduce",
     "run_from_cli",
     "select_regression_width",
+    "single_threaded",
     "split_train_test",
     "tree_nodes",
 ]
@@ -109,6 +113,35 @@ class _Progress:
         if self.enabled:
             elapsed = time.perf_counter() - self.t0
             print(f"[reproduce {elapsed:7.1f} s] {message}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def single_threaded() -> Iterator[None]:
+    """Run torch and the BLAS libraries on one thread inside the block, then restore.
+
+    The fast RVM solvers add basis functions one at a time, choosing the best by comparing
+    floating-point gains; the last bits of a matrix product depend on how many threads summed
+    it, and a different last bit can tip one choice and with it the whole fit. With one thread
+    the same seed gives the same numbers on every machine (the fits here are small, so the cost
+    is modest).
+    """
+    # threadpoolctl limits the thread pools of libraries already loaded: load them all first.
+    import scipy.linalg  # noqa: F401
+    import sklearn.cluster
+    import sklearn.svm  # noqa: F401
+    import torch
+    from threadpoolctl import threadpool_limits
+
+    import bayes_fdi.diagnosis
+    import bayes_fdi.rvm  # noqa: F401
+
+    n_threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with threadpool_limits(limits=1):
+            yield
+    finally:
+        torch.set_num_threads(n_threads)
 
 
 # ----------------------------------------------------------------------------- datasets
@@ -818,8 +851,37 @@ def evaluate_dataset(
         Arrays for the figures: ``features``/``labels`` of the paper states' test runs,
         ``residuals`` examples (time, r1, r2 of the first test run of fn, f1, f2, f15),
         ``rvm_predict`` (features -> labels), ``train_features`` and ``train_labels``
-        (training runs of every state).
+        (training runs of every state), ``diagnoser`` (the fitted RVM
+        :class:`~bayes_fdi.diagnosis.FaultDiagnoser`) and ``test_runs`` (the paper states'
+        test runs).
+
+    Notes
+    -----
+    Torch and BLAS run on one thread here (:func:`single_threaded`), so the same seed gives
+    the same numbers on any machine.
     """
+    with single_threaded():
+        return _evaluate_dataset(
+            ds,
+            states=states,
+            n_train=n_train,
+            seed=seed,
+            all_states=all_states,
+            progress=progress,
+            diagnoser=diagnoser,
+        )
+
+
+def _evaluate_dataset(
+    ds: xr.Dataset,
+    *,
+    states: Sequence[str],
+    n_train: int,
+    seed: int,
+    all_states: bool,
+    progress: Callable[[str], None] | None,
+    diagnoser: Any,
+) -> tuple[dict[str, Any], dict[str, Any]]:
     from bayes_fdi.diagnosis import FaultDiagnoser
     from bayes_fdi.features import extract_features
 
@@ -919,6 +981,8 @@ def evaluate_dataset(
         "residuals": _residual_examples(res_test, y_test_all, ("fn", "f1", "f2", "f15")),
         "train_features": feats_train_all,
         "train_labels": y_train_all,
+        "diagnoser": diag,
+        "test_runs": test.isel(run=np.flatnonzero(in_paper_test)),
     }
 
     if all_states:
@@ -949,6 +1013,94 @@ def evaluate_dataset(
         results["all_states"] = block
     results["timing"] = timing
     return results, artifacts
+
+
+# ----------------------------------------------------------------------------- calibration
+def _ece_headline(e: dict[str, Any]) -> dict[str, Any]:
+    keys = ("value", "ci_low", "ci_high", "debiased", "noise_floor")
+    return {k: e.get(k) for k in keys}
+
+
+def calibration_headlines(
+    diagnoser: Any,
+    test_runs: xr.Dataset,
+    out_dir: str | os.PathLike,
+    *,
+    seed: int = 0,
+    real_record: xr.Dataset | None = None,
+    n_bootstrap: int = 500,
+    title: str = "Calibration report",
+) -> dict[str, Any]:
+    """Write the calibration report of a fitted diagnoser and return its headline figures.
+
+    Parameters
+    ----------
+    diagnoser
+        Fitted :class:`~bayes_fdi.diagnosis.FaultDiagnoser`.
+    test_runs
+        Labelled held-out runs (their ``fn`` runs score the normal models).
+    out_dir
+        Folder of the full report (:func:`bayes_fdi.calibration_report.write_calibration_report`).
+    seed
+        Seed of the bootstrap and of the cross-fitted recalibration.
+    real_record
+        A real fault-free record (e.g. the Lublin hour): the normal models, configured as the
+        diagnoser's, are fitted on its first half (width chosen there by
+        :func:`select_regression_width`) and scored on its second half.
+    n_bootstrap
+        Bootstrap resamples of the ECE intervals.
+    title
+        Heading of the full report.
+
+    Returns
+    -------
+    dict
+        ``report`` (path of ``report.md`` relative to the parent of ``out_dir``),
+        ``recalibration`` (method, fitted parameters), ``before`` and ``after``
+        (``accuracy``, ``log_loss``, ``ece``: top-label, 15 equal-width bins, with bootstrap
+        interval, debiased value and noise floor), ``coverage`` (per output, each level:
+        nominal, coverage, mean width, on the fault-free test runs) and, with
+        ``real_record``, ``real_record_coverage`` (the same on its second half).
+    """
+    from sklearn.base import clone
+
+    from bayes_fdi.calibration_report import time_split_summary, write_calibration_report
+
+    out = Path(out_dir)
+    with single_threaded():
+        path = write_calibration_report(
+            diagnoser, test_runs, out, seed=seed, n_bootstrap=n_bootstrap, title=title
+        )
+        cal = json.loads((path.parent / "calibration.json").read_text())
+        head: dict[str, Any] = {
+            "report": f"{out.name}/{path.name}",
+            "recalibration": cal["recalibration"],
+        }
+        for when in ("before", "after"):
+            d = cal["whole_tree"][when]
+            head[when] = {
+                "accuracy": d["accuracy"],
+                "log_loss": d["log_loss"],
+                "ece": _ece_headline(d["ece"]),
+            }
+        head["coverage"] = {k: v["coverage"] for k, v in cal.get("normal_models", {}).items()}
+        if real_record is not None:
+            first, _ = _split_half(real_record)
+            width, _ = select_regression_width(first, seed=seed)
+            model = clone(diagnoser.normal_models_)
+            regressor = model.regressor
+            if regressor is not None and "width" in regressor.get_params():
+                model.set_params(regressor=clone(regressor).set_params(width=width))
+            hour = time_split_summary(model, real_record)
+            head["real_record_coverage"] = {k: hour[k]["coverage"] for k in ("X", "F") if k in hour}
+            head["real_record_width"] = float(width)
+    return head
+
+
+def _split_half(runs: xr.Dataset) -> tuple[xr.Dataset, xr.Dataset]:
+    from bayes_fdi.calibration_report import split_in_time
+
+    return split_in_time(runs, 0.5)
 
 
 # ----------------------------------------------------------------------------- main job
@@ -1029,6 +1181,20 @@ def reproduce(
             ds, states=states, seed=seed, progress=lambda m, k=key: say(f"{k}: {m}")
         )
         res["campaign"] = info
+        say(f"{key}: calibration report")
+        real = None
+        if str(ds.attrs.get("source", "")) == "lublin-example":
+            from bayes_fdi.datasets import load_lublin_example
+
+            real = load_lublin_example()
+        res["calibration"] = calibration_headlines(
+            art["diagnoser"],
+            art["test_runs"],
+            out / f"{key}-calibration",
+            seed=seed,
+            real_record=real,
+            title=f"{key}: calibration of the RVM pipeline on its test runs",
+        )
         results["datasets"][key] = res
         say(f"{key}: figures")
         figs = {

@@ -81,6 +81,44 @@ def test_outputs_written_and_consistent(run):
         assert f"]({fig})" in report
 
 
+def test_calibration_headlines_match_the_full_report(run):
+    tmp, _, results, _ = run
+    out = tmp / "out1"
+    cal = results["datasets"]["tiny"]["calibration"]
+    full = json.loads((out / "tiny-calibration" / "calibration.json").read_text())
+    assert (out / cal["report"]).is_file()
+    for when in ("before", "after"):
+        mine, theirs = cal[when], full["whole_tree"][when]
+        assert mine["ece"]["value"] == theirs["ece"]["value"]
+        assert mine["accuracy"] == theirs["accuracy"] and mine["log_loss"] == theirs["log_loss"]
+        assert 0.0 <= mine["ece"]["value"] <= 1.0
+    # recalibration may not change the diagnosed state, so accuracy is unchanged ...
+    rvm = results["datasets"]["tiny"]["rvm"]
+    assert cal["before"]["accuracy"] == pytest.approx(rvm["accuracy"])
+    # ... and the before-ECE is the one of the main table (same runs, same bins)
+    assert cal["before"]["ece"]["value"] == pytest.approx(rvm["ece"])
+    for name in ("X", "F"):
+        c95 = cal["coverage"][name]["95%"]
+        assert c95 == full["normal_models"][name]["coverage"]["95%"]
+        assert 0.5 <= c95["coverage"] <= 1.0 and c95["mean_width"] > 0
+    assert "real_record_coverage" not in cal  # simulated inputs: no real record to split
+    report = (out / "report.md").read_text()
+    assert "## Calibration of the RVM pipeline" in report and f"]({cal['report']})" in report
+
+
+def test_single_threaded_limits_and_restores():
+    import torch
+    from threadpoolctl import threadpool_info
+
+    from bayes_fdi.reproduce import single_threaded
+
+    before = torch.get_num_threads()
+    with single_threaded():
+        assert torch.get_num_threads() == 1
+        assert all(lib["num_threads"] == 1 for lib in threadpool_info())
+    assert torch.get_num_threads() == before
+
+
 def test_cli_same_seed_same_numbers_from_the_cache(tmp_path, capsys, run):
     tmp, toml, first, _ = run
     cached = list((tmp / "cache").glob("tiny-*-seed3.nc"))
