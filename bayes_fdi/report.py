@@ -608,6 +608,15 @@ def _why_below(
     return lines
 
 
+def _display_path(path: str | os.PathLike) -> str:
+    """``path`` relative to the working folder when inside it (reports do not leak home paths)."""
+    p = Path(path)
+    try:
+        return p.resolve().relative_to(Path.cwd().resolve()).as_posix()
+    except (ValueError, OSError):
+        return p.name if p.is_absolute() else p.as_posix()
+
+
 def _ece_text(e: Mapping[str, Any]) -> str:
     return (
         f"{_num(e.get('value'), '.3f')} [{_num(e.get('ci_low'), '.3f')}, "
@@ -770,7 +779,7 @@ def render_report(results: Mapping[str, Any]) -> str:
         info = d.get("campaign", {})
         split = d.get("split", {})
         md += [
-            f"Campaign `{info.get('campaign_file', name)}` "
+            f"Campaign `{_display_path(info.get('campaign_file') or name)}` "
             f"(sha256 {str(info.get('campaign_sha256', ''))[:16]}…), "
             + (
                 "loaded from the cache"
