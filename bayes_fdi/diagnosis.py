@@ -68,6 +68,10 @@ class FaultDiagnoser(BaseEstimator):
         Passed to `bayes_fdi.residuals.NormalModels`.
     random_state
         Seed for subsampling, the GA and the tree design.
+    interval_calibration
+        Passed to `bayes_fdi.residuals.NormalModels`: ``"cross-fit"`` (default) calibrates
+        the predictive standard deviations ``X_hat_std``, ``F_hat_std`` on held-out fault-free
+        runs; ``None`` keeps the regressors' own.
 
     Attributes
     ----------
@@ -99,6 +103,7 @@ class FaultDiagnoser(BaseEstimator):
         width_search: str | None = "evidence",
         max_train_samples: int | None = None,
         random_state: int | None = 0,
+        interval_calibration: str | None = "cross-fit",
     ) -> None:
         self.regressor = regressor
         self.classifier = classifier
@@ -109,6 +114,7 @@ class FaultDiagnoser(BaseEstimator):
         self.width_search = width_search
         self.max_train_samples = max_train_samples
         self.random_state = random_state
+        self.interval_calibration = interval_calibration
 
     # ------------------------------------------------------------------ helpers
     def _feature_rows(self, res: xr.Dataset, what: str) -> np.ndarray:
@@ -157,6 +163,7 @@ class FaultDiagnoser(BaseEstimator):
             width_search=self.width_search,
             max_train_samples=self.max_train_samples,
             random_state=self.random_state,
+            interval_calibration=self.interval_calibration,
         ).fit(normal_runs)
         self.fit_seconds_["normal_models"] = time.perf_counter() - t0
 

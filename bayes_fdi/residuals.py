@@ -261,7 +261,25 @@ class NormalModels(BaseEstimator):
     chunk_size
         Samples per ``predict`` call (bounds memory).
     random_state
-        Seed for subsampling, the GA's validation split and the GA itself.
+        Seed for subsampling, the GA's validation split, the GA itself and the calibration
+        folds.
+    interval_calibration
+        ``"cross-fit"`` (default): make the predictive standard deviations honest out of
+        sample (see Notes). ``None``: use the regressors' own predictive standard deviations
+        (their in-sample noise estimate, optimistic on new runs).
+    calibration_folds
+        Number of folds (>= 2) of the cross-fit; the fault-free runs are split into folds by
+        run.
+    calibration_bins
+        Number of bins (>= 1) of ``|dCV/dt|`` with their own scale factor; 1 gives a single
+        factor per output.
+    calibration_method
+        How a bin's factor is fitted to its standardised held-out residuals ``z``: ``"mle"``
+        (``sqrt(mean(z**2))``, Gaussian maximum likelihood) or ``"coverage"`` (matches the
+        empirical 95 % coverage); see `bayes_fdi.calibration.StdScaler`.
+    calibration_max_samples
+        Training samples of each fold's refit (random subset; bounds the cost). ``None``: all
+        samples of the other folds.
 
     Attributes
     ----------
@@ -278,7 +296,42 @@ class NormalModels(BaseEstimator):
     n_dropped_nan_ : int
         Training samples left out because an input or output was NaN.
     fit_seconds_ : dict
-        Wall-clock seconds: ``"X"``, ``"F"`` (final fits) and ``"ga"`` (search, if any).
+        Wall-clock seconds: ``"X"``, ``"F"`` (final fits), ``"ga"`` or ``"evidence"``
+        (search, if any) and ``"calibration"`` (cross-fit, if any).
+    interval_calibration_ : str or None
+        The calibration applied (``None`` when none was, see above).
+    std_scale_ : dict
+        ``{"X": factors, "F": factors}``: one factor per ``|dCV/dt|`` bin (all 1 without
+        calibration).
+    std_scale_all_ : dict
+        ``{"X": factor, "F": factor}`` fitted on all held-out residuals together (used where
+        ``|dCV/dt|`` is not finite).
+    std_scale_edges_ : numpy.ndarray
+        Inner bin edges of ``|dCV/dt|`` (per second); bin ``b`` holds
+        ``edges[b-1] <= |dCV/dt| < edges[b]``.
+    calibration_fold_ : numpy.ndarray
+        ``(n_runs, n_times)`` fold of each training sample in the cross-fit (-1: not used,
+        e.g. NaN); absent without calibration.
+
+    Notes
+    -----
+    Interval calibration. With ``interval_calibration="cross-fit"``, ``fit`` ends by splitting
+    the fault-free runs into ``calibration_folds`` folds by run (seeded; a whole run is always
+    in one fold, so autocorrelated samples of a run never calibrate their own prediction). When
+    there are fewer runs than folds, every run is cut into contiguous time blocks and the blocks
+    are assigned to folds. For each fold and output the regressor is refitted at the width
+    already chosen on at most ``calibration_max_samples`` samples of the other folds, and the
+    held-out samples' standardised residuals ``z = (y - mean) / std`` are collected. The samples
+    are then binned by ``|dCV/dt|`` (per second, central differences along each run; bin edges
+    are quantiles of the training samples) and each bin gets the factor ``calibration_method``
+    fits to its ``z``. ``predict`` multiplies the predictive std by the factor of each sample's
+    bin (samples whose ``|dCV/dt|`` is not finite, e.g. next to a gap or in one-sample runs, get
+    the factor fitted on all bins together). The means are not changed. Only fault-free training
+    runs are used. The static models' error grows where CV moves fast (the stem lags its
+    command), and F's error vanishes at its flow rail, hence a factor per speed bin rather than
+    one constant. When the training data cannot be split (fewer than ``2 * calibration_folds``
+    finite samples), a warning is given and the factors stay 1 (``interval_calibration_`` is
+    then ``None``).
     """
 
     def __init__(
@@ -296,6 +349,11 @@ class NormalModels(BaseEstimator):
         max_train_samples: int | None = None,
         chunk_size: int = 20000,
         random_state: int | None = 0,
+        interval_calibration: str | None = "cross-fit",
+        calibration_folds: int = 4,
+        calibration_bins: int = 5,
+        calibration_method: str = "mle",
+        calibration_max_samples: int | None = 2000,
     ) -> None:
         self.regressor = regressor
         self.width_search = width_search
@@ -309,6 +367,11 @@ class NormalModels(BaseEstimator):
         self.max_train_samples = max_train_samples
         self.chunk_size = chunk_size
         self.random_state = random_state
+        self.interval_calibration = interval_calibration
+        self.calibration_folds = calibration_folds
+        self.calibration_bins = calibration_bins
+        self.calibration_method = calibration_method
+        self.calibration_max_samples = calibration_max_samples
 
     # ------------------------------------------------------------------ fitting
     def _base(self) -> Any:
@@ -341,6 +404,7 @@ class NormalModels(BaseEstimator):
             )
         if self.max_train_samples is not None and int(self.max_train_samples) < 2:
             raise ValueError("max_train_samples must be at least 2")
+        self._check_calibration_params()
         rng = np.random.default_rng(self.random_state)
         base = self._base()
         U, n_neg = model_inputs(normal_runs)
@@ -432,7 +496,142 @@ class NormalModels(BaseEstimator):
         self.n_negative_pressure_drop_ = n_neg
         self.n_dropped_nan_ = n_dropped
         self.n_features_in_ = len(MODEL_INPUTS)
+        self._fit_interval_calibration(normal_runs, U, targets, finite, base, widths)
         return self
+
+    # ------------------------------------------------------- interval calibration
+    def _check_calibration_params(self) -> None:
+        if self.interval_calibration not in (None, "cross-fit"):
+            raise ValueError(
+                "interval_calibration must be None or 'cross-fit', got "
+                f"{self.interval_calibration!r}"
+            )
+        for name, low in (("calibration_folds", 2), ("calibration_bins", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+                raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+        if self.calibration_method not in ("mle", "coverage"):
+            raise ValueError(
+                f"calibration_method must be 'mle' or 'coverage', got {self.calibration_method!r}"
+            )
+        m = self.calibration_max_samples
+        if m is not None and (isinstance(m, bool) or not isinstance(m, int | np.integer) or m < 2):
+            raise ValueError(f"calibration_max_samples must be None or an integer >= 2, got {m!r}")
+
+    def _fit_interval_calibration(
+        self,
+        runs: xr.Dataset,
+        U: np.ndarray,
+        targets: dict[str, np.ndarray],
+        finite: np.ndarray,
+        base: Any,
+        widths: dict[str, float],
+    ) -> None:
+        """Cross-fitted scale factors of the predictive stds (see the class docstring)."""
+        n_out = len(OUTPUT_CHANNELS)
+        self.interval_calibration_: str | None = None
+        self.std_scale_ = {name: np.ones(int(self.calibration_bins)) for name in OUTPUT_CHANNELS}
+        self.std_scale_all_ = dict.fromkeys(OUTPUT_CHANNELS, 1.0)
+        self.std_scale_edges_ = np.empty(0)
+        if self.interval_calibration is None:
+            return
+        from bayes_fdi.calibration import StdScaler
+
+        k = int(self.calibration_folds)
+        n_runs, n_times = runs.sizes["run"], runs.sizes["time"]
+        if int(finite.sum()) < 2 * k:
+            warnings.warn(
+                f"only {int(finite.sum())} finite fault-free samples: too few for "
+                f"{k}-fold interval calibration; predictive stds are not calibrated",
+                UserWarning,
+                stacklevel=3,
+            )
+            return
+        rng = np.random.default_rng(
+            None if self.random_state is None else [int(self.random_state), 7919]
+        )
+        # segments: whole runs, or contiguous time blocks when there are fewer runs than folds
+        blocks = 1 if n_runs >= k else min(n_times, -(-k // n_runs))
+        block_of_time = (np.arange(n_times) * blocks) // n_times
+        segment = (np.arange(n_runs)[:, None] * blocks + block_of_time[None, :]).ravel()
+        n_seg = n_runs * blocks
+        fold_of_segment = np.empty(n_seg, dtype=np.int64)
+        fold_of_segment[rng.permutation(n_seg)] = np.arange(n_seg) % k
+        fold = np.where(finite, fold_of_segment[segment], -1)
+        speed = self._cv_speed(runs)
+        t0 = time.perf_counter()
+        z = {name: np.full(U.shape[0], np.nan) for name in OUTPUT_CHANNELS}
+        for name, y in targets.items():
+            est0 = clone(base)
+            if name in widths:
+                est0.set_params(**{self.width_param: widths[name]})
+            fitted = self.regressors_[name]
+            params = est0.get_params()
+            if params.get(self.width_param, None) == "auto" and hasattr(
+                fitted, f"{self.width_param}_"
+            ):  # keep the width the final fit found instead of searching again per fold
+                est0.set_params(**{self.width_param: getattr(fitted, f"{self.width_param}_")})
+            for f in range(k):
+                held = np.flatnonzero(fold == f)
+                train = np.flatnonzero((fold >= 0) & (fold != f))
+                if held.size == 0 or train.size < 2:
+                    continue
+                if self.calibration_max_samples is not None and train.size > int(
+                    self.calibration_max_samples
+                ):
+                    train = np.sort(
+                        rng.choice(train, size=int(self.calibration_max_samples), replace=False)
+                    )
+                est = clone(est0).fit(U[train], y[train])
+                mean, std = _predict_with_std(est, U[held], int(self.chunk_size))
+                ok = np.isfinite(std) & (std > 0)
+                z[name][held[ok]] = (y[held[ok]] - mean[ok]) / std[ok]
+        self.fit_seconds_["calibration"] = time.perf_counter() - t0
+        used = np.isfinite(z[OUTPUT_CHANNELS[0]])
+        for name in OUTPUT_CHANNELS[1:n_out]:
+            used &= np.isfinite(z[name])
+        nb = int(self.calibration_bins)
+        fast = speed[used]
+        fast = fast[np.isfinite(fast)]
+        edges = np.quantile(fast, np.arange(1, nb) / nb) if (nb > 1 and fast.size) else []
+        self.std_scale_edges_ = np.asarray(edges, dtype=np.float64)
+        bins = self._speed_bins(speed)
+        for name in OUTPUT_CHANNELS:
+            zn = z[name][used]
+            scaler = StdScaler(method=self.calibration_method)
+            self.std_scale_all_[name] = scaler.fit(zn, np.zeros_like(zn), np.ones_like(zn)).scale_
+            scales = np.full(nb, self.std_scale_all_[name])
+            for b in range(nb):
+                zb = z[name][used & (bins == b)]
+                if zb.size >= 10 and np.any(zb != 0):
+                    scales[b] = scaler.fit(zb, np.zeros_like(zb), np.ones_like(zb)).scale_
+            self.std_scale_[name] = scales
+        self.calibration_fold_ = fold.reshape(n_runs, n_times)
+        self.interval_calibration_ = self.interval_calibration
+
+    @staticmethod
+    def _cv_speed(runs: xr.Dataset) -> np.ndarray:
+        """``|dCV/dt|`` per sample (per second, central differences), flattened run-major."""
+        cv = np.asarray(runs["CV"].transpose("run", "time").values, dtype=np.float64)
+        if cv.shape[1] < 2:
+            return np.full(cv.size, np.nan)
+        t = np.asarray(runs["time"].values, dtype=np.float64)
+        return np.abs(np.gradient(cv, t, axis=1)).ravel()
+
+    def _speed_bins(self, speed: np.ndarray) -> np.ndarray:
+        """Bin index of each ``|dCV/dt|`` (-1 where it is not finite)."""
+        bins = np.searchsorted(self.std_scale_edges_, speed, side="right")
+        return np.where(np.isfinite(speed), bins, -1)
+
+    def _std_factors(self, runs: xr.Dataset, name: str) -> np.ndarray:
+        """Calibration factor of each sample of ``runs`` for output ``name`` (flattened)."""
+        n = runs.sizes["run"] * runs.sizes["time"]
+        if getattr(self, "interval_calibration_", None) is None:
+            return np.ones(n)
+        bins = self._speed_bins(self._cv_speed(runs))
+        scales = self.std_scale_[name]
+        per_bin = scales[np.clip(bins, 0, scales.size - 1)]
+        return np.where(bins >= 0, per_bin, self.std_scale_all_[name])
 
     # --------------------------------------------------------------- prediction
     def _check_fitted(self) -> None:
@@ -463,6 +662,7 @@ class NormalModels(BaseEstimator):
             std = np.full(U.shape[0], np.nan)
             if ok.any():
                 mean[ok], std[ok] = _predict_with_std(est, U[ok], int(self.chunk_size))
+                std *= self._std_factors(runs, name)
             data[f"{name}_hat"] = (("run", "time"), mean.reshape(shape))
             data[f"{name}_hat_std"] = (("run", "time"), std.reshape(shape))
         coords = {k: v for k, v in runs.coords.items() if set(v.dims) <= {"run", "time"}}
