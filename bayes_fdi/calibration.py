@@ -4,7 +4,7 @@ A diagnoser is *calibrated* when its stated probabilities are frequencies: among
 it diagnoses as ``f2`` with probability 0.8, about 80 % really are ``f2``. A normal model
 is calibrated when its 95 % predictive intervals contain about 95 % of fault-free
 measurements. This module measures both, and recalibrates a whole tree's class
-distribution with a single temperature.
+distribution (one temperature, vector scaling or Dirichlet calibration).
 
 Classification
 --------------
@@ -18,6 +18,11 @@ Classification
     Matplotlib reliability diagram with the bin counts shown.
 :class:`TemperatureScaler`
     One temperature fitted on held-out data by minimising the negative log-likelihood.
+:class:`DirichletScaler`
+    Dirichlet calibration (a linear map of the log-probabilities with ODIR penalty chosen
+    by cross-validation), vector scaling, or one temperature.
+:func:`cross_val_log_loss`
+    Cross-validated log loss of a recalibrator, to choose one on calibration data only.
 :func:`node_calibration`
     Binary calibration of every node of a hierarchical classifier on the samples of its classes.
 
@@ -33,16 +38,19 @@ from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-from scipy import optimize, special, stats
+from scipy import optimize, stats
 
 __all__ = [
     "DEFAULT_LEVELS",
+    "DEFAULT_REG_GRID",
     "CoverageResult",
+    "DirichletScaler",
     "ECEResult",
     "NodeCalibration",
     "StdScaler",
     "TemperatureScaler",
     "brier",
+    "cross_val_log_loss",
     "crps_gaussian",
     "expected_calibration_error",
     "interval_coverage",
@@ -505,7 +513,8 @@ def reliability_diagram(
 # temperature scaling
 # --------------------------------------------------------------------------------------
 def _log_softmax(z: np.ndarray) -> np.ndarray:
-    return z - special.logsumexp(z, axis=1, keepdims=True)
+    shifted = z - np.max(z, axis=1, keepdims=True)
+    return shifted - np.log(np.sum(np.exp(shifted), axis=1, keepdims=True))
 
 
 class TemperatureScaler:
@@ -648,6 +657,404 @@ class TemperatureScaler:
     def __repr__(self) -> str:
         t = f", temperature_={self.temperature_:.4g}" if hasattr(self, "temperature_") else ""
         return f"TemperatureScaler(input={self.input!r}, floor={self.floor!r}{t})"
+
+
+# --------------------------------------------------------------------------------------
+# Dirichlet (matrix) and vector scaling
+# --------------------------------------------------------------------------------------
+#: Default grid of the ODIR penalty searched by :class:`DirichletScaler`'s cross-validation.
+DEFAULT_REG_GRID: tuple[float, ...] = (1e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0, 10.0)
+
+_PARAMETRIZATIONS = ("full", "diagonal", "scalar")
+
+
+def _class_indices(y: Any, n_rows: int, classes: Sequence | None, n_cols: int):
+    """Labels as column indices (validated); returns (indices, classes)."""
+    y = np.asarray(y)
+    if y.ndim != 1 or y.shape[0] != n_rows:
+        raise ValueError(f"y must be 1-D with {n_rows} labels, got shape {y.shape}")
+    if n_rows == 0:
+        raise ValueError("no samples to fit on")
+    cls = np.unique(y) if classes is None else np.asarray(classes)
+    if cls.ndim != 1 or len(np.unique(cls)) != len(cls):
+        raise ValueError("classes must be a 1-D sequence of distinct labels")
+    if len(cls) != n_cols:
+        raise ValueError(f"{n_cols} columns but {len(cls)} classes; pass `classes` in column order")
+    lookup = {c: i for i, c in enumerate(cls.tolist())}
+    try:
+        y_idx = np.array([lookup[v] for v in y.tolist()], dtype=np.intp)
+    except KeyError as err:
+        raise ValueError(f"label {err.args[0]!r} is not among the classes") from None
+    return y_idx, cls
+
+
+def _fold_indices(y_idx: np.ndarray, n_folds: int, seed: int | None) -> list[np.ndarray]:
+    """Seeded folds, stratified by class (each class dealt round-robin after shuffling)."""
+    rng = np.random.default_rng(seed)
+    fold = np.empty(y_idx.shape[0], dtype=np.intp)
+    start = 0
+    for c in np.unique(y_idx):
+        idx = rng.permutation(np.flatnonzero(y_idx == c))
+        fold[idx] = (start + np.arange(idx.size)) % n_folds
+        start += idx.size  # continue the round robin so fold sizes stay balanced
+    return [np.flatnonzero(fold == f) for f in range(n_folds)]
+
+
+class DirichletScaler:
+    """Recalibrate class distributions with a linear map of the log-probabilities.
+
+    ``q = softmax(W log(p) + b)`` (Kull et al. 2019, *Beyond temperature scaling: obtaining
+    well-calibrated multiclass probabilities with Dirichlet calibration*, NeurIPS). ``W`` is
+    a ``K x K`` matrix and ``b`` a ``K``-vector, fitted on held-out data by minimising the mean
+    negative log-likelihood plus the ODIR penalty (off-diagonal and intercept regularisation)
+
+    ``reg_lambda / (K (K - 1)) * sum_{i != j} W_ij**2 + reg_mu / K * sum_j b_j**2``,
+
+    so that with a strong penalty the map shrinks towards per-class powers
+    ``q_k ∝ p_k ** W_kk`` and never to zero (the diagonal is not penalised). ``W = I``,
+    ``b = 0`` is the identity on probabilities. Unlike :class:`TemperatureScaler` the map
+    can move probability between classes, so the arg-max (the diagnosed class) **can
+    change**: compare the accuracy before and after.
+
+    The penalty is chosen by ``cv``-fold cross-validation on the fitting data (folds
+    stratified by class and seeded by ``random_state``): the value of ``reg_grid`` with the
+    lowest mean held-out NLL (ties: the larger penalty); ``reg_mu`` is tied to ``reg_lambda``
+    unless given.
+
+    Parameters
+    ----------
+    parametrization
+        ``"full"`` (default): Dirichlet calibration, full ``W`` and ``b``;
+        ``"diagonal"``: vector scaling, ``W`` diagonal (one power per class) and ``b``;
+        ``"scalar"``: ``W = I / T``, ``b = 0`` (temperature scaling, no penalty, no
+        cross-validation).
+    reg_lambda
+        Off-diagonal penalty; ``None`` (default) chooses it from ``reg_grid`` by
+        cross-validation. Ignored unless ``parametrization="full"``.
+    reg_mu
+        Intercept penalty; ``None`` (default) uses the same value as ``reg_lambda`` (for
+        ``"diagonal"``: cross-validated on ``reg_grid``).
+    reg_grid
+        Penalties tried by the cross-validation.
+    cv
+        Number of cross-validation folds (>= 2).
+    min_samples
+        Fewer fitting samples than this, or fewer than ``2 * cv``, and the scaler falls back
+        to one temperature (``parametrization="scalar"``), recorded in ``fallback_``.
+        ``None`` (default): ``10 * K`` for ``"full"``, ``3 * K`` for ``"diagonal"``.
+    input
+        ``"proba"`` (default) or ``"logits"`` (unnormalised log-probabilities), as for
+        :class:`TemperatureScaler`.
+    floor
+        Probabilities below ``floor`` are raised to it before taking logarithms (default
+        1e-12, as :class:`TemperatureScaler`).
+    classes
+        Column labels; default: the sorted unique labels seen in ``fit``.
+    random_state
+        Seed of the cross-validation folds.
+    max_iter
+        Iteration limit of the (damped Newton) optimiser.
+
+    Attributes
+    ----------
+    coef_ : numpy.ndarray
+        ``W``, shape ``(K, K)``; rows are output classes. Adding one constant to a whole
+        column of ``W`` leaves the map unchanged for probability input, so compare maps (or
+        column-centred ``W``), not raw matrices.
+    intercept_ : numpy.ndarray
+        ``b``, shape ``(K,)`` (defined up to a common constant).
+    reg_lambda_, reg_mu_ : float
+        Penalties used for the final fit.
+    cv_results_ : dict
+        Penalty -> mean held-out NLL (empty when no cross-validation ran).
+    classes_ : numpy.ndarray
+    nll_before_, nll_after_ : float
+        Mean NLL on the fitting data before recalibration and after it (without penalty).
+    fallback_ : str or None
+        Why the requested parametrization was replaced by ``"scalar"``, else None.
+    parametrization_ : str
+        The parametrization actually fitted.
+    converged_ : bool
+    n_samples_ : int
+    """
+
+    def __init__(
+        self,
+        *,
+        parametrization: str = "full",
+        reg_lambda: float | None = None,
+        reg_mu: float | None = None,
+        reg_grid: Sequence[float] = DEFAULT_REG_GRID,
+        cv: int = 5,
+        min_samples: int | None = None,
+        input: str = "proba",
+        floor: float = 1e-12,
+        classes: Sequence | None = None,
+        random_state: int | None = 0,
+        max_iter: int = 100,
+    ) -> None:
+        self.parametrization = parametrization
+        self.reg_lambda = reg_lambda
+        self.reg_mu = reg_mu
+        self.reg_grid = reg_grid
+        self.cv = cv
+        self.min_samples = min_samples
+        self.input = input
+        self.floor = floor
+        self.classes = classes
+        self.random_state = random_state
+        self.max_iter = max_iter
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """Constructor parameters (scikit-learn convention)."""
+        return {
+            "parametrization": self.parametrization,
+            "reg_lambda": self.reg_lambda,
+            "reg_mu": self.reg_mu,
+            "reg_grid": self.reg_grid,
+            "cv": self.cv,
+            "min_samples": self.min_samples,
+            "input": self.input,
+            "floor": self.floor,
+            "classes": self.classes,
+            "random_state": self.random_state,
+            "max_iter": self.max_iter,
+        }
+
+    def set_params(self, **params: Any) -> DirichletScaler:
+        """Set constructor parameters (scikit-learn convention)."""
+        for k, v in params.items():
+            if k not in self.get_params():
+                raise ValueError(f"unknown parameter {k!r} for DirichletScaler")
+            setattr(self, k, v)
+        return self
+
+    def _logits(self, values: Any) -> np.ndarray:
+        return TemperatureScaler(input=self.input, floor=self.floor)._logits(values)
+
+    # ---- the optimisation problem
+    @staticmethod
+    def _basis(k: int, kind: str) -> np.ndarray:
+        """Matrix mapping the free parameters to ``vec([W | b])`` (row-major, k x (k+1))."""
+        full = np.eye(k * (k + 1))
+        if kind == "full":
+            return full
+        diag_cols = [a * (k + 1) + a for a in range(k)]
+        if kind == "diagonal":
+            return full[:, diag_cols + [a * (k + 1) + k for a in range(k)]]
+        return full[:, diag_cols].sum(axis=1, keepdims=True)
+
+    @staticmethod
+    def _identity(k: int, kind: str) -> np.ndarray:
+        if kind == "full":
+            return np.concatenate([np.eye(k), np.zeros((k, 1))], axis=1).ravel()
+        if kind == "diagonal":
+            return np.concatenate([np.ones(k), np.zeros(k)])
+        return np.ones(1)
+
+    @staticmethod
+    def _unpack(theta: np.ndarray, basis: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        m = (basis @ theta).reshape(k, k + 1)
+        return m[:, :k], m[:, k]
+
+    def _solve(
+        self, z: np.ndarray, y_idx: np.ndarray, kind: str, lam: float, mu: float
+    ) -> tuple[np.ndarray, bool]:
+        """Penalised multinomial logistic regression on ``[z, 1]`` by damped Newton steps.
+
+        The objective is convex; Newton's method with a backtracking line search converges in
+        a few tens of steps where first-order methods crawl (log-probabilities of a tree are
+        strongly correlated). The Hessian is singular along ``W -> W + 1 v^T`` (a constant
+        added to every logit) when the penalty does not fix it: steps are least-squares.
+        """
+        n, k = z.shape
+        x = np.concatenate([z, np.ones((n, 1))], axis=1)
+        onehot = np.zeros((n, k))
+        onehot[np.arange(n), y_idx] = 1.0
+        basis = self._basis(k, kind)
+        pen = np.zeros((k, k + 1))
+        if k > 1:
+            pen[:, :k] = lam / (k * (k - 1)) * (1.0 - np.eye(k))
+        pen[:, k] = mu / k
+        pen_phi = basis.T @ (pen.ravel()[:, None] * basis)  # penalty = theta' pen_phi theta
+        xx = (x[:, :, None] * x[:, None, :]).reshape(n, -1)
+
+        def value(theta: np.ndarray) -> tuple[float, np.ndarray]:
+            m = (basis @ theta).reshape(k, k + 1)
+            logq = _log_softmax(x @ m.T)
+            return float(-np.sum(onehot * logq) / n + theta @ pen_phi @ theta), logq
+
+        theta = self._identity(k, kind)
+        f, logq = value(theta)
+        ok = False
+        for _ in range(int(self.max_iter)):
+            q = np.exp(logq)
+            grad_m = ((q - onehot).T @ x) / n
+            g = basis.T @ grad_m.ravel() + 2.0 * pen_phi @ theta
+            if np.max(np.abs(g)) < 1e-9:
+                ok = True
+                break
+            s = (q[:, :, None] * (np.eye(k)[None] - q[:, None, :])).reshape(n, -1)
+            h = (s.T @ xx / n).reshape(k, k, k + 1, k + 1).transpose(0, 2, 1, 3)
+            h = basis.T @ h.reshape(k * (k + 1), -1) @ basis + 2.0 * pen_phi
+            step = -np.linalg.lstsq(h, g, rcond=1e-12)[0]
+            slope = float(g @ step)
+            if slope >= 0:  # numerically flat: no descent direction left
+                step, slope = -g, -float(g @ g)
+            t = 1.0
+            while True:
+                f_new, logq_new = value(theta + t * step)
+                if f_new <= f + 1e-4 * t * slope or t < 1e-10:
+                    break
+                t *= 0.5
+            if t < 1e-10 or f - f_new < 1e-15 * max(1.0, abs(f)):
+                ok = f_new <= f and np.max(np.abs(g)) < 1e-6
+                if f_new <= f:
+                    theta, f = theta + t * step, f_new
+                break
+            theta, f, logq = theta + t * step, f_new, logq_new
+        return theta, ok
+
+    def _nll(self, theta: np.ndarray, z: np.ndarray, y_idx: np.ndarray, kind: str) -> float:
+        k = z.shape[1]
+        w, b = self._unpack(theta, self._basis(k, kind), k)
+        logq = _log_softmax(z @ w.T + b)
+        return float(-np.mean(logq[np.arange(z.shape[0]), y_idx]))
+
+    def fit(self, proba_or_logits: Any, y: Any) -> DirichletScaler:
+        """Fit ``W`` and ``b`` (and choose the penalty) on held-out ``(proba_or_logits, y)``."""
+        if self.parametrization not in _PARAMETRIZATIONS:
+            raise ValueError(
+                f"parametrization must be one of {_PARAMETRIZATIONS}, got {self.parametrization!r}"
+            )
+        if int(self.cv) != self.cv or self.cv < 2:
+            raise ValueError(f"cv must be an integer >= 2, got {self.cv!r}")
+        grid = np.asarray(self.reg_grid, dtype=np.float64)
+        if grid.ndim != 1 or grid.size == 0 or np.any(~np.isfinite(grid)) or np.any(grid < 0):
+            raise ValueError("reg_grid must be a non-empty sequence of finite penalties >= 0")
+        for name in ("reg_lambda", "reg_mu"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0 or None, got {v!r}")
+        if int(self.max_iter) != self.max_iter or self.max_iter < 1:
+            raise ValueError(f"max_iter must be a positive integer, got {self.max_iter!r}")
+        z = self._logits(proba_or_logits)
+        n, k = z.shape
+        y_idx, cls = _class_indices(y, n, self.classes, k)
+        kind = self.parametrization
+        min_n = self.min_samples
+        if min_n is None:
+            min_n = {"full": 10 * k, "diagonal": 3 * k, "scalar": 1}[kind]
+        self.fallback_ = None
+        if kind != "scalar" and (n < min_n or n < 2 * self.cv):
+            self.fallback_ = (
+                f"{n} fitting samples < {max(min_n, 2 * self.cv)} needed for "
+                f"{kind!r}: fitted one temperature instead"
+            )
+            kind = "scalar"
+        # ---- penalty
+        self.cv_results_ = {}
+        if kind == "scalar":
+            lam = mu = 0.0
+        elif kind == "full" and self.reg_lambda is not None:
+            lam = float(self.reg_lambda)
+            mu = lam if self.reg_mu is None else float(self.reg_mu)
+        elif kind == "diagonal" and self.reg_mu is not None:
+            lam = mu = float(self.reg_mu)
+        else:
+            folds = _fold_indices(y_idx, int(self.cv), self.random_state)
+            fixed_mu = None if kind == "diagonal" else self.reg_mu
+            scores = {}
+            for r in sorted(grid.tolist(), reverse=True):
+                m = r if fixed_mu is None else float(fixed_mu)
+                losses = []
+                for f in folds:
+                    train = np.setdiff1d(np.arange(n), f)
+                    theta, _ = self._solve(z[train], y_idx[train], kind, r, m)
+                    losses.append(self._nll(theta, z[f], y_idx[f], kind) * f.size)
+                scores[r] = float(np.sum(losses) / n)
+            self.cv_results_ = scores
+            best = min(scores.values())
+            lam = max(r for r, s in scores.items() if s <= best + 1e-12)
+            mu = lam if fixed_mu is None else float(fixed_mu)
+        theta, ok = self._solve(z, y_idx, kind, lam, mu)
+        w, b = self._unpack(theta, self._basis(k, kind), k)
+        self.coef_ = np.array(w)
+        self.intercept_ = np.array(b)
+        self.reg_lambda_ = lam if kind == "full" else 0.0
+        self.reg_mu_ = mu
+        self.parametrization_ = kind
+        self.converged_ = ok
+        self.classes_ = cls
+        rows = np.arange(n)
+        self.nll_before_ = float(-np.mean(_log_softmax(z)[rows, y_idx]))
+        self.nll_after_ = self._nll(theta, z, y_idx, kind)
+        self.n_samples_ = int(n)
+        return self
+
+    def transform(self, proba_or_logits: Any) -> np.ndarray:
+        """Recalibrated probabilities ``softmax(W log(p) + b)``; rows sum to 1."""
+        if not hasattr(self, "coef_"):
+            raise ValueError("DirichletScaler is not fitted; call fit first")
+        z = self._logits(proba_or_logits)
+        if z.shape[1] != len(self.classes_):
+            raise ValueError(f"expected {len(self.classes_)} columns, got {z.shape[1]}")
+        return np.exp(_log_softmax(z @ self.coef_.T + self.intercept_))
+
+    def fit_transform(self, proba_or_logits: Any, y: Any) -> np.ndarray:
+        """``fit`` then ``transform`` on the same data."""
+        return self.fit(proba_or_logits, y).transform(proba_or_logits)
+
+    def __repr__(self) -> str:
+        fitted = f", reg_lambda_={self.reg_lambda_:.3g}" if hasattr(self, "coef_") else ""
+        return f"DirichletScaler(parametrization={self.parametrization!r}{fitted})"
+
+
+def cross_val_log_loss(
+    scaler: Any,
+    proba: Any,
+    y: Any,
+    *,
+    classes: Sequence | None = None,
+    cv: int = 5,
+    random_state: int | None = 0,
+) -> float:
+    """Mean held-out log loss of a recalibrator, by ``cv``-fold cross-validation.
+
+    Each fold is recalibrated by a fresh copy of ``scaler`` (same ``get_params``, with
+    ``classes`` set) fitted on the other folds; folds are stratified by class and seeded.
+    Use it to choose a recalibrator on the calibration data only.
+
+    Parameters
+    ----------
+    scaler
+        An unfitted recalibrator with ``get_params``, ``fit(proba, y)`` and
+        ``transform(proba)`` (:class:`TemperatureScaler`, :class:`DirichletScaler`).
+    proba, y
+        Calibration probabilities ``(n, K)`` and labels.
+    classes
+        Column labels; default: the sorted unique labels of ``y``.
+    cv
+        Number of folds (>= 2, at most ``n``).
+    random_state
+        Seed of the folds.
+
+    Returns
+    -------
+    float
+        Sum over folds of the held-out NLL, divided by ``n``.
+    """
+    yv, p, cls = _check_proba(y, proba, classes)
+    if int(cv) != cv or not 2 <= cv <= yv.shape[0]:
+        raise ValueError(f"cv must be an integer in [2, n_samples={yv.shape[0]}], got {cv!r}")
+    y_idx, _ = _class_indices(yv, yv.shape[0], cls, p.shape[1])
+    total = 0.0
+    for f in _fold_indices(y_idx, int(cv), random_state):
+        train = np.setdiff1d(np.arange(yv.shape[0]), f)
+        est = type(scaler)(**(scaler.get_params() | {"classes": cls}))
+        q = est.fit(p[train], yv[train]).transform(p[f])
+        total += -np.sum(np.log(np.maximum(q[np.arange(f.size), y_idx[f]], 1e-300)))
+    return float(total / yv.shape[0])
 
 
 # --------------------------------------------------------------------------------------

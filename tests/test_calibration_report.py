@@ -119,7 +119,18 @@ def test_report_before_after_nodes_and_coverage(setup, tmp_path):
     assert res["recalibration"]["temperature"] == pytest.approx(2.0, rel=0.15)
     assert after["ece"]["value"] < 0.04 < before["ece"]["value"]
     assert after["log_loss"] < before["log_loss"]
-    assert after["accuracy"] == before["accuracy"]
+    temp = res["whole_tree"]["temperature"]
+    assert temp["accuracy"] == before["accuracy"]  # one temperature never changes the argmax
+    # the distortion is a pure temperature: every recalibrator fixes it, none beats the truth
+    for m in ("temperature", "vector", "dirichlet"):
+        assert res["whole_tree"][m]["ece"]["value"] < 0.04
+    fit = res["recalibration"]["fits"][0]
+    assert res["recalibration"]["selected"] == [fit["selected"]]
+    assert fit["selected"] == min(fit["cv_log_loss"], key=fit["cv_log_loss"].get)
+    assert after == res["whole_tree"][fit["selected"]]
+    assert {(b["strategy"], b["n_bins"]) for b in res["ece_binning"]} == {
+        (s, nb) for s in ("uniform", "quantile") for nb in (15, 10, 5)
+    }
     assert sum(before["ece"]["bin_counts"]) == 1200
     # nodes evaluate the exact posterior -> calibrated; node 0 sees all runs, node 1 the faults
     assert [n["n"] for n in res["nodes"]] == [1200, 800]
@@ -149,6 +160,8 @@ def test_report_cross_fits_without_calibration_runs(setup, tmp_path):
     res = json.loads((tmp_path / "calibration.json").read_text())
     t = res["recalibration"]["temperature"]
     assert len(t) == 2 and all(v == pytest.approx(2.0, rel=0.25) for v in t)
+    assert [f["scored"] for f in res["recalibration"]["fits"]] == [595, 595]
+    assert [f["n_fit"] for f in res["recalibration"]["fits"]] == [595, 595]
     assert res["n_excluded_unknown_state"] == 10 and res["excluded_states"] == ["f9"]
     assert res["whole_tree"]["after"]["ece"]["value"] < res["whole_tree"]["before"]["ece"]["value"]
     assert "10 excluded" in (tmp_path / "report.md").read_text()
@@ -270,3 +283,44 @@ def test_time_split_summary_of_a_correct_gaussian_model(rng):
         assert res[name]["crps"] == pytest.approx(s / np.sqrt(np.pi), rel=0.03)
     with pytest.raises(ValueError, match="fraction"):
         cr.split_in_time(runs, 1.0)
+
+
+def test_recalibrate_cross_fits_every_run_out_of_fold(rng):
+    """Each fold's temperature column equals a TemperatureScaler fitted on the other folds."""
+    from bayes_fdi.calibration import TemperatureScaler, _fold_indices
+
+    n, k = 900, 3
+    p_true = rng.dirichlet(np.ones(k), size=n)
+    y = np.array(CLASSES)[(rng.random(n)[:, None] > np.cumsum(p_true, 1)).sum(1).clip(max=k - 1)]
+    hot = np.exp(np.log(p_true) / 0.5)
+    hot /= hot.sum(axis=1, keepdims=True)
+    out, info = cr.recalibrate(y, hot, CLASSES, n_folds=3, methods=("temperature",), seed=4)
+    y_idx = np.array([CLASSES.index(v) for v in y])
+    folds = _fold_indices(y_idx, 3, 4)
+    assert sorted(np.concatenate(folds).tolist()) == list(range(n))
+    for fold, fit in zip(folds, info["fits"], strict=True):
+        rest = np.setdiff1d(np.arange(n), fold)
+        ts = TemperatureScaler(classes=CLASSES).fit(hot[rest], y[rest])
+        np.testing.assert_allclose(out["temperature"][fold], ts.transform(hot[fold]))
+        assert fit["temperature"]["temperature"] == pytest.approx(ts.temperature_)
+        assert fit["selected"] == "temperature" and fit["scored"] == fold.size
+    np.testing.assert_array_equal(out["after"], out["temperature"])
+    with pytest.raises(ValueError, match="n_folds"):
+        cr.recalibrate(y, hot, CLASSES, n_folds=1)
+    with pytest.raises(ValueError, match="unknown recalibrator"):
+        cr.recalibrate(y, hot, CLASSES, methods=("platt",))
+
+
+def test_recalibrate_selects_dirichlet_for_a_dirichlet_distortion(rng):
+    """Classes 0 and 1 swapped by the distortion: only the full map can undo it."""
+    n, k = 1500, 3
+    p_true = rng.dirichlet(np.full(k, 0.5), size=n)
+    y = np.array(CLASSES)[(rng.random(n)[:, None] > np.cumsum(p_true, 1)).sum(1).clip(max=k - 1)]
+    p_obs = p_true[:, [1, 0, 2]]
+    out, info = cr.recalibrate(y, p_obs, CLASSES, n_folds=2, seed=0)
+    assert [f["selected"] for f in info["fits"]] == ["dirichlet", "dirichlet"]
+    acc = {m: np.mean(np.array(CLASSES)[q.argmax(1)] == y) for m, q in out.items()}
+    acc_true = np.mean(np.array(CLASSES)[p_true.argmax(1)] == y)
+    assert acc["after"] == pytest.approx(acc_true, abs=0.025)
+    assert acc["temperature"] == pytest.approx(np.mean(np.array(CLASSES)[p_obs.argmax(1)] == y))
+    assert acc["after"] > acc["temperature"] + 0.2
