@@ -1029,6 +1029,7 @@ def calibration_headlines(
     seed: int = 0,
     real_record: xr.Dataset | None = None,
     n_bootstrap: int = 500,
+    n_folds: int = 5,
     title: str = "Calibration report",
 ) -> dict[str, Any]:
     """Write the calibration report of a fitted diagnoser and return its headline figures.
@@ -1049,6 +1050,10 @@ def calibration_headlines(
         :func:`select_regression_width`) and scored on its second half.
     n_bootstrap
         Bootstrap resamples of the ECE intervals.
+    n_folds
+        Cross-fitting folds of the recalibration (each test run is recalibrated by
+        recalibrators fitted on the other folds; see
+        :func:`bayes_fdi.calibration_report.recalibrate`).
     title
         Heading of the full report.
 
@@ -1058,7 +1063,9 @@ def calibration_headlines(
         ``report`` (path of ``report.md`` relative to the parent of ``out_dir``),
         ``recalibration`` (method, fitted parameters), ``before`` and ``after``
         (``accuracy``, ``log_loss``, ``ece``: top-label, 15 equal-width bins, with bootstrap
-        interval, debiased value and noise floor), ``coverage`` (per output, each level:
+        interval, debiased value and noise floor), ``selected`` (recalibrators chosen in the
+        folds), ``ece_by_binning`` (before/after with other bin counts and equal-mass bins),
+        ``coverage`` (per output, each level:
         nominal, coverage, mean width, on the fault-free test runs) and, with
         ``real_record``, ``real_record_coverage`` (the same on its second half).
     """
@@ -1069,7 +1076,13 @@ def calibration_headlines(
     out = Path(out_dir)
     with single_threaded():
         path = write_calibration_report(
-            diagnoser, test_runs, out, seed=seed, n_bootstrap=n_bootstrap, title=title
+            diagnoser,
+            test_runs,
+            out,
+            seed=seed,
+            n_bootstrap=n_bootstrap,
+            n_folds=n_folds,
+            title=title,
         )
         cal = json.loads((path.parent / "calibration.json").read_text())
         head: dict[str, Any] = {
@@ -1083,6 +1096,16 @@ def calibration_headlines(
                 "log_loss": d["log_loss"],
                 "ece": _ece_headline(d["ece"]),
             }
+        head["selected"] = sorted(set(cal["recalibration"].get("selected", [])))
+        head["ece_by_binning"] = [
+            {
+                "strategy": b["strategy"],
+                "n_bins": b["n_bins"],
+                "before": _ece_headline(b["before"]),
+                "after": _ece_headline(b["after"]),
+            }
+            for b in cal.get("ece_binning", [])
+        ]
         head["coverage"] = {k: v["coverage"] for k, v in cal.get("normal_models", {}).items()}
         if real_record is not None:
             first, _ = _split_half(real_record)

@@ -92,10 +92,9 @@ def test_calibration_headlines_match_the_full_report(run):
         assert mine["ece"]["value"] == theirs["ece"]["value"]
         assert mine["accuracy"] == theirs["accuracy"] and mine["log_loss"] == theirs["log_loss"]
         assert 0.0 <= mine["ece"]["value"] <= 1.0
-    # recalibration may not change the diagnosed state, so accuracy is unchanged ...
+    # before recalibration the numbers are the main table's (same runs, same bins)
     rvm = results["datasets"]["tiny"]["rvm"]
     assert cal["before"]["accuracy"] == pytest.approx(rvm["accuracy"])
-    # ... and the before-ECE is the one of the main table (same runs, same bins)
     assert cal["before"]["ece"]["value"] == pytest.approx(rvm["ece"])
     for name in ("X", "F"):
         c95 = cal["coverage"][name]["95%"]
