@@ -68,6 +68,11 @@ class FaultDiagnoser(BaseEstimator):
         Passed to `bayes_fdi.residuals.NormalModels`.
     random_state
         Seed for subsampling, the GA and the tree design.
+    input_lags
+        Passed to `bayes_fdi.residuals.NormalModels`: lags ``L`` (seconds) of extra normal-model
+        inputs ``CV(t - L)`` (dynamic normal models, beyond the paper; the command is taken as
+        held at its first value before a run's first sample). Default ``()``: the paper's
+        static inputs ``(CV, sqrt(P1 - P2), T1)``.
 
     Attributes
     ----------
@@ -99,6 +104,7 @@ class FaultDiagnoser(BaseEstimator):
         width_search: str | None = "evidence",
         max_train_samples: int | None = None,
         random_state: int | None = 0,
+        input_lags: Sequence[float] = (),
     ) -> None:
         self.regressor = regressor
         self.classifier = classifier
@@ -109,6 +115,7 @@ class FaultDiagnoser(BaseEstimator):
         self.width_search = width_search
         self.max_train_samples = max_train_samples
         self.random_state = random_state
+        self.input_lags = input_lags
 
     # ------------------------------------------------------------------ helpers
     def _feature_rows(self, res: xr.Dataset, what: str) -> np.ndarray:
@@ -157,6 +164,7 @@ class FaultDiagnoser(BaseEstimator):
             width_search=self.width_search,
             max_train_samples=self.max_train_samples,
             random_state=self.random_state,
+            input_lags=self.input_lags,
         ).fit(normal_runs)
         self.fit_seconds_["normal_models"] = time.perf_counter() - t0
 
