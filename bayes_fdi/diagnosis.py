@@ -72,6 +72,11 @@ class FaultDiagnoser(BaseEstimator):
         Passed to `bayes_fdi.residuals.NormalModels`: ``"cross-fit"`` (default) calibrates
         the predictive standard deviations ``X_hat_std``, ``F_hat_std`` on held-out fault-free
         runs; ``None`` keeps the regressors' own.
+    input_lags
+        Passed to `bayes_fdi.residuals.NormalModels`: lags ``L`` (seconds) of extra normal-model
+        inputs ``CV(t - L)`` (dynamic normal models, beyond the paper; the command is taken as
+        held at its first value before a run's first sample). Default ``()``: the paper's
+        static inputs ``(CV, sqrt(P1 - P2), T1)``.
 
     Attributes
     ----------
@@ -104,6 +109,7 @@ class FaultDiagnoser(BaseEstimator):
         max_train_samples: int | None = None,
         random_state: int | None = 0,
         interval_calibration: str | None = "cross-fit",
+        input_lags: Sequence[float] = (),
     ) -> None:
         self.regressor = regressor
         self.classifier = classifier
@@ -115,6 +121,7 @@ class FaultDiagnoser(BaseEstimator):
         self.max_train_samples = max_train_samples
         self.random_state = random_state
         self.interval_calibration = interval_calibration
+        self.input_lags = input_lags
 
     # ------------------------------------------------------------------ helpers
     def _feature_rows(self, res: xr.Dataset, what: str) -> np.ndarray:
@@ -164,6 +171,7 @@ class FaultDiagnoser(BaseEstimator):
             max_train_samples=self.max_train_samples,
             random_state=self.random_state,
             interval_calibration=self.interval_calibration,
+            input_lags=self.input_lags,
         ).fit(normal_runs)
         self.fit_seconds_["normal_models"] = time.perf_counter() - t0
 

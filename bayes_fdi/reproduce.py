@@ -625,6 +625,7 @@ def select_regression_width(
     widths: Sequence[float] = REGRESSION_WIDTHS,
     max_samples: int = REGRESSION_WIDTH_SAMPLES,
     seed: int = 0,
+    input_lags: Sequence[float] = (),
 ) -> tuple[float, dict[float, float]]:
     """RBF width of the normal models by maximum evidence over a grid.
 
@@ -644,6 +645,9 @@ def select_regression_width(
         Subsample size.
     seed
         Subsample seed.
+    input_lags
+        Lags (seconds) of extra inputs ``CV(t - L)`` of the normal models
+        (:func:`bayes_fdi.residuals.model_inputs`); default ``()``, the paper's inputs.
 
     Returns
     -------
@@ -654,7 +658,7 @@ def select_regression_width(
     from bayes_fdi.residuals import model_inputs
     from bayes_fdi.rvm import RVR
 
-    U, _ = model_inputs(normal_runs, warn=False)
+    U, _ = model_inputs(normal_runs, warn=False, input_lags=input_lags)
     targets = [np.asarray(normal_runs[c].transpose("run", "time").values).ravel() for c in "XF"]
     ok = np.isfinite(U).all(axis=1) & np.isfinite(targets[0]) & np.isfinite(targets[1])
     idx = np.flatnonzero(ok)

@@ -14,6 +14,12 @@ Pressure drop: where ``P1 < P2`` (reverse flow under fault f17, or bad data), th
 is replaced by the signed root ``sign(D) * sqrt(|D|)`` with ``D = P1 - P2``; such samples are
 kept (never dropped) and counted, with a `NegativePressureDropWarning`.
 
+Dynamic inputs (beyond the paper): ``input_lags=(L1, L2, ...)`` appends the delayed commands
+``CV(t - L1), CV(t - L2), ...`` (lags in seconds of the ``time`` coordinate) to the three inputs,
+so the models can follow the actuator's lag behind its command. Before a run's first sample the
+command is taken as held at its first value (no sample is dropped). The default ``()`` gives the
+paper's static models.
+
 Missing values: samples with a NaN input are not passed to the regressors; their predictions
 and residuals are NaN (counted in the output's attributes). In ``fit``, samples with a NaN
 input or output are left out of the training set with a warning giving their number.
@@ -24,7 +30,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -39,6 +45,7 @@ __all__ = [
     "NegativePressureDropWarning",
     "NormalModels",
     "genetic_width_search",
+    "input_names",
     "model_inputs",
 ]
 
@@ -50,7 +57,86 @@ class NegativePressureDropWarning(UserWarning):
     """Some samples have ``P1 < P2``; the signed root ``sign(D) sqrt(|D|)`` was used."""
 
 
-def model_inputs(ds: xr.Dataset, *, warn: bool = True) -> tuple[np.ndarray, int]:
+def _check_lags(input_lags: Any) -> tuple[float, ...]:
+    """Validate ``input_lags`` (seconds): a sequence of distinct finite positive numbers."""
+    if isinstance(input_lags, (str, bytes)) or not hasattr(input_lags, "__iter__"):
+        raise ValueError(
+            f"input_lags must be a sequence of lags in seconds, e.g. (1, 2); got {input_lags!r}"
+        )
+    lags = []
+    for lag in input_lags:
+        if isinstance(lag, (bool, np.bool_)) or not isinstance(lag, (int, float, np.number)):
+            raise ValueError(f"input_lags must hold numbers (seconds); got {lag!r}")
+        value = float(lag)
+        if not math.isfinite(value) or value <= 0:
+            raise ValueError(f"input_lags must be positive and finite (seconds); got {lag!r}")
+        lags.append(value)
+    if len(set(lags)) != len(lags):
+        raise ValueError(f"input_lags has duplicate lags: {tuple(input_lags)!r}")
+    return tuple(lags)
+
+
+def _lag_name(lag: float) -> str:
+    return f"CV_lag{lag:g}s"
+
+
+def input_names(input_lags: Any = ()) -> tuple[str, ...]:
+    """Names of the columns of ``model_inputs(ds, input_lags=input_lags)``.
+
+    ``("CV", "sqrt_dP", "T1")`` followed by ``"CV_lag{L}s"`` for each lag ``L`` (in the order
+    given), e.g. ``input_names((1, 2.5))`` is
+    ``("CV", "sqrt_dP", "T1", "CV_lag1s", "CV_lag2.5s")``.
+    """
+    return MODEL_INPUTS + tuple(_lag_name(lag) for lag in _check_lags(input_lags))
+
+
+def _lag_steps(ds: xr.Dataset, lags: tuple[float, ...]) -> list[int]:
+    """Each lag as a whole number of sampling steps of ``ds["time"]`` (ValueError otherwise)."""
+    if "time" not in ds.coords:
+        raise ValueError("input_lags need a 'time' coordinate (seconds) to define the lag")
+    t = np.asarray(ds["time"].values)
+    if np.issubdtype(t.dtype, np.datetime64) or np.issubdtype(t.dtype, np.timedelta64):
+        t = (t - t[0]) / np.timedelta64(1, "s")
+    if not np.issubdtype(t.dtype, np.number):
+        raise ValueError(f"the 'time' coordinate must be numeric seconds, got dtype {t.dtype}")
+    t = t.astype(np.float64)
+    if t.size < 2:
+        raise ValueError(
+            f"input_lags need at least 2 time samples to define the sampling step, got {t.size}"
+        )
+    dt = np.diff(t)
+    step = float(dt[0])
+    if not (math.isfinite(step) and step > 0):
+        raise ValueError(f"the 'time' coordinate must increase, got a first step of {step}")
+    if not np.allclose(dt, step, rtol=1e-6, atol=0.0):
+        raise ValueError(
+            "input_lags need a uniform time grid; the 'time' steps range from "
+            f"{dt.min():g} to {dt.max():g} s"
+        )
+    steps = []
+    for lag in lags:
+        ratio = lag / step
+        k = round(ratio)
+        if k < 1 or abs(ratio - k) > 1e-6 * max(1.0, ratio):
+            raise ValueError(
+                f"input lag {lag:g} s is not a whole multiple of the sampling step {step:g} s"
+            )
+        steps.append(int(k))
+    return steps
+
+
+def _held_shift(cv: np.ndarray, k: int) -> np.ndarray:
+    """``cv`` (run, time) delayed by ``k`` samples, held at each run's first value before it."""
+    out = np.empty_like(cv)
+    k = min(k, cv.shape[1])
+    out[:, :k] = cv[:, :1]
+    out[:, k:] = cv[:, : cv.shape[1] - k]
+    return out
+
+
+def model_inputs(
+    ds: xr.Dataset, *, warn: bool = True, input_lags: Any = ()
+) -> tuple[np.ndarray, int]:
     """Regression inputs ``(CV, sign(D) sqrt(|D|), T1)`` with ``D = P1 - P2``, one row a sample.
 
     Parameters
@@ -59,19 +145,31 @@ def model_inputs(ds: xr.Dataset, *, warn: bool = True) -> tuple[np.ndarray, int]
         Dataset in the project's format with channels ``CV``, ``P1``, ``P2``, ``T1``.
     warn
         Emit a `NegativePressureDropWarning` when some samples have ``P1 < P2``.
+    input_lags
+        Lags ``L`` in seconds (positive, distinct, each a whole multiple of the sampling step of
+        the uniform ``time`` coordinate); one column ``CV(t - L)`` is appended per lag, in the
+        order given (names: `input_names`). Before a run's first sample the command is taken
+        as held at its first value, so ``CV(t - L) = CV(t_0)`` for ``t - L < t_0``: no sample
+        is dropped. A NaN command stays NaN in the lagged columns (``L`` later). Default
+        ``()``: the paper's three static inputs.
 
     Returns
     -------
     inputs : numpy.ndarray
-        ``(n_runs * n_times, 3)``, runs stacked in order (row ``r * n_times + t``). NaN inputs
-        stay NaN.
+        ``(n_runs * n_times, 3 + len(input_lags))``, runs stacked in order (row
+        ``r * n_times + t``). NaN inputs stay NaN.
     n_negative : int
         Number of samples with ``P1 < P2`` (signed root used; samples kept).
     """
+    lags = _check_lags(input_lags)
     validate_dataset(ds, require=INPUT_CHANNELS, allow_nan=True)
+    steps = _lag_steps(ds, lags) if lags else []
+
+    def grid(name: str) -> np.ndarray:
+        return np.asarray(ds[name].transpose("run", "time").values, dtype=np.float64)
 
     def flat(name: str) -> np.ndarray:
-        return np.asarray(ds[name].transpose("run", "time").values, dtype=np.float64).ravel()
+        return grid(name).ravel()
 
     dp = flat("P1") - flat("P2")
     n_negative = int(np.sum(dp < 0))
@@ -83,7 +181,11 @@ def model_inputs(ds: xr.Dataset, *, warn: bool = True) -> tuple[np.ndarray, int]
             stacklevel=2,
         )
     root = np.sign(dp) * np.sqrt(np.abs(dp))
-    return np.column_stack([flat("CV"), root, flat("T1")]), n_negative
+    columns = [flat("CV"), root, flat("T1")]
+    if steps:
+        cv = grid("CV")
+        columns += [_held_shift(cv, k).ravel() for k in steps]
+    return np.column_stack(columns), n_negative
 
 
 class GAResult(NamedTuple):
@@ -228,6 +330,10 @@ def _predict_with_std(est: Any, X: np.ndarray, chunk: int) -> tuple[np.ndarray, 
 class NormalModels(BaseEstimator):
     """Fault-free models ``X_hat = g1(u)``, ``F_hat = g2(u)`` with ``u = (CV, sqrt(P1-P2), T1)``.
 
+    With ``input_lags`` the inputs also hold the delayed commands ``CV(t - L)`` (see
+    `model_inputs`), everywhere the inputs are built: the width searches, the fits,
+    `predict` and `residuals`.
+
     Parameters
     ----------
     regressor
@@ -280,6 +386,11 @@ class NormalModels(BaseEstimator):
     calibration_max_samples
         Training samples of each fold's refit (random subset; bounds the cost). ``None``: all
         samples of the other folds.
+    input_lags
+        Lags ``L`` in seconds of extra inputs ``CV(t - L)`` (dynamic normal models, beyond the
+        paper; positive, distinct, whole multiples of the sampling step). Before a run's first
+        sample the command is taken as held at its first value. Default ``()``: the paper's
+        static models on ``(CV, sqrt(P1 - P2), T1)``.
 
     Attributes
     ----------
@@ -312,6 +423,12 @@ class NormalModels(BaseEstimator):
     calibration_fold_ : numpy.ndarray
         ``(n_runs, n_times)`` fold of each training sample in the cross-fit (-1: not used,
         e.g. NaN); absent without calibration.
+    input_lags_ : tuple of float
+        The validated lags (seconds) the models were fitted with; `predict` uses these.
+    input_names_ : tuple of str
+        Names of the model inputs, e.g. ``("CV", "sqrt_dP", "T1", "CV_lag1s", "CV_lag2s")``.
+    n_features_in_ : int
+        Number of model inputs (``3 + len(input_lags)``).
 
     Notes
     -----
@@ -354,6 +471,7 @@ class NormalModels(BaseEstimator):
         calibration_bins: int = 5,
         calibration_method: str = "mle",
         calibration_max_samples: int | None = 2000,
+        input_lags: Sequence[float] = (),
     ) -> None:
         self.regressor = regressor
         self.width_search = width_search
@@ -372,6 +490,7 @@ class NormalModels(BaseEstimator):
         self.calibration_bins = calibration_bins
         self.calibration_method = calibration_method
         self.calibration_max_samples = calibration_max_samples
+        self.input_lags = input_lags
 
     # ------------------------------------------------------------------ fitting
     def _base(self) -> Any:
@@ -405,9 +524,10 @@ class NormalModels(BaseEstimator):
         if self.max_train_samples is not None and int(self.max_train_samples) < 2:
             raise ValueError("max_train_samples must be at least 2")
         self._check_calibration_params()
+        lags = _check_lags(self.input_lags)
         rng = np.random.default_rng(self.random_state)
         base = self._base()
-        U, n_neg = model_inputs(normal_runs)
+        U, n_neg = model_inputs(normal_runs, input_lags=lags)
         n_runs, n_times = normal_runs.sizes["run"], normal_runs.sizes["time"]
         run_of = np.repeat(np.arange(n_runs), n_times)
         targets = {
@@ -495,7 +615,9 @@ class NormalModels(BaseEstimator):
         self.n_train_samples_ = int(idx.size)
         self.n_negative_pressure_drop_ = n_neg
         self.n_dropped_nan_ = n_dropped
-        self.n_features_in_ = len(MODEL_INPUTS)
+        self.input_lags_ = lags
+        self.input_names_ = input_names(lags)
+        self.n_features_in_ = len(self.input_names_)
         self._fit_interval_calibration(normal_runs, U, targets, finite, base, widths)
         return self
 
@@ -653,7 +775,7 @@ class NormalModels(BaseEstimator):
             coordinates of ``runs``; attrs ``n_negative_pressure_drop`` and ``n_nan_inputs``.
         """
         self._check_fitted()
-        U, n_neg = model_inputs(runs)
+        U, n_neg = model_inputs(runs, input_lags=getattr(self, "input_lags_", ()))
         shape = (runs.sizes["run"], runs.sizes["time"])
         ok = np.isfinite(U).all(axis=1)
         data = {}
