@@ -41,6 +41,7 @@ from bayes_fdi.datasets import STATES, load_dataset, save_dataset, validate_data
 __all__ = [
     "ALL_STATES",
     "DATASETS",
+    "DYNAMIC_LAGS",
     "N_TRAIN",
     "PAPER_GROUPS",
     "PAPER_STATES",
@@ -95,6 +96,12 @@ REGRESSION_WIDTHS: tuple[float, ...] = (0.05, 0.1, 0.2, 0.4, 0.8)
 REGRESSION_WIDTH_SAMPLES: int = 600
 #: Gaussian kernel width of every node classifier (the paper: sigma = 2).
 NODE_WIDTH: float = 2.0
+#: Lags (s) of the extra normal-model inputs ``CV(t - L)`` of the "beyond the paper" dynamic
+#: pipeline. Chosen on the fault-free *training* runs only (log evidence and the spread of
+#: held-out run-mean residuals, see docs/diagnosis.md): ``(1, 2, 3)`` ranks first there but
+#: keeps about 200 relevance vectors per Lublin model and fits about 9x slower; ``(1, 2)`` is
+#: the runner-up at a fraction of the cost.
+DYNAMIC_LAGS: tuple[float, ...] = (1.0, 2.0)
 #: ``small=True``: runs per state (20 train + 4 test) ...
 SMALL_RUNS_PER_STATE: int = 24
 #: ... and seconds per run (the paper: 350).
@@ -820,6 +827,7 @@ def evaluate_dataset(
     all_states: bool = True,
     progress: Callable[[str], None] | None = None,
     diagnoser: Any = None,
+    input_lags: Sequence[float] = (),
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The paper's protocol (and the 20-state extension) on one dataset.
 
@@ -843,6 +851,10 @@ def evaluate_dataset(
         (``node_scaling=True``) of :func:`node_classifier` ``("rvm")`` nodes — the
         diagnoser's default tree. The SVM baseline is the same tree of ``("svm")`` nodes on the
         RVM pipeline's features.
+    input_lags
+        Lags (s) of extra normal-model inputs ``CV(t - L)`` of the default diagnoser (dynamic
+        normal models, beyond the paper; see :class:`bayes_fdi.residuals.NormalModels`).
+        Default ``()``: the paper's static inputs.
 
     Returns
     -------
@@ -873,6 +885,7 @@ def evaluate_dataset(
             all_states=all_states,
             progress=progress,
             diagnoser=diagnoser,
+            input_lags=input_lags,
         )
 
 
@@ -885,6 +898,7 @@ def _evaluate_dataset(
     all_states: bool,
     progress: Callable[[str], None] | None,
     diagnoser: Any,
+    input_lags: Sequence[float],
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     from bayes_fdi.diagnosis import FaultDiagnoser
     from bayes_fdi.features import extract_features
@@ -905,7 +919,7 @@ def _evaluate_dataset(
     if diagnoser is None:
         say("normal-model kernel width by maximum evidence")
         t0 = time.perf_counter()
-        width, evidence = select_regression_width(normal, seed=seed)
+        width, evidence = select_regression_width(normal, seed=seed, input_lags=input_lags)
         timing["regression_width"] = time.perf_counter() - t0
         from bayes_fdi.rvm import RVR
 
@@ -913,8 +927,11 @@ def _evaluate_dataset(
             regressor=RVR(kernel="rbf", width=width),
             classifier=_tree("rvm", seed),
             random_state=seed,
+            input_lags=tuple(input_lags),
         )
         regression = {"width": width, "log_evidence": evidence}
+    elif len(input_lags):
+        raise ValueError("give input_lags to the diagnoser itself when passing a diagnoser")
     else:
         regression = {}
     say(f"fitting the RVM pipeline (normal models on {normal.sizes['run']} fault-free runs)")
@@ -968,6 +985,7 @@ def _evaluate_dataset(
     }
     results["normal_models"] = {
         **regression,
+        "input_lags": [float(v) for v in diag.normal_models_.input_lags_],
         "relevance_vectors": {k: _n_vectors(r) for k, r in diag.normal_models_.regressors_.items()},
         "noise_std": {
             k: float(r.beta_**-0.5)
@@ -1113,8 +1131,8 @@ def calibration_headlines(
         head["coverage"] = {k: v["coverage"] for k, v in cal.get("normal_models", {}).items()}
         if real_record is not None:
             first, _ = _split_half(real_record)
-            width, _ = select_regression_width(first, seed=seed)
             model = clone(diagnoser.normal_models_)
+            width, _ = select_regression_width(first, seed=seed, input_lags=model.input_lags)
             regressor = model.regressor
             if regressor is not None and "width" in regressor.get_params():
                 model.set_params(regressor=clone(regressor).set_params(width=width))
@@ -1140,6 +1158,7 @@ def reproduce(
     states: Sequence[str] = PAPER_STATES,
     progress: bool = True,
     datasets: Sequence[str | os.PathLike | xr.Dataset] = DATASETS,
+    dynamic_lags: Sequence[float] = DYNAMIC_LAGS,
 ) -> dict[str, Any]:
     """Run the paper's experiments and write ``report.md``, figures and ``results.json``.
 
@@ -1162,6 +1181,10 @@ def reproduce(
     datasets
         Campaigns to run: names or TOML paths (simulated or cached), or datasets already in
         the project's format (named by their ``campaign`` attribute).
+    dynamic_lags
+        Beyond the paper: run the whole pipeline a second time with dynamic normal models,
+        ``CV(t - L)`` for these lags (s) as extra inputs (default :data:`DYNAMIC_LAGS`);
+        ``()`` skips it.
 
     Returns
     -------
@@ -1184,6 +1207,7 @@ def reproduce(
         "small": bool(small),
         "states": [str(s) for s in states],
         "n_train_per_state": N_TRAIN,
+        "dynamic_lags": [float(v) for v in dynamic_lags],
         "datasets": {},
     }
     figures: dict[str, dict[str, str]] = {}
@@ -1222,6 +1246,25 @@ def reproduce(
             real_record=real,
             title=f"{key}: calibration of the RVM pipeline on its test runs",
         )
+        if len(dynamic_lags):
+            lags = tuple(float(v) for v in dynamic_lags)
+            say(f"{key}: beyond the paper: dynamic normal models with CV lagged {lags} s")
+            dyn, dyn_art = evaluate_dataset(
+                ds,
+                states=states,
+                seed=seed,
+                input_lags=lags,
+                progress=lambda m, k=key: say(f"{k} (dynamic): {m}"),
+            )
+            dyn["calibration"] = calibration_headlines(
+                dyn_art["diagnoser"],
+                dyn_art["test_runs"],
+                out / f"{key}-dynamic-calibration",
+                seed=seed,
+                real_record=real,
+                title=f"{key}: calibration of the dynamic RVM pipeline on its test runs",
+            )
+            res["dynamic"] = {k: v for k, v in dyn.items() if k != "strength"}
         results["datasets"][key] = res
         say(f"{key}: figures")
         figs = {
@@ -1281,6 +1324,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         default=",".join(PAPER_STATES),
         help="comma-separated states of the paper protocol (default: the paper's ten)",
     )
+    parser.add_argument(
+        "--dynamic-lags",
+        default=",".join(f"{v:g}" for v in DYNAMIC_LAGS),
+        metavar="SECONDS",
+        help="comma-separated lags (s) of CV for the beyond-the-paper dynamic normal models "
+        "(default: %(default)s; empty string: skip that part)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress messages")
 
 
@@ -1290,8 +1340,16 @@ def run_from_cli(args: argparse.Namespace) -> int:
     unknown = sorted(set(states) - set(ALL_STATES))
     if unknown:
         raise SystemExit(f"bayes-fdi reproduce: unknown state(s) {unknown}; use fn, f1..f19")
+    try:
+        lags = tuple(float(v) for v in args.dynamic_lags.split(",") if v.strip())
+    except ValueError:
+        raise SystemExit(
+            f"bayes-fdi reproduce: --dynamic-lags must be comma-separated seconds, "
+            f"got {args.dynamic_lags!r}"
+        ) from None
     results = reproduce(
         args.out,
+        dynamic_lags=lags,
         seed=args.seed,
         cache_dir=args.cache_dir,
         small=args.small,

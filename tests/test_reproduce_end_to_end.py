@@ -105,6 +105,29 @@ def test_calibration_headlines_match_the_full_report(run):
     assert "## Calibration of the RVM pipeline" in report and f"]({cal['report']})" in report
 
 
+def test_dynamic_normal_models_beyond_the_paper(run):
+    tmp, _, results, _ = run
+    d = results["datasets"]["tiny"]
+    dyn = d["dynamic"]
+    assert results["dynamic_lags"] == [1.0, 2.0]
+    assert dyn["normal_models"]["input_lags"] == [1.0, 2.0]
+    assert d["normal_models"]["input_lags"] == []  # the paper's static models stay the main result
+    for method in ("rvm", "svm"):
+        m = dyn[method]
+        cm = np.array(m["confusion"]["matrix"])
+        assert cm.sum() == 5 * 4 and m["accuracy"] == pytest.approx(np.trace(cm) / cm.sum())
+    # the same test runs: the confusion rows hold the same number of runs per state
+    assert np.array_equal(
+        np.sum(dyn["rvm"]["confusion"]["matrix"], axis=1),
+        np.sum(d["rvm"]["confusion"]["matrix"], axis=1),
+    )
+    cal = dyn["calibration"]
+    assert (tmp / "out1" / cal["report"]).is_file() and cal["report"].startswith("tiny-dynamic")
+    report = (tmp / "out1" / "report.md").read_text()
+    assert "## Beyond the paper: dynamic normal models" in report
+    assert f"]({cal['report']})" in report
+
+
 def test_single_threaded_limits_and_restores():
     import torch
     from threadpoolctl import threadpool_info
@@ -123,11 +146,13 @@ def test_cli_same_seed_same_numbers_from_the_cache(tmp_path, capsys, run):
     cached = list((tmp / "cache").glob("tiny-*-seed3.nc"))
     assert len(cached) == 1
     argv = ["reproduce", "--out", str(tmp_path / "o"), "--seed", "3", "--no-progress"]
+    argv += ["--dynamic-lags", ""]  # skip the dynamic part here (tested above)
     argv += ["--cache-dir", str(tmp / "cache"), "--campaign", str(toml)]
     assert main([*argv, "--states", ",".join(STATES)]) == 0
     second = json.loads((tmp_path / "o" / "results.json").read_text())
     a, b = first["datasets"]["tiny"], second["datasets"]["tiny"]
     assert b["campaign"]["cached"] and not a["campaign"]["cached"]
+    assert "dynamic" in a and "dynamic" not in b
     for method in ("rvm", "svm"):
         for key in ("accuracy", "per_class", "confusion", "log_loss", "brier", "ece", "nodes"):
             assert a[method][key] == b[method][key]
@@ -136,3 +161,5 @@ def test_cli_same_seed_same_numbers_from_the_cache(tmp_path, capsys, run):
     assert "tiny: RVM" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="unknown state"):
         main([*argv, "--states", "fn,f42"])
+    with pytest.raises(SystemExit, match="--dynamic-lags"):
+        main([*argv[:-2], "--states", ",".join(STATES), "--dynamic-lags", "1,two"])
