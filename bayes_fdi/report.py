@@ -732,7 +732,13 @@ def dynamic_section(results: Mapping[str, Any]) -> list[str]:
                     _model_size(r.get("normal_models", {})),
                     format_percent(rvm["accuracy"]),
                     format_percent(svm["accuracy"]),
-                    ">=" if rvm["accuracy"] >= svm["accuracy"] else "<",
+                    (">=" if rvm["accuracy"] >= svm["accuracy"] else "<")
+                    + (
+                        f" (+{r['paired']['a_only']}/−{r['paired']['b_only']} runs, "
+                        f"McNemar p = {r['paired']['p_value']:.2g})"
+                        if r.get("paired")
+                        else ""
+                    ),
                     _vectors(rvm),
                     _vectors(svm),
                     format_percent(block["rvm"]["separable_accuracy"]) if "rvm" in block else "–",
@@ -854,10 +860,17 @@ def render_report(results: Mapping[str, Any]) -> str:
         rvm, svm = d["rvm"]["accuracy"], d["svm"]["accuracy"]
         if paper is not None:
             verdict = "meets" if rvm >= paper else "is below"
+            pair = d.get("paired")
+            paired = (
+                f" Paired on the same test runs: only the RVM right on {pair['a_only']}, only "
+                f"the SVM on {pair['b_only']} (exact McNemar p = {pair['p_value']:.2g})."
+                if pair
+                else ""
+            )
             checks.append(
                 f"- {name}: RVM {format_percent(rvm)} {verdict} the paper's "
                 f"{format_percent(paper)}; "
-                f"RVM {'>=' if rvm >= svm else '<'} SVM ({format_percent(svm)})."
+                f"RVM {'>=' if rvm >= svm else '<'} SVM ({format_percent(svm)})." + paired
             )
         rv = [n["vectors"] for n in d["rvm"]["nodes"] if n["vectors"] is not None]
         sv = [n["vectors"] for n in d["svm"]["nodes"] if n["vectors"] is not None]

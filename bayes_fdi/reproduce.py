@@ -58,6 +58,7 @@ __all__ = [
     "group_metrics",
     "load_or_simulate",
     "node_classifier",
+    "paired_comparison",
     "pairwise_separability",
     "reproduce",
     "run_from_cli",
@@ -774,6 +775,37 @@ def _state_key(state: str) -> tuple[int, int]:
     return (1, 0) if state == "fn" else (0, int(state[1:]))
 
 
+def paired_comparison(
+    y_true: Sequence[str], pred_a: Sequence[str], pred_b: Sequence[str]
+) -> dict[str, Any]:
+    """Exact McNemar test of two classifiers scored on the same runs.
+
+    Only the runs on which exactly one classifier is right carry information: under the null
+    hypothesis of equal accuracy each of them is equally likely to favour either, so the
+    count ``a_only`` is Binomial(``a_only + b_only``, 1/2).
+
+    Returns
+    -------
+    dict
+        ``a_only`` (runs only the first gets right), ``b_only``, ``both``, ``neither``
+        and ``p_value`` (two-sided exact binomial; 1 when no run is discordant).
+    """
+    from scipy.stats import binomtest
+
+    y = np.asarray(y_true).astype(str)
+    ra = np.asarray(pred_a).astype(str) == y
+    rb = np.asarray(pred_b).astype(str) == y
+    a_only, b_only = int(np.sum(ra & ~rb)), int(np.sum(~ra & rb))
+    n = a_only + b_only
+    return {
+        "a_only": a_only,
+        "b_only": b_only,
+        "both": int(np.sum(ra & rb)),
+        "neither": int(np.sum(~ra & ~rb)),
+        "p_value": float(binomtest(a_only, n, 0.5).pvalue) if n else 1.0,
+    }
+
+
 def _method_result(
     clf: Any, y_test: np.ndarray, proba: np.ndarray, fit_s: float, predict_s: float, prefix: str
 ) -> dict[str, Any]:
@@ -976,6 +1008,11 @@ def _evaluate_dataset(
 
     svm, _, proba_svm, fit_s, pred_s = _fit_tree(make_svm, X_tr, y_tr, X_te)
     results["svm"] = _method_result(svm, y_te, proba_svm, fit_s, pred_s, "SVM")
+    results["paired"] = paired_comparison(
+        y_te,
+        np.asarray(diag.classes_).astype(str)[np.argmax(proba, axis=1)],
+        np.asarray(svm.classes_).astype(str)[np.argmax(proba_svm, axis=1)],
+    )
     results["split"] = {
         "n_train_per_state": int(n_train),
         "train_runs": {s: int((y_tr == s).sum()) for s in states},

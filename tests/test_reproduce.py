@@ -256,3 +256,24 @@ def test_pairwise_separability_matches_sklearn_loo(rng):
     expected = 0.5 * (np.mean(pred[y == "a"] != "a") + np.mean(pred[y == "b"] != "b"))
     assert err[0, 1] == pytest.approx(expected)
     assert 0 < expected < 0.5
+
+
+def test_paired_comparison_by_hand():
+    from scipy.stats import binom
+
+    from bayes_fdi.reproduce import paired_comparison
+
+    y = ["a"] * 10
+    a = ["a"] * 7 + ["b"] * 3  # right on runs 0-6
+    b = ["b"] * 2 + ["a"] * 6 + ["b"] * 2  # right on runs 2-7
+    out = paired_comparison(y, a, b)
+    assert (out["a_only"], out["b_only"], out["both"], out["neither"]) == (2, 1, 5, 2)
+    # two-sided exact binomial: P(X <= 1) + P(X >= 2) for X ~ Bin(3, 1/2) = 1
+    assert out["p_value"] == pytest.approx(1.0)
+    y = ["a"] * 12
+    a = ["a"] * 12
+    b = ["b"] * 10 + ["a"] * 2
+    out = paired_comparison(y, a, b)
+    assert (out["a_only"], out["b_only"]) == (10, 0)
+    assert out["p_value"] == pytest.approx(2 * binom.pmf(10, 10, 0.5))
+    assert paired_comparison(["a"], ["a"], ["a"])["p_value"] == 1.0
