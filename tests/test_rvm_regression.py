@@ -337,3 +337,21 @@ def test_buffer_growth_does_not_change_the_fit(monkeypatch):
         assert torch.equal(tight.active, roomy.active)
         torch.testing.assert_close(tight.mean, roomy.mean, rtol=1e-9, atol=1e-12)
         assert tight.log_evidence == pytest.approx(roomy.log_evidence, rel=1e-12)
+
+
+def test_fast_solver_stops_when_only_reestimations_gain_nothing(monkeypatch):
+    """The stall rule ends a fit early only at the evidence the full run reaches anyway."""
+    import bayes_fdi.rvm.sparse_bayes as sb
+
+    rng = np.random.default_rng(1)
+    X = rng.uniform(0, 1, (800, 3))
+    t = np.sin(3 * X[:, 0]) + X[:, 1] ** 2 + 0.01 * rng.standard_normal(800)
+    with_rule = RVR(kernel="rbf", width=0.2, max_iter=3000).fit(X, t)
+    monkeypatch.setattr(sb, "_GAUSS_STALL_WINDOW", 10**9)
+    without = RVR(kernel="rbf", width=0.2, max_iter=3000).fit(X, t)
+    assert with_rule.n_iter_ < without.n_iter_
+    # the stopped fit is within the rule's tolerance of the longer run's evidence
+    assert abs(with_rule.log_evidence_ - without.log_evidence_) < sb._GAUSS_STALL_GAIN
+    np.testing.assert_allclose(with_rule.predict(X), without.predict(X), atol=1e-3)
+    trace = with_rule.evidence_trace_
+    assert trace[-1] == pytest.approx(with_rule.log_evidence_)

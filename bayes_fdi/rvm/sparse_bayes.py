@@ -57,6 +57,13 @@ _LOG_2PI = math.log(2.0 * math.pi)
 # for _STALL_ITERATIONS iterations (not in SparseBayes, which cycles until its limit)
 _STALL_GAIN = 1e-4
 _STALL_ITERATIONS = 50
+# Gaussian fast solver: also stop when, for _GAUSS_STALL_WINDOW iterations, every action
+# was a re-estimation (no basis function added or deleted) and the log evidence rose by less
+# than _GAUSS_STALL_GAIN in all. On smooth data a weakly determined alpha can otherwise keep
+# being re-estimated by more than ``tol`` in log for thousands of iterations while the
+# evidence creeps by 1e-5 per iteration (SparseBayes runs to its iteration limit there).
+_GAUSS_STALL_GAIN = 1e-3
+_GAUSS_STALL_WINDOW = 200
 # fast Gaussian solver with a float32 screening copy: exact re-checks of a chosen addition
 _MAX_RECHECKS = 100
 # initial number of columns of the fast Gaussian solver's Phi / B^T Phi buffers
@@ -293,7 +300,10 @@ def fast_gaussian(
         Iteration limit (a safety net; one action per iteration).
     tol : float
         Stop when the best action is a re-estimate changing ``log alpha`` by less than this
-        (SparseBayes ``MinDeltaLogAlpha``) and no deletion is pending.
+        (SparseBayes ``MinDeltaLogAlpha``) and no deletion is pending. The solver also stops
+        (converged) after 200 iterations of re-estimations only (no addition or deletion)
+        that raised the log evidence by less than 1e-3 in all: a weakly determined ``alpha``
+        can otherwise be re-estimated for thousands of iterations at no gain.
 
     Returns
     -------
@@ -356,6 +366,7 @@ def fast_gaussian(
     trace = [log_ml]
     converged = False
     it = 0
+    last_structural = 0  # iteration of the last addition or deletion
     for it in range(1, max_iter + 1):
         Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
         best = _best_action(S, Q, act_t, alpha, addable)
@@ -389,6 +400,8 @@ def fast_gaussian(
             if abs(math.log(best.new_alpha) - math.log(float(alpha[jj]))) < tol:
                 last = True
         if not last:
+            if action != 1:
+                last_structural = it
             if action == 1:  # re-estimate
                 sj = Sigma[:, jj].clone()
                 mu_j = float(mu[jj])
@@ -476,6 +489,16 @@ def fast_gaussian(
                 last = False
         trace.append(log_ml)
         if last:
+            converged = True
+            break
+        if (
+            it - last_structural >= _GAUSS_STALL_WINDOW
+            and log_ml - trace[-1 - _GAUSS_STALL_WINDOW] < _GAUSS_STALL_GAIN
+        ):
+            # only re-estimations, at no gain: the optimum is reached within the tolerance
+            Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
+            mu, Sigma, S, Q, log_ml = full_statistics(beta, alpha, Phi, BtPhi)
+            trace[-1] = log_ml
             converged = True
             break
 
