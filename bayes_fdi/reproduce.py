@@ -1275,14 +1275,20 @@ def reproduce(
             from bayes_fdi.datasets import load_lublin_example
 
             real = load_lublin_example()
-        res["calibration"] = calibration_headlines(
-            art["diagnoser"],
-            art["test_runs"],
-            out / f"{key}-calibration",
-            seed=seed,
-            real_record=real,
-            title=f"{key}: calibration of the RVM pipeline on its test runs",
-        )
+
+        def calibrate(
+            artifacts: dict[str, Any], suffix: str, what: str, k: str = key, real: Any = real
+        ) -> Any:
+            return calibration_headlines(
+                artifacts["diagnoser"],
+                artifacts["test_runs"],
+                out / f"{k}{suffix}-calibration",
+                seed=seed,
+                real_record=real,
+                title=f"{k}: calibration of the {what} on its test runs",
+            )
+
+        res["calibration"] = calibrate(art, "", "RVM pipeline")
         if len(dynamic_lags):
             lags = tuple(float(v) for v in dynamic_lags)
             say(f"{key}: beyond the paper: dynamic normal models with CV lagged {lags} s")
@@ -1293,14 +1299,7 @@ def reproduce(
                 input_lags=lags,
                 progress=lambda m, k=key: say(f"{k} (dynamic): {m}"),
             )
-            dyn["calibration"] = calibration_headlines(
-                dyn_art["diagnoser"],
-                dyn_art["test_runs"],
-                out / f"{key}-dynamic-calibration",
-                seed=seed,
-                real_record=real,
-                title=f"{key}: calibration of the dynamic RVM pipeline on its test runs",
-            )
+            dyn["calibration"] = calibrate(dyn_art, "-dynamic", "dynamic RVM pipeline")
             res["dynamic"] = {k: v for k, v in dyn.items() if k != "strength"}
         results["datasets"][key] = res
         say(f"{key}: figures")
