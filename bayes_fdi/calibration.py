@@ -858,7 +858,13 @@ class DirichletScaler:
         return m[:, :k], m[:, k]
 
     def _solve(
-        self, z: np.ndarray, y_idx: np.ndarray, kind: str, lam: float, mu: float
+        self,
+        z: np.ndarray,
+        y_idx: np.ndarray,
+        kind: str,
+        lam: float,
+        mu: float,
+        theta0: np.ndarray | None = None,
     ) -> tuple[np.ndarray, bool]:
         """Penalised multinomial logistic regression on ``[z, 1]`` by damped Newton steps.
 
@@ -866,6 +872,7 @@ class DirichletScaler:
         a few tens of steps where first-order methods crawl (log-probabilities of a tree are
         strongly correlated). The Hessian is singular along ``W -> W + 1 v^T`` (a constant
         added to every logit) when the penalty does not fix it: steps are least-squares.
+        ``theta0`` warm-starts the iteration (the penalty path of the cross-validation).
         """
         n, k = z.shape
         x = np.concatenate([z, np.ones((n, 1))], axis=1)
@@ -884,7 +891,7 @@ class DirichletScaler:
             logq = _log_softmax(x @ m.T)
             return float(-np.sum(onehot * logq) / n + theta @ pen_phi @ theta), logq
 
-        theta = self._identity(k, kind)
+        theta = self._identity(k, kind) if theta0 is None else np.array(theta0, dtype=np.float64)
         f, logq = value(theta)
         ok = False
         for _ in range(int(self.max_iter)):
@@ -897,7 +904,11 @@ class DirichletScaler:
             s = (q[:, :, None] * (np.eye(k)[None] - q[:, None, :])).reshape(n, -1)
             h = (s.T @ xx / n).reshape(k, k, k + 1, k + 1).transpose(0, 2, 1, 3)
             h = basis.T @ h.reshape(k * (k + 1), -1) @ basis + 2.0 * pen_phi
-            step = -np.linalg.lstsq(h, g, rcond=1e-12)[0]
+            try:  # positive definite when the penalty fixes every direction: Cholesky
+                chol = np.linalg.cholesky(h)
+                step = -np.linalg.solve(chol.T, np.linalg.solve(chol, g))
+            except np.linalg.LinAlgError:  # singular along W -> W + 1 v^T: least squares
+                step = -np.linalg.lstsq(h, g, rcond=1e-12)[0]
             slope = float(g @ step)
             if slope >= 0:  # numerically flat: no descent direction left
                 step, slope = -g, -float(g @ g)
@@ -965,12 +976,14 @@ class DirichletScaler:
             folds = _fold_indices(y_idx, int(self.cv), self.random_state)
             fixed_mu = None if kind == "diagonal" else self.reg_mu
             scores = {}
-            for r in sorted(grid.tolist(), reverse=True):
+            warm: list[np.ndarray | None] = [None] * len(folds)
+            for r in sorted(grid.tolist(), reverse=True):  # strong to weak penalty
                 m = r if fixed_mu is None else float(fixed_mu)
                 losses = []
-                for f in folds:
+                for i, f in enumerate(folds):
                     train = np.setdiff1d(np.arange(n), f)
-                    theta, _ = self._solve(z[train], y_idx[train], kind, r, m)
+                    theta, _ = self._solve(z[train], y_idx[train], kind, r, m, warm[i])
+                    warm[i] = theta
                     losses.append(self._nll(theta, z[f], y_idx[f], kind) * f.size)
                 scores[r] = float(np.sum(losses) / n)
             self.cv_results_ = scores
