@@ -639,9 +639,11 @@ def select_regression_width(
 
     Both normal models (``X`` and ``F`` on ``(CV, sqrt(P1 - P2), T1)``) are fitted with each
     candidate width on the same random subsample of the fault-free samples; the width with the
-    largest summed log marginal likelihood wins. (``RVR(width="auto")`` searches down to much
-    smaller widths, where a fit on thousands of samples keeps hundreds of basis functions and
-    takes minutes; the grid stays where the evidence peaks on these data.)
+    largest summed log marginal likelihood wins (:func:`bayes_fdi.residuals.evidence_grid_search`,
+    also the default width search of :class:`bayes_fdi.residuals.NormalModels`).
+    (``RVR(width="auto")`` searches down to much smaller widths, where a fit on thousands of
+    samples keeps hundreds of basis functions and takes minutes; the grid stays where the
+    evidence peaks on these data.)
 
     Parameters
     ----------
@@ -663,23 +665,24 @@ def select_regression_width(
     log_evidence : dict
         Width -> summed log evidence.
     """
-    from bayes_fdi.residuals import model_inputs
+    from bayes_fdi.residuals import evidence_grid_search, model_inputs
     from bayes_fdi.rvm import RVR
 
     U, _ = model_inputs(normal_runs, warn=False, input_lags=input_lags)
-    targets = [np.asarray(normal_runs[c].transpose("run", "time").values).ravel() for c in "XF"]
-    ok = np.isfinite(U).all(axis=1) & np.isfinite(targets[0]) & np.isfinite(targets[1])
+    targets = {c: np.asarray(normal_runs[c].transpose("run", "time").values).ravel() for c in "XF"}
+    ok = np.isfinite(U).all(axis=1) & np.isfinite(targets["X"]) & np.isfinite(targets["F"])
     idx = np.flatnonzero(ok)
     if idx.size < 10:
         raise ValueError(f"only {idx.size} finite fault-free samples to choose the width")
-    if idx.size > max_samples:
-        idx = np.sort(np.random.default_rng(seed).choice(idx, size=max_samples, replace=False))
-    evidence = {
-        float(w): float(sum(RVR(kernel="rbf", width=float(w)).fit(U[idx], t[idx]).log_evidence_
-                            for t in targets))
-        for w in widths
-    }  # fmt: skip
-    return max(evidence, key=evidence.__getitem__), evidence
+    res = evidence_grid_search(
+        lambda w: RVR(kernel="rbf", width=w),
+        U[idx],
+        {c: t[idx] for c, t in targets.items()},
+        widths,
+        max_samples=max_samples,
+        rng=np.random.default_rng(seed),
+    )
+    return res.width, res.log_evidence
 
 
 def node_classifier(kind: str = "rvm", *, width: float = NODE_WIDTH) -> Any:

@@ -192,12 +192,15 @@ def test_negative_pressure_drop_runs_are_kept(rng):
 
 
 def test_evidence_width_search_on_a_subsample(rng):
-    """Default width search: the RVR's own evidence search on a seeded subsample (checked by
-    repeating it independently on the same samples), then a fit on every sample at that width."""
+    """``width_search="evidence"``: the RVR's own evidence search on a seeded subsample (checked
+    by repeating it independently on the same samples), then a fit on every sample at that
+    width."""
     from bayes_fdi.rvm import RVR
 
     normal = make_dataset(synthetic_runs(4, rng))
-    nm = NormalModels(RVR(width="auto"), evidence_max_samples=150, random_state=3).fit(normal)
+    nm = NormalModels(
+        RVR(width="auto"), width_search="evidence", evidence_max_samples=150, random_state=3
+    ).fit(normal)
     U, _ = model_inputs(normal)
     idx = np.sort(np.random.default_rng(3).choice(U.shape[0], size=150, replace=False))
     for name in ("X", "F"):
