@@ -450,8 +450,9 @@ class NormalModels(BaseEstimator):
         subsample of at most ``evidence_max_samples`` samples, then fit on all samples at the
         width found. On trajectory data (sine-driven runs lie on thin curves of the input
         space, so nearest-neighbour distances are tiny) it can choose very small widths
-        (0.006-0.016 on the paper's campaigns) that keep hundreds of relevance vectors and make
-        the fits take minutes.
+        (0.006-0.016 on the paper's campaigns) that keep about a hundred relevance vectors
+        and make the whole fit 7-15 times slower (40-75 s against 5-6 s on the paper's 20
+        fault-free runs).
         ``None``: keep the regressor as given (``"auto"`` then searches on every sample).
         ``"ga"``: choose the width parameter of each output's regressor with
         `genetic_width_search`, minimising the MSE on held-out fault-free runs (the
@@ -550,14 +551,14 @@ class NormalModels(BaseEstimator):
     Width search. The default ``"evidence-grid"`` gives ``X`` and ``F`` one shared width, the
     grid width of largest summed log evidence, because that is exactly what
     `bayes_fdi.reproduce.select_regression_width` does (both call `evidence_grid_search`):
-    with ``random_state=0``, ``evidence_max_samples=600`` and no ``max_train_samples``
-    (``bayes-fdi reproduce``'s settings) the chosen width is the one of the reproduction.
+    with ``random_state=0`` and ``evidence_max_samples=600`` (the defaults; ``bayes-fdi
+    reproduce`` uses seed 0 and 600 samples) the chosen width is the one of the reproduction.
     The grid spans the widths where the evidence peaks on inputs normalised to [0, 1]. A
     per-output choice was not taken: ``X``'s evidence is nearly flat over the grid, so its own
     argmax jumps with the subsample (0.2, 0.8, 0.4 on the paper-simulated fault-free training
-    runs for subsample seeds 0, 1, 2), while the summed evidence is steeper and stable (0.05,
-    0.05, 0.1; ``F`` alone: 0.1 for all three). Both fitted models are recorded in
-    ``width_log_evidence_by_output_``.
+    runs for subsample seeds 0, 1, 2), while the summed evidence moves by at most one grid
+    step (0.05, 0.05, 0.1; ``F`` alone: 0.1 for all three). Both outputs' evidences are
+    recorded in ``width_log_evidence_by_output_``.
 
     Interval calibration. With ``interval_calibration="cross-fit"``, ``fit`` ends by splitting
     the fault-free runs into ``calibration_folds`` folds by run (seeded; a whole run is always
