@@ -39,6 +39,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from scipy import optimize, stats
+from sklearn.base import BaseEstimator
 
 __all__ = [
     "DEFAULT_LEVELS",
@@ -517,7 +518,7 @@ def _log_softmax(z: np.ndarray) -> np.ndarray:
     return shifted - np.log(np.sum(np.exp(shifted), axis=1, keepdims=True))
 
 
-class TemperatureScaler:
+class TemperatureScaler(BaseEstimator):
     """Recalibrate class distributions with one temperature (Guo et al. 2017).
 
     ``q = softmax(log(p) / T)``: ``T > 1`` softens over-confident distributions, ``T < 1``
@@ -565,23 +566,6 @@ class TemperatureScaler:
         self.floor = floor
         self.bounds = bounds
         self.classes = classes
-
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        """Constructor parameters (scikit-learn convention)."""
-        return {
-            "input": self.input,
-            "floor": self.floor,
-            "bounds": self.bounds,
-            "classes": self.classes,
-        }
-
-    def set_params(self, **params: Any) -> TemperatureScaler:
-        """Set constructor parameters (scikit-learn convention)."""
-        for k, v in params.items():
-            if k not in self.get_params():
-                raise ValueError(f"unknown parameter {k!r} for TemperatureScaler")
-            setattr(self, k, v)
-        return self
 
     def _logits(self, values: Any) -> np.ndarray:
         a = np.asarray(values, dtype=np.float64)
@@ -700,7 +684,7 @@ def _fold_indices(y_idx: np.ndarray, n_folds: int, seed: int | None) -> list[np.
     return [np.flatnonzero(fold == f) for f in range(n_folds)]
 
 
-class DirichletScaler:
+class DirichletScaler(BaseEstimator):
     """Recalibrate class distributions with a linear map of the log-probabilities.
 
     ``q = softmax(W log(p) + b)`` (Kull et al. 2019, *Beyond temperature scaling: obtaining
@@ -804,30 +788,6 @@ class DirichletScaler:
         self.classes = classes
         self.random_state = random_state
         self.max_iter = max_iter
-
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        """Constructor parameters (scikit-learn convention)."""
-        return {
-            "parametrization": self.parametrization,
-            "reg_lambda": self.reg_lambda,
-            "reg_mu": self.reg_mu,
-            "reg_grid": self.reg_grid,
-            "cv": self.cv,
-            "min_samples": self.min_samples,
-            "input": self.input,
-            "floor": self.floor,
-            "classes": self.classes,
-            "random_state": self.random_state,
-            "max_iter": self.max_iter,
-        }
-
-    def set_params(self, **params: Any) -> DirichletScaler:
-        """Set constructor parameters (scikit-learn convention)."""
-        for k, v in params.items():
-            if k not in self.get_params():
-                raise ValueError(f"unknown parameter {k!r} for DirichletScaler")
-            setattr(self, k, v)
-        return self
 
     def _logits(self, values: Any) -> np.ndarray:
         return TemperatureScaler(input=self.input, floor=self.floor)._logits(values)

@@ -165,7 +165,7 @@ def test_dirichlet_scaler_rejects_bad_input():
         DirichletScaler(classes=[0, 5]).fit(p, y)
     with pytest.raises(ValueError, match="labels"):
         DirichletScaler().fit(p, y[:-1])
-    with pytest.raises(ValueError, match="unknown parameter"):
+    with pytest.raises(ValueError, match="Invalid parameter"):
         DirichletScaler().set_params(temperature=2.0)
     fitted = DirichletScaler(parametrization="diagonal").fit(p, y)
     with pytest.raises(ValueError, match="columns"):
