@@ -350,7 +350,7 @@ def recalibrate(
     classes: Any,
     *,
     calibration: tuple[Any, Any] | None = None,
-    n_folds: int = 2,
+    n_folds: int = 5,
     methods: tuple[str, ...] = RECALIBRATORS,
     cv: int = 5,
     seed: int = 0,
@@ -462,7 +462,7 @@ def write_calibration_report(
     n_bootstrap: int = 500,
     seed: int = 0,
     title: str = "Calibration report",
-    n_folds: int = 2,
+    n_folds: int = 5,
     methods: tuple[str, ...] = RECALIBRATORS,
 ) -> Path:
     """Diagnose ``test_runs`` and write a calibration report (Markdown + figures + JSON).
@@ -801,8 +801,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--n-folds",
         type=int,
-        default=2,
-        help="cross-fitting folds on the test runs when no --calibration is given",
+        default=5,
+        help="cross-fitting folds on the test runs when no --calibration is given (default 5)",
     )
 
 

@@ -156,7 +156,7 @@ def test_report_cross_fits_without_calibration_runs(setup, tmp_path):
     test, _, feats = setup
     test2 = test.assign_coords(state=("run", np.where(np.arange(1200) < 10, "f9", test["state"])))
     test2.attrs["key"] = "test"
-    cr.write_calibration_report(FakeDiagnoser(feats), test2, tmp_path, n_bootstrap=0)
+    cr.write_calibration_report(FakeDiagnoser(feats), test2, tmp_path, n_bootstrap=0, n_folds=2)
     res = json.loads((tmp_path / "calibration.json").read_text())
     t = res["recalibration"]["temperature"]
     assert len(t) == 2 and all(v == pytest.approx(2.0, rel=0.25) for v in t)
@@ -165,6 +165,11 @@ def test_report_cross_fits_without_calibration_runs(setup, tmp_path):
     assert res["n_excluded_unknown_state"] == 10 and res["excluded_states"] == ["f9"]
     assert res["whole_tree"]["after"]["ece"]["value"] < res["whole_tree"]["before"]["ece"]["value"]
     assert "10 excluded" in (tmp_path / "report.md").read_text()
+    # the default cross-fits in five folds (each fit on 4/5 of the runs)
+    cr.write_calibration_report(FakeDiagnoser(feats), test2, tmp_path / "k5", n_bootstrap=0)
+    fits = json.loads((tmp_path / "k5" / "calibration.json").read_text())["recalibration"]["fits"]
+    assert len(fits) == 5 and sum(f["scored"] for f in fits) == 1190
+    assert all(f["n_fit"] == 1190 - f["scored"] for f in fits)
 
 
 def test_cli_fits_on_train_and_reports(setup, tmp_path, monkeypatch):
