@@ -61,6 +61,7 @@ def make_dataset(
     campaign: str = "",
     seed: int | None = None,
     attrs: dict | None = None,
+    allow_nan: bool = False,
 ) -> xr.Dataset:
     """Build a dataset in the project's format from ``(run, time)`` arrays.
 
@@ -73,6 +74,8 @@ def make_dataset(
         Per-run labels; a scalar applies to every run.
     campaign, seed, attrs
         Stored as dataset attributes (with the package version).
+    allow_nan
+        Whether NaN gaps are allowed in the channels (as in :func:`validate_dataset`).
 
     Returns
     -------
@@ -125,7 +128,7 @@ def make_dataset(
             **(attrs or {}),
         },
     )
-    validate_dataset(ds, require=())
+    validate_dataset(ds, require=(), allow_nan=allow_nan)
     return ds
 
 

@@ -424,11 +424,8 @@ def load_lublin_day(
 
 
 def _make_real(channels, source, actuator, day, ranges, events) -> xr.Dataset:
-    # make_dataset validates without NaN; build with NaN replaced, then restore the gaps.
-    nan_masks = {k: np.isnan(v) for k, v in channels.items()}
-    filled = {k: np.where(nan_masks[k], 0.0, v) for k, v in channels.items()}
-    ds = make_dataset(
-        filled,
+    return make_dataset(
+        channels,
         state="fn",
         campaign="lublin-day",
         attrs={
@@ -439,10 +436,8 @@ def _make_real(channels, source, actuator, day, ranges, events) -> xr.Dataset:
             "units": _units_attr(actuator, ranges),
             "fault_events": json.dumps(events),
         },
+        allow_nan=True,
     )
-    for name, mask in nan_masks.items():
-        ds[name].values[0, mask] = np.nan
-    return ds
 
 
 def lublin_fault_labels(date: str, actuator: int, times: np.ndarray | None = None) -> np.ndarray:
