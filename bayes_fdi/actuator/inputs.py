@@ -12,11 +12,10 @@ from bayes_fdi.datasets import make_dataset
 __all__ = ["benchmark_inputs"]
 
 
-def _positive(value, name: str, *, allow_zero: bool = False) -> float:
+def _check_non_negative(value, name: str) -> None:
     value = float(value)
-    if not math.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-        raise ValueError(f"benchmark_inputs: {name} must be {'>=' if allow_zero else '>'} 0")
-    return value
+    if not math.isfinite(value) or value < 0:
+        raise ValueError(f"benchmark_inputs: {name} must be >= 0")
 
 
 def benchmark_inputs(
@@ -91,14 +90,11 @@ def benchmark_inputs(
         ("cv_frequency", cv_frequency),
         ("p1_frequency", p1_frequency),
         ("p2_omega", p2_omega),
-    ):
-        _positive(value, name, allow_zero=True)
-    for name, value in (
         ("cv_amplitude", cv_amplitude),
         ("p1_amplitude", p1_amplitude),
         ("p2_amplitude", p2_amplitude),
     ):
-        _positive(value, name, allow_zero=True)
+        _check_non_negative(value, name)
     t = np.arange(duration, dtype=np.float64)
     phases = np.zeros((n_runs, 3))
     gains = np.ones((n_runs, 3))
