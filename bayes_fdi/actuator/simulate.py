@@ -52,33 +52,36 @@ def _check_inputs(inputs: xr.Dataset, *, who: str) -> np.ndarray:
     return np.ascontiguousarray(u)
 
 
+def _validated(fault: Fault, r: int, who: str) -> Fault:
+    try:
+        return fault.validated()
+    except ValueError as exc:
+        raise ValueError(f"{who}: run {r}: {exc}") from None
+
+
 def _resolve_faults(inputs: xr.Dataset, faults, who: str) -> list[Fault | None]:
     n_runs = inputs.sizes["run"]
     if faults is None:
         if "state" not in inputs.coords:
             return [None] * n_runs
+        defaults = {"strength": 0.0, "onset": 0.0, "profile": "abrupt", "ramp": 0.0}
+        coords = {
+            name: inputs[name].values if name in inputs.coords else [default] * n_runs
+            for name, default in defaults.items()
+        }
         out: list[Fault | None] = []
-        for r in range(n_runs):
-            state = str(inputs["state"].values[r])
+        for r, state in enumerate(map(str, inputs["state"].values)):
             if state == "fn":
                 out.append(None)
                 continue
-            get = {
-                name: inputs[name].values[r]
-                for name in ("strength", "onset", "profile", "ramp")
-                if name in inputs.coords
-            }
             fault = Fault(
                 state,
-                float(get.get("strength", 0.0)),
-                float(get.get("onset", 0.0)),
-                str(get.get("profile", "abrupt")),
-                float(get.get("ramp", 0.0)),
+                float(coords["strength"][r]),
+                float(coords["onset"][r]),
+                str(coords["profile"][r]),
+                float(coords["ramp"][r]),
             )
-            try:
-                out.append(fault.validated())
-            except ValueError as exc:
-                raise ValueError(f"{who}: run {r}: {exc}") from None
+            out.append(_validated(fault, r, who))
         return out
     if isinstance(faults, Fault):
         return [faults.validated()] * n_runs
@@ -94,10 +97,7 @@ def _resolve_faults(inputs: xr.Dataset, faults, who: str) -> list[Fault | None]:
         if fault is None:
             out.append(None)
         elif isinstance(fault, Fault):
-            try:
-                out.append(fault.validated())
-            except ValueError as exc:
-                raise ValueError(f"{who}: run {r}: {exc}") from None
+            out.append(_validated(fault, r, who))
         else:
             raise ValueError(f"{who}: faults[{r}] must be a Fault or None, got {fault!r}")
     return out
