@@ -9,7 +9,7 @@ import xarray as xr
 
 from bayes_fdi.actuator import model
 from bayes_fdi.actuator.faults import FAULT_NAMES, Fault
-from bayes_fdi.datasets import INPUT_CHANNELS, validate_dataset
+from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS, validate_dataset
 
 __all__ = ["NOISE_STD", "inject_faults", "simulate"]
 
@@ -25,9 +25,9 @@ _HOLDS = {"zero": 0, "linear": 1}
 _INTEGRATORS = {"reference": (0, model.STEPS_REF), "fast": (1, model.STEPS_REF)}
 
 
-def _check_inputs(inputs: xr.Dataset, *, who: str) -> np.ndarray:
-    """Validate the input channels; return physical inputs (run, time, 4)."""
-    validate_dataset(inputs, require=INPUT_CHANNELS)
+def _check_inputs(inputs: xr.Dataset, *, who: str, require=INPUT_CHANNELS) -> np.ndarray:
+    """Validate the dataset (``require``: its channels); return physical inputs (run, time, 4)."""
+    validate_dataset(inputs, require=require)
     time = np.asarray(inputs["time"].values, dtype=np.float64)
     if time.size < 1:
         raise ValueError(f"{who}: the dataset has no time samples")
@@ -282,10 +282,10 @@ def simulate(
     ds = inputs.copy()
     for i, name in enumerate(_MEASURED):
         ds[name] = (("run", "time"), out[:, :, i])
-    ds = _with_fault_coords(ds[list(("CV", "P1", "P2", "T1", "X", "F"))], resolved)
+    ds = _with_fault_coords(ds[list(CHANNELS)], resolved)
     ds.attrs.update(seed=int(seed), integrator=integrator, hold=hold, noise=int(bool(noise)))
     ds.attrs.setdefault("bayes_fdi_version", inputs.attrs.get("bayes_fdi_version", ""))
-    validate_dataset(ds, require=("CV", "P1", "P2", "T1", "X", "F"))
+    validate_dataset(ds, require=CHANNELS)
     if return_states:
         return ds, _states_dataset(ds, extra)
     return ds
@@ -328,8 +328,7 @@ def inject_faults(
         A new dataset with the faulty records and the fault coordinates set.
     """
     who = "inject_faults"
-    validate_dataset(real, require=("CV", "P1", "P2", "T1", "X", "F"))
-    u = _check_inputs(real, who=who)
+    u = _check_inputs(real, who=who, require=CHANNELS)
     resolved = _resolve_faults(real, faults, who)
     kw = {
         "integrator": integrator,
@@ -355,4 +354,4 @@ def inject_faults(
     )
     if seed is not None:
         ds.attrs["seed"] = int(seed)
-    return validate_dataset(ds, require=("CV", "P1", "P2", "T1", "X", "F"))
+    return validate_dataset(ds, require=CHANNELS)
