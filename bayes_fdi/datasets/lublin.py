@@ -252,10 +252,7 @@ def load_lublin_example() -> xr.Dataset:
     if matrix.shape != (11, 3600):
         raise ValueError(f"{EXAMPLE_FILE}: expected an 11 x 3600 matrix, got {matrix.shape}")
     ranges = ACTUATOR_RANGES[3]
-    channels = {
-        name: matrix[_EXAMPLE_ROWS[name]] / ranges[name][0]
-        for name in ("CV", "P1", "P2", "T1", "X", "F")
-    }
+    channels = {name: matrix[_EXAMPLE_ROWS[name]] / ranges[name][0] for name in CHANNELS}
     ds = make_dataset(
         channels,
         state="fn",
@@ -407,7 +404,7 @@ def load_lublin_day(
         raise ValueError(f"ranges lacks channel(s) {missing}")
     columns = ACTUATOR_COLUMNS[actuator]
     channels = {}
-    for name in ("CV", "P1", "P2", "T1", "X", "F"):
+    for name in CHANNELS:
         divisor = float(ranges[name][0])
         if not np.isfinite(divisor) or divisor <= 0:
             raise ValueError(f"ranges[{name!r}] divisor must be > 0, got {divisor}")
