@@ -210,3 +210,17 @@ def test_file_errors_name_the_file(tmp_path):
     bad.write_text("[campaign\n")
     with pytest.raises(CampaignError, match="not valid TOML"):
         load_campaign(bad)
+
+
+def test_label_tables_agree_with_the_model_and_the_dataset_format():
+    # campaigns keeps its own copies (it imports neither xarray nor the numba model at import
+    # time); they must not drift from the tables they copy
+    from bayes_fdi import campaigns
+    from bayes_fdi.actuator import FAULT_NAMES, SIGNED_FAULTS
+    from bayes_fdi.datasets import PROFILES, STATES
+
+    assert campaigns.STATES == STATES
+    assert campaigns.FAULTS == FAULT_NAMES
+    assert campaigns.PROFILES == PROFILES
+    assert campaigns.SIGNED_FAULTS == SIGNED_FAULTS
+    assert {f for f, d in campaigns.FAULT_DIRECTION.items() if d < 0} <= SIGNED_FAULTS
