@@ -59,9 +59,9 @@ def select_runs(
                 raise ValueError(f"run {r} out of range: the dataset has {n} run(s)")
             chosen.append(int(r) % n)
     if states is not None:
-        labels = np.asarray(ds["state"].values).astype(str) if "state" in ds.coords else None
-        if labels is None:
+        if "state" not in ds.coords:
             raise ValueError("the dataset has no 'state' coordinate to select by")
+        labels = np.asarray(ds["state"].values).astype(str)
         for s in states:
             hits = np.flatnonzero(labels == s)
             if not len(hits):
