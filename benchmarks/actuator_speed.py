@@ -24,6 +24,7 @@ TARGET_S = 60.0
 
 def _campaign(n_per_state: int, duration: int, seed: int):
     from bayes_fdi.actuator import FAULT_NAMES, Fault, benchmark_inputs
+    from bayes_fdi.campaigns import FAULT_DIRECTION
 
     states = ["fn", *FAULT_NAMES]
     n = n_per_state * len(states)
@@ -34,7 +35,7 @@ def _campaign(n_per_state: int, duration: int, seed: int):
         if state == "fn":
             faults.append(None)
             continue
-        sign = -1.0 if state in ("f12", "f14", "f19") else 1.0
+        sign = FAULT_DIRECTION[str(state)]
         faults.append(Fault(str(state), sign * rng.uniform(0.5, 1.0), onset=0.0))
     return inputs, faults
 
