@@ -917,15 +917,18 @@ class NormalModels(BaseEstimator):
         bins = np.searchsorted(self.std_scale_edges_, speed, side="right")
         return np.where(np.isfinite(speed), bins, -1)
 
-    def _std_factors(self, runs: xr.Dataset, name: str) -> np.ndarray:
-        """Calibration factor of each sample of ``runs`` for output ``name`` (flattened)."""
+    def _std_factors(self, runs: xr.Dataset) -> dict[str, np.ndarray]:
+        """Calibration factor of each sample of ``runs`` (flattened), per output name."""
         n = runs.sizes["run"] * runs.sizes["time"]
         if getattr(self, "interval_calibration_", None) is None:
-            return np.ones(n)
+            return {name: np.ones(n) for name in self.regressors_}
         bins = self._speed_bins(self._cv_speed(runs))
-        scales = self.std_scale_[name]
-        per_bin = scales[np.clip(bins, 0, scales.size - 1)]
-        return np.where(bins >= 0, per_bin, self.std_scale_all_[name])
+        factors = {}
+        for name in self.regressors_:
+            scales = self.std_scale_[name]
+            per_bin = scales[np.clip(bins, 0, scales.size - 1)]
+            factors[name] = np.where(bins >= 0, per_bin, self.std_scale_all_[name])
+        return factors
 
     # --------------------------------------------------------------- prediction
     def _check_fitted(self) -> None:
@@ -950,13 +953,14 @@ class NormalModels(BaseEstimator):
         U, n_neg = model_inputs(runs, input_lags=getattr(self, "input_lags_", ()))
         shape = (runs.sizes["run"], runs.sizes["time"])
         ok = np.isfinite(U).all(axis=1)
+        factors = self._std_factors(runs) if ok.any() else {}
         data = {}
         for name, est in self.regressors_.items():
             mean = np.full(U.shape[0], np.nan)
             std = np.full(U.shape[0], np.nan)
             if ok.any():
                 mean[ok], std[ok] = _predict_with_std(est, U[ok], int(self.chunk_size))
-                std *= self._std_factors(runs, name)
+                std *= factors[name]
             data[f"{name}_hat"] = (("run", "time"), mean.reshape(shape))
             data[f"{name}_hat_std"] = (("run", "time"), std.reshape(shape))
         coords = {k: v for k, v in runs.coords.items() if set(v.dims) <= {"run", "time"}}
