@@ -689,6 +689,11 @@ class NormalModels(BaseEstimator):
         self.width_log_evidence_: dict[float, float] = {}
         self.width_log_evidence_by_output_: dict[str, dict[float, float]] = {}
         widths: dict[str, float] = {}
+        auto_width = base.get_params().get(self.width_param, None) == "auto"
+
+        def with_width(width: float) -> Any:
+            return clone(base).set_params(**{self.width_param: width})
+
         if self.width_search == "ga":
             if self.width_param not in base.get_params():
                 raise ValueError(
@@ -707,12 +712,8 @@ class NormalModels(BaseEstimator):
                 va = rng.choice(va, size=int(self.ga_max_samples), replace=False)
             t0 = time.perf_counter()
             for name, y in targets.items():
-
-                def make(width: float, _base: Any = base) -> Any:
-                    return clone(_base).set_params(**{self.width_param: width})
-
                 res = genetic_width_search(
-                    make,
+                    with_width,
                     U[tr],
                     y[tr],
                     U[va],
@@ -725,13 +726,10 @@ class NormalModels(BaseEstimator):
                 self.ga_results_[name] = res
                 widths[name] = res.width
             self.fit_seconds_["ga"] = time.perf_counter() - t0
-        elif (
-            self.width_search == "evidence-grid"
-            and base.get_params().get(self.width_param, None) == "auto"
-        ):
+        elif self.width_search == "evidence-grid" and auto_width:
             t0 = time.perf_counter()
             res = evidence_grid_search(
-                lambda w, _base=base: clone(_base).set_params(**{self.width_param: w}),
+                with_width,
                 U[idx],
                 {name: y[idx] for name, y in targets.items()},
                 grid,
@@ -743,9 +741,7 @@ class NormalModels(BaseEstimator):
             self.width_log_evidence_by_output_ = res.log_evidence_by_output
             self.fit_seconds_["evidence-grid"] = time.perf_counter() - t0
         elif (
-            self.width_search == "evidence"
-            and base.get_params().get(self.width_param, None) == "auto"
-            and idx.size > self.evidence_max_samples
+            self.width_search == "evidence" and auto_width and idx.size > self.evidence_max_samples
         ):
             sub = np.sort(rng.choice(idx, size=int(self.evidence_max_samples), replace=False))
             t0 = time.perf_counter()
@@ -759,9 +755,7 @@ class NormalModels(BaseEstimator):
             idx = np.sort(rng.choice(idx, size=int(self.max_train_samples), replace=False))
         self.regressors_: dict[str, Any] = {}
         for name, y in targets.items():
-            est = clone(base)
-            if name in widths:
-                est.set_params(**{self.width_param: widths[name]})
+            est = with_width(widths[name]) if name in widths else clone(base)
             t0 = time.perf_counter()
             est.fit(U[idx], y[idx])
             self.fit_seconds_[name] = time.perf_counter() - t0
@@ -772,7 +766,7 @@ class NormalModels(BaseEstimator):
         self.input_lags_ = lags
         self.input_names_ = input_names(lags)
         self.n_features_in_ = len(self.input_names_)
-        self._fit_interval_calibration(normal_runs, U, targets, finite, base, widths)
+        self._fit_interval_calibration(normal_runs, U, targets, finite)
         return self
 
     def _check_width_grid(self) -> tuple[float, ...]:
@@ -818,11 +812,8 @@ class NormalModels(BaseEstimator):
         U: np.ndarray,
         targets: dict[str, np.ndarray],
         finite: np.ndarray,
-        base: Any,
-        widths: dict[str, float],
     ) -> None:
         """Cross-fitted scale factors of the predictive stds (see the class docstring)."""
-        n_out = len(OUTPUT_CHANNELS)
         self.interval_calibration_: str | None = None
         self.std_scale_ = {name: np.ones(int(self.calibration_bins)) for name in OUTPUT_CHANNELS}
         self.std_scale_all_ = dict.fromkeys(OUTPUT_CHANNELS, 1.0)
@@ -856,12 +847,9 @@ class NormalModels(BaseEstimator):
         t0 = time.perf_counter()
         z = {name: np.full(U.shape[0], np.nan) for name in OUTPUT_CHANNELS}
         for name, y in targets.items():
-            est0 = clone(base)
-            if name in widths:
-                est0.set_params(**{self.width_param: widths[name]})
             fitted = self.regressors_[name]
-            params = est0.get_params()
-            if params.get(self.width_param, None) == "auto" and hasattr(
+            est0 = clone(fitted)  # the final fit's parameters, width search included
+            if est0.get_params().get(self.width_param, None) == "auto" and hasattr(
                 fitted, f"{self.width_param}_"
             ):  # keep the width the final fit found instead of searching again per fold
                 est0.set_params(**{self.width_param: getattr(fitted, f"{self.width_param}_")})
@@ -881,9 +869,7 @@ class NormalModels(BaseEstimator):
                 ok = np.isfinite(std) & (std > 0)
                 z[name][held[ok]] = (y[held[ok]] - mean[ok]) / std[ok]
         self.fit_seconds_["calibration"] = time.perf_counter() - t0
-        used = np.isfinite(z[OUTPUT_CHANNELS[0]])
-        for name in OUTPUT_CHANNELS[1:n_out]:
-            used &= np.isfinite(z[name])
+        used = np.all([np.isfinite(z[name]) for name in OUTPUT_CHANNELS], axis=0)
         nb = int(self.calibration_bins)
         fast = speed[used]
         fast = fast[np.isfinite(fast)]
@@ -917,15 +903,18 @@ class NormalModels(BaseEstimator):
         bins = np.searchsorted(self.std_scale_edges_, speed, side="right")
         return np.where(np.isfinite(speed), bins, -1)
 
-    def _std_factors(self, runs: xr.Dataset, name: str) -> np.ndarray:
-        """Calibration factor of each sample of ``runs`` for output ``name`` (flattened)."""
+    def _std_factors(self, runs: xr.Dataset) -> dict[str, np.ndarray]:
+        """Calibration factor of each sample of ``runs`` (flattened), per output name."""
         n = runs.sizes["run"] * runs.sizes["time"]
         if getattr(self, "interval_calibration_", None) is None:
-            return np.ones(n)
+            return {name: np.ones(n) for name in self.regressors_}
         bins = self._speed_bins(self._cv_speed(runs))
-        scales = self.std_scale_[name]
-        per_bin = scales[np.clip(bins, 0, scales.size - 1)]
-        return np.where(bins >= 0, per_bin, self.std_scale_all_[name])
+        factors = {}
+        for name in self.regressors_:
+            scales = self.std_scale_[name]
+            per_bin = scales[np.clip(bins, 0, scales.size - 1)]
+            factors[name] = np.where(bins >= 0, per_bin, self.std_scale_all_[name])
+        return factors
 
     # --------------------------------------------------------------- prediction
     def _check_fitted(self) -> None:
@@ -950,13 +939,14 @@ class NormalModels(BaseEstimator):
         U, n_neg = model_inputs(runs, input_lags=getattr(self, "input_lags_", ()))
         shape = (runs.sizes["run"], runs.sizes["time"])
         ok = np.isfinite(U).all(axis=1)
+        factors = self._std_factors(runs) if ok.any() else {}
         data = {}
         for name, est in self.regressors_.items():
             mean = np.full(U.shape[0], np.nan)
             std = np.full(U.shape[0], np.nan)
             if ok.any():
                 mean[ok], std[ok] = _predict_with_std(est, U[ok], int(self.chunk_size))
-                std *= self._std_factors(runs, name)
+                std *= factors[name]
             data[f"{name}_hat"] = (("run", "time"), mean.reshape(shape))
             data[f"{name}_hat_std"] = (("run", "time"), std.reshape(shape))
         coords = {k: v for k, v in runs.coords.items() if set(v.dims) <= {"run", "time"}}

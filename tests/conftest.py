@@ -15,6 +15,22 @@ import torch
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+def sine_inputs(n_runs: int, rng: np.random.Generator, T: int = 100) -> dict[str, np.ndarray]:
+    """Inputs ``CV, P1, P2, T1`` (each ``(n_runs, T)``) of the synthetic sine-driven test runs.
+
+    Sines of a random phase per run (drawn from ``rng``: one ``uniform(0, 2 pi, (n_runs, 1))``
+    draw); the test files add their own outputs ``X``, ``F``.
+    """
+    t = np.arange(T)
+    ph = rng.uniform(0, 2 * np.pi, (n_runs, 1))
+    return {
+        "CV": 0.5 + 0.3 * np.sin(2 * np.pi * t / 60 + ph),
+        "P1": 0.8 + 0.05 * np.sin(2 * np.pi * t / 37 + 2 * ph),
+        "P2": 0.3 + 0.05 * np.sin(2 * np.pi * t / 23 + 3 * ph),
+        "T1": 0.3 + 0.02 * np.sin(2 * np.pi * t / 90 + ph),
+    }
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     """A seeded numpy generator (every random test is seeded)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import sine_inputs
 from sklearn.linear_model import LogisticRegression
 
 from bayes_fdi.baselines import KernelRidgeRegressor, svm_classifier, svm_fault_diagnoser
@@ -20,19 +21,16 @@ OFFSETS = {"fn": (0, 0), "f1": (0.04, 0), "f2": (0, -0.04), "f3": (0.03, 0.03), 
 def campaign(states, n_per, rng, T=100, onset=0.0):
     sts = [s for s in states for _ in range(n_per)]
     n, t = len(sts), np.arange(T)
-    ph = rng.uniform(0, 2 * np.pi, (n, 1))
-    CV = 0.5 + 0.3 * np.sin(2 * np.pi * t / 60 + ph)
-    P1 = 0.8 + 0.05 * np.sin(2 * np.pi * t / 37 + 2 * ph)
-    P2 = 0.3 + 0.05 * np.sin(2 * np.pi * t / 23 + 3 * ph)
-    T1 = 0.3 + 0.02 * np.sin(2 * np.pi * t / 90 + ph)
+    ch = sine_inputs(n, rng, T)
+    CV = ch["CV"]
     X = 0.9 * CV + 0.05 * CV**2 + NOISE * rng.standard_normal((n, T))
-    F = 0.7 * (1 - 0.8 * X) * np.sqrt(P1 - P2) + NOISE * rng.standard_normal((n, T))
+    F = 0.7 * (1 - 0.8 * X) * np.sqrt(ch["P1"] - ch["P2"]) + NOISE * rng.standard_normal((n, T))
     on = (t >= onset)[None, :]
     for i, s in enumerate(sts):
         X[i] += OFFSETS[s][0] * on[0]
         F[i] += OFFSETS[s][1] * on[0]
     return make_dataset(
-        dict(CV=CV, P1=P1, P2=P2, T1=T1, X=X, F=F),
+        dict(ch, X=X, F=F),
         state=sts,
         onset=onset,
         campaign="synthetic-test",

@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import sine_inputs
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
@@ -24,19 +25,15 @@ NOISE = 0.005
 
 def synthetic_runs(n_runs, rng, offsets=(0.0, 0.0), T=100):
     """Smooth actuator-like maps of (CV, sqrt(P1-P2), T1) plus noise; faults as offsets."""
-    t = np.arange(T)
-    ph = rng.uniform(0, 2 * np.pi, (n_runs, 1))
-    CV = 0.5 + 0.3 * np.sin(2 * np.pi * t / 60 + ph)
-    P1 = 0.8 + 0.05 * np.sin(2 * np.pi * t / 37 + 2 * ph)
-    P2 = 0.3 + 0.05 * np.sin(2 * np.pi * t / 23 + 3 * ph)
-    T1 = 0.3 + 0.02 * np.sin(2 * np.pi * t / 90 + ph)
+    ch = sine_inputs(n_runs, rng, T)
+    CV, P1, P2, T1 = ch["CV"], ch["P1"], ch["P2"], ch["T1"]
     X = 0.9 * CV + 0.05 * CV**2 + NOISE * rng.standard_normal((n_runs, T)) + offsets[0]
     F = (
         0.7 * (1 - 0.8 * (0.9 * CV + 0.05 * CV**2)) * np.sqrt(P1 - P2) * (1 + 0.1 * T1)
         + NOISE * rng.standard_normal((n_runs, T))
         + offsets[1]
     )
-    return dict(CV=CV, P1=P1, P2=P2, T1=T1, X=X, F=F)
+    return dict(ch, X=X, F=F)
 
 
 def test_model_inputs_signed_root_and_count():

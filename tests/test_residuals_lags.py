@@ -191,6 +191,16 @@ def test_lags_do_not_hurt_a_static_plant():
         assert lagged[r] < 1.2 * static[r]
 
 
+def hand_inputs(ds, lag2=False):
+    """``(CV, sqrt(P1 - P2), T1)`` built by hand (1 s steps), plus ``CV(t - 2 s)`` held at the
+    start when ``lag2``: the reference the model inputs are checked against."""
+    cv = ds["CV"].values
+    columns = [cv.ravel(), np.sqrt((ds["P1"] - ds["P2"]).values.ravel()), ds["T1"].values.ravel()]
+    if lag2:
+        columns.append(np.concatenate([cv[:, :1], cv[:, :1], cv[:, :-2]], axis=1).ravel())
+    return np.column_stack(columns)
+
+
 def test_width_searches_and_predictions_use_the_lagged_inputs():
     """Evidence search, GA and predict all see ``3 + len(lags)`` inputs; predictions equal an
     independent fit of the same regressor on hand-built lagged inputs."""
@@ -211,25 +221,7 @@ def test_width_searches_and_predictions_use_the_lagged_inputs():
     for nm, n_in in ((ev, 5), (ga, 4)):
         for est in nm.regressors_.values():
             assert est.n_features_in_ == n_in
-    cv = train["CV"].values
-    lag2 = np.concatenate([cv[:, :1], cv[:, :1], cv[:, :-2]], axis=1)
-    U_tr = np.column_stack(
-        [
-            cv.ravel(),
-            np.sqrt((train["P1"] - train["P2"]).values.ravel()),
-            train["T1"].values.ravel(),
-            lag2.ravel(),
-        ]
-    )
-    cv_te = test["CV"].values
-    U_te = np.column_stack(
-        [
-            cv_te.ravel(),
-            np.sqrt((test["P1"] - test["P2"]).values.ravel()),
-            test["T1"].values.ravel(),
-            np.concatenate([cv_te[:, :1], cv_te[:, :1], cv_te[:, :-2]], axis=1).ravel(),
-        ]
-    )
+    U_tr, U_te = hand_inputs(train, lag2=True), hand_inputs(test, lag2=True)
     ref = KernelRidgeRegressor(width=ga.widths_["X"], alphas=(1e-3,)).fit(
         U_tr, train["X"].values.ravel()
     )
@@ -248,14 +240,9 @@ def test_default_normal_models_are_the_static_paper_models():
     nm.fit(train)
     assert nm.input_names_ == ("CV", "sqrt_dP", "T1") and nm.input_lags_ == ()
     assert nm.n_features_in_ == 3
-    U = np.column_stack(
-        [
-            train["CV"].values.ravel(),
-            np.sqrt((train["P1"] - train["P2"]).values.ravel()),
-            train["T1"].values.ravel(),
-        ]
+    ref = KernelRidgeRegressor(width=0.5, alphas=(1e-3,)).fit(
+        hand_inputs(train), train["F"].values.ravel()
     )
-    ref = KernelRidgeRegressor(width=0.5, alphas=(1e-3,)).fit(U, train["F"].values.ravel())
     U_te, _ = model_inputs(test)
     np.testing.assert_allclose(nm.predict(test)["F_hat"].values.ravel(), ref.predict(U_te))
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import sine_inputs
 from sklearn.linear_model import Ridge
 
 from bayes_fdi.datasets import make_dataset
@@ -16,15 +17,11 @@ GRID = (0.05, 0.1, 0.2, 0.4, 0.8)
 
 def trajectory_runs(n_runs, rng, T=100, noise=0.005):
     """Sine-driven runs (thin trajectories of the input space) with smooth outputs."""
-    t = np.arange(T)
-    ph = rng.uniform(0, 2 * np.pi, (n_runs, 1))
-    CV = 0.5 + 0.3 * np.sin(2 * np.pi * t / 60 + ph)
-    P1 = 0.8 + 0.05 * np.sin(2 * np.pi * t / 37 + 2 * ph)
-    P2 = 0.3 + 0.05 * np.sin(2 * np.pi * t / 23 + 3 * ph)
-    T1 = 0.3 + 0.02 * np.sin(2 * np.pi * t / 90 + ph)
+    ch = sine_inputs(n_runs, rng, T)
+    CV, P1, P2 = ch["CV"], ch["P1"], ch["P2"]
     X = 0.9 * CV + 0.05 * CV**2 + noise * rng.standard_normal((n_runs, T))
     F = 0.7 * (1 - 0.8 * X) * np.sqrt(P1 - P2) + noise * rng.standard_normal((n_runs, T))
-    return make_dataset(dict(CV=CV, P1=P1, P2=P2, T1=T1, X=X, F=F))
+    return make_dataset(dict(ch, X=X, F=F))
 
 
 def independent_evidence(U, ys, widths):
