@@ -18,7 +18,7 @@ It only uses the diagnoser's public contract: ``diagnose(runs)`` returning the D
 
 The recalibrators are fitted on held-out data: on ``calibration_runs`` when given,
 otherwise by cross-fitting on the test runs (``n_folds`` seeded folds stratified by class,
-two by default; each fold is recalibrated by recalibrators fitted on the other folds), so no
+five by default; each fold is recalibrated by recalibrators fitted on the other folds), so no
 run is scored by a recalibrator fitted on itself. The report's "after" column is, in every
 fit, the recalibrator of lowest cross-validated log loss on that fit's fitting runs alone
 (:func:`recalibrate`).
@@ -487,7 +487,7 @@ def write_calibration_report(
     title
         First heading of the report.
     n_folds
-        Cross-fitting folds when no ``calibration_runs`` are given (default 2).
+        Cross-fitting folds when no ``calibration_runs`` are given (default 5).
     methods
         Recalibrators compared (:data:`RECALIBRATORS`); the report's ``after`` column is, in
         every fit, the one of lowest cross-validated log loss on the fitting runs.
@@ -560,14 +560,18 @@ def write_calibration_report(
     results["whole_tree"] = summaries
 
     # ---- how the ECE depends on the binning (value, debiased, interval, floor)
+    # (the report's own binnings, n_bins equal width and equal mass, are already in summaries)
     binning = []
     for strategy in ("uniform", "quantile"):
         for nb in sorted({int(n_bins), 10, 5}, reverse=True):
             nb_ = min(nb, y.size) if strategy == "quantile" else nb
             row: dict[str, Any] = {"strategy": strategy, "n_bins": nb_}
             for k, v in columns.items():
-                e = expected_calibration_error(y, v, classes=classes, strategy=strategy,
-                                               **(kw | {"n_bins": nb_}))  # fmt: skip
+                if nb == n_bins:
+                    e = summaries[k]["_results"][0 if strategy == "uniform" else 1]
+                else:
+                    e = expected_calibration_error(y, v, classes=classes, strategy=strategy,
+                                                   **(kw | {"n_bins": nb_}))  # fmt: skip
                 row[k] = {
                     "value": e.value,
                     "debiased": e.debiased,
