@@ -497,6 +497,34 @@ def write_calibration_report(
     pathlib.Path
         Path of ``report.md``.
     """
+    return _write_report(
+        diagnoser,
+        test_runs,
+        out_dir,
+        calibration_runs=calibration_runs,
+        n_bins=n_bins,
+        n_bootstrap=n_bootstrap,
+        seed=seed,
+        title=title,
+        n_folds=n_folds,
+        methods=methods,
+    )[0]
+
+
+def _write_report(
+    diagnoser: Any,
+    test_runs: xr.Dataset,
+    out_dir: str | Path,
+    *,
+    calibration_runs: xr.Dataset | None,
+    n_bins: int,
+    n_bootstrap: int,
+    seed: int,
+    title: str,
+    n_folds: int,
+    methods: tuple[str, ...],
+) -> tuple[Path, dict[str, Any]]:
+    """:func:`write_calibration_report`, also returning the content of ``calibration.json``."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -644,7 +672,7 @@ def write_calibration_report(
     (out / "calibration.json").write_text(json.dumps(clean, indent=2))
     report = out / "report.md"
     report.write_text(_markdown(clean, node_note))
-    return report
+    return report, clean
 
 
 def _markdown(r: dict[str, Any], node_note: str) -> str:

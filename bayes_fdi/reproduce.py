@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import hashlib
-import json
 import math
 import os
 import sys
@@ -1133,20 +1132,22 @@ def calibration_headlines(
     """
     from sklearn.base import clone
 
-    from bayes_fdi.calibration_report import time_split_summary, write_calibration_report
+    from bayes_fdi.calibration_report import RECALIBRATORS, _write_report, time_split_summary
 
     out = Path(out_dir)
     with single_threaded():
-        path = write_calibration_report(
+        path, cal = _write_report(
             diagnoser,
             test_runs,
             out,
-            seed=seed,
+            calibration_runs=None,
+            n_bins=15,
             n_bootstrap=n_bootstrap,
-            n_folds=n_folds,
+            seed=seed,
             title=title,
+            n_folds=n_folds,
+            methods=RECALIBRATORS,
         )
-        cal = json.loads((path.parent / "calibration.json").read_text())
         head: dict[str, Any] = {
             "report": f"{out.name}/{path.name}",
             "recalibration": cal["recalibration"],
