@@ -1132,7 +1132,12 @@ def calibration_headlines(
     """
     from sklearn.base import clone
 
-    from bayes_fdi.calibration_report import RECALIBRATORS, _write_report, time_split_summary
+    from bayes_fdi.calibration_report import (
+        RECALIBRATORS,
+        _write_report,
+        split_in_time,
+        time_split_summary,
+    )
 
     out = Path(out_dir)
     with single_threaded():
@@ -1171,7 +1176,7 @@ def calibration_headlines(
         ]
         head["coverage"] = {k: v["coverage"] for k, v in cal.get("normal_models", {}).items()}
         if real_record is not None:
-            first, _ = _split_half(real_record)
+            first, _ = split_in_time(real_record, 0.5)
             model = clone(diagnoser.normal_models_)
             width, _ = select_regression_width(first, seed=seed, input_lags=model.input_lags)
             regressor = model.regressor
@@ -1181,12 +1186,6 @@ def calibration_headlines(
             head["real_record_coverage"] = {k: hour[k]["coverage"] for k in ("X", "F") if k in hour}
             head["real_record_width"] = float(width)
     return head
-
-
-def _split_half(runs: xr.Dataset) -> tuple[xr.Dataset, xr.Dataset]:
-    from bayes_fdi.calibration_report import split_in_time
-
-    return split_in_time(runs, 0.5)
 
 
 # ----------------------------------------------------------------------------- main job
