@@ -588,19 +588,7 @@ class TemperatureScaler(BaseEstimator):
     def fit(self, proba_or_logits: Any, y: Any) -> TemperatureScaler:
         """Fit the temperature on held-out ``(proba_or_logits, y)``."""
         z = self._logits(proba_or_logits)
-        y = np.asarray(y)
-        if y.ndim != 1 or y.shape[0] != z.shape[0]:
-            raise ValueError(f"y must be 1-D with {z.shape[0]} labels, got shape {y.shape}")
-        cls = np.unique(y) if self.classes is None else np.asarray(self.classes)
-        if len(cls) != z.shape[1]:
-            raise ValueError(
-                f"{z.shape[1]} columns but {len(cls)} classes; pass `classes` in column order"
-            )
-        lookup = {c: i for i, c in enumerate(cls.tolist())}
-        try:
-            y_idx = np.array([lookup[v] for v in y.tolist()], dtype=np.intp)
-        except KeyError as err:
-            raise ValueError(f"label {err.args[0]!r} is not among the classes") from None
+        y_idx, cls = _class_indices(y, z.shape[0], self.classes, z.shape[1])
         t_lo, t_hi = (float(b) for b in self.bounds)
         if not 0 < t_lo < t_hi:
             raise ValueError(f"bounds must satisfy 0 < low < high, got {self.bounds}")

@@ -18,7 +18,7 @@ It only uses the diagnoser's public contract: ``diagnose(runs)`` returning the D
 
 The recalibrators are fitted on held-out data: on ``calibration_runs`` when given,
 otherwise by cross-fitting on the test runs (``n_folds`` seeded folds stratified by class,
-two by default; each fold is recalibrated by recalibrators fitted on the other folds), so no
+five by default; each fold is recalibrated by recalibrators fitted on the other folds), so no
 run is scored by a recalibrator fitted on itself. The report's "after" column is, in every
 fit, the recalibrator of lowest cross-validated log loss on that fit's fitting runs alone
 (:func:`recalibrate`).
@@ -487,7 +487,7 @@ def write_calibration_report(
     title
         First heading of the report.
     n_folds
-        Cross-fitting folds when no ``calibration_runs`` are given (default 2).
+        Cross-fitting folds when no ``calibration_runs`` are given (default 5).
     methods
         Recalibrators compared (:data:`RECALIBRATORS`); the report's ``after`` column is, in
         every fit, the one of lowest cross-validated log loss on the fitting runs.
@@ -497,6 +497,34 @@ def write_calibration_report(
     pathlib.Path
         Path of ``report.md``.
     """
+    return _write_report(
+        diagnoser,
+        test_runs,
+        out_dir,
+        calibration_runs=calibration_runs,
+        n_bins=n_bins,
+        n_bootstrap=n_bootstrap,
+        seed=seed,
+        title=title,
+        n_folds=n_folds,
+        methods=methods,
+    )[0]
+
+
+def _write_report(
+    diagnoser: Any,
+    test_runs: xr.Dataset,
+    out_dir: str | Path,
+    *,
+    calibration_runs: xr.Dataset | None,
+    n_bins: int,
+    n_bootstrap: int,
+    seed: int,
+    title: str,
+    n_folds: int,
+    methods: tuple[str, ...],
+) -> tuple[Path, dict[str, Any]]:
+    """:func:`write_calibration_report`, also returning the content of ``calibration.json``."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -560,14 +588,18 @@ def write_calibration_report(
     results["whole_tree"] = summaries
 
     # ---- how the ECE depends on the binning (value, debiased, interval, floor)
+    # (the report's own binnings, n_bins equal width and equal mass, are already in summaries)
     binning = []
     for strategy in ("uniform", "quantile"):
         for nb in sorted({int(n_bins), 10, 5}, reverse=True):
             nb_ = min(nb, y.size) if strategy == "quantile" else nb
             row: dict[str, Any] = {"strategy": strategy, "n_bins": nb_}
             for k, v in columns.items():
-                e = expected_calibration_error(y, v, classes=classes, strategy=strategy,
-                                               **(kw | {"n_bins": nb_}))  # fmt: skip
+                if nb == n_bins:
+                    e = summaries[k]["_results"][0 if strategy == "uniform" else 1]
+                else:
+                    e = expected_calibration_error(y, v, classes=classes, strategy=strategy,
+                                                   **(kw | {"n_bins": nb_}))  # fmt: skip
                 row[k] = {
                     "value": e.value,
                     "debiased": e.debiased,
@@ -640,7 +672,7 @@ def write_calibration_report(
     (out / "calibration.json").write_text(json.dumps(clean, indent=2))
     report = out / "report.md"
     report.write_text(_markdown(clean, node_note))
-    return report
+    return report, clean
 
 
 def _markdown(r: dict[str, Any], node_note: str) -> str:

@@ -429,6 +429,17 @@ def write_json(results: Mapping[str, Any], path: str | os.PathLike) -> Path:
     return path
 
 
+def _save(fig: Any, path: str | os.PathLike) -> Path:
+    """Lay out ``fig``, write it to ``path`` (PNG, 110 dpi), close it; return the path."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def plot_residuals(
     residuals: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]],
     path: str | os.PathLike,
@@ -472,11 +483,7 @@ def plot_residuals(
         axes[-1, col].set_xlabel("time (s)")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def plot_features(
@@ -561,11 +568,7 @@ def plot_features(
     ax.legend(fontsize=8, ncol=2, loc="best", markerscale=1.5)
     if title:
         ax.set_title(title)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def _num(value: Any, fmt: str = ".4f") -> str:

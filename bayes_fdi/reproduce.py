@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import hashlib
-import json
 import math
 import os
 import sys
@@ -1133,20 +1132,27 @@ def calibration_headlines(
     """
     from sklearn.base import clone
 
-    from bayes_fdi.calibration_report import time_split_summary, write_calibration_report
+    from bayes_fdi.calibration_report import (
+        RECALIBRATORS,
+        _write_report,
+        split_in_time,
+        time_split_summary,
+    )
 
     out = Path(out_dir)
     with single_threaded():
-        path = write_calibration_report(
+        path, cal = _write_report(
             diagnoser,
             test_runs,
             out,
-            seed=seed,
+            calibration_runs=None,
+            n_bins=15,
             n_bootstrap=n_bootstrap,
-            n_folds=n_folds,
+            seed=seed,
             title=title,
+            n_folds=n_folds,
+            methods=RECALIBRATORS,
         )
-        cal = json.loads((path.parent / "calibration.json").read_text())
         head: dict[str, Any] = {
             "report": f"{out.name}/{path.name}",
             "recalibration": cal["recalibration"],
@@ -1170,7 +1176,7 @@ def calibration_headlines(
         ]
         head["coverage"] = {k: v["coverage"] for k, v in cal.get("normal_models", {}).items()}
         if real_record is not None:
-            first, _ = _split_half(real_record)
+            first, _ = split_in_time(real_record, 0.5)
             model = clone(diagnoser.normal_models_)
             width, _ = select_regression_width(first, seed=seed, input_lags=model.input_lags)
             regressor = model.regressor
@@ -1180,12 +1186,6 @@ def calibration_headlines(
             head["real_record_coverage"] = {k: hour[k]["coverage"] for k in ("X", "F") if k in hour}
             head["real_record_width"] = float(width)
     return head
-
-
-def _split_half(runs: xr.Dataset) -> tuple[xr.Dataset, xr.Dataset]:
-    from bayes_fdi.calibration_report import split_in_time
-
-    return split_in_time(runs, 0.5)
 
 
 # ----------------------------------------------------------------------------- main job
