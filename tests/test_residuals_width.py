@@ -60,7 +60,7 @@ def test_grid_search_is_the_argmax_of_independent_evidences(rng):
     for est in nm.regressors_.values():
         assert est.get_params()["width"] == best and est.width_ == best
     assert nm.n_train_samples_ == U.shape[0] == 400
-    assert nm.fit_seconds_["evidence-grid"] >= 0
+    assert nm.fit_seconds_["evidence-grid"] > 0  # the search ran and was timed
 
 
 def test_grid_search_on_every_sample_when_there_are_few():
