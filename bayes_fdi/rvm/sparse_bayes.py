@@ -186,17 +186,35 @@ def _unit_columns(design: Design) -> tuple[Tensor, Tensor]:
     return torch.where(valid, norms, torch.ones_like(norms)), valid
 
 
-def _rescale(
-    active: Tensor, mu: Tensor, Sigma: Tensor, alpha: Tensor, norms: Tensor
-) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """Map unit-norm-basis results to the caller's basis and sort by column index."""
+def _result(
+    active: Tensor,
+    mu: Tensor,
+    Sigma: Tensor,
+    alpha: Tensor,
+    norms: Tensor,
+    *,
+    beta: float,
+    trace: list[float],
+    log_ml: float,
+    n_iter: int,
+    converged: bool,
+) -> SBLResult:
+    """The :class:`SBLResult` of a solver run: unit-norm-basis weights, covariance and
+    precisions mapped to the caller's basis, sorted by column index."""
     order = torch.argsort(active)
     active = active[order]
     d = norms[active]
-    mu = mu[order] / d
-    Sigma = Sigma[order][:, order] / (d[:, None] * d[None, :])
-    alpha = alpha[order] * d * d
-    return active, mu, Sigma, alpha
+    return SBLResult(
+        active=active,
+        mean=mu[order] / d,
+        covariance=Sigma[order][:, order] / (d[:, None] * d[None, :]),
+        alpha=alpha[order] * d * d,
+        beta=float(beta),
+        evidence_trace=torch.tensor(trace, dtype=torch.float64),
+        log_evidence=float(log_ml),
+        n_iter=n_iter,
+        converged=converged,
+    )
 
 
 class _Action(NamedTuple):
@@ -502,15 +520,15 @@ def fast_gaussian(
             converged = True
             break
 
-    act, w, C, a = _rescale(torch.tensor(active, device=device), mu, Sigma, alpha, norms)
-    return SBLResult(
-        active=act,
-        mean=w,
-        covariance=C,
-        alpha=a,
-        beta=float(beta),
-        evidence_trace=torch.tensor(trace, dtype=torch.float64),
-        log_evidence=float(log_ml),
+    return _result(
+        torch.tensor(active, device=device),
+        mu,
+        Sigma,
+        alpha,
+        norms,
+        beta=beta,
+        trace=trace,
+        log_ml=log_ml,
         n_iter=it,
         converged=converged,
     )
@@ -599,15 +617,15 @@ def em_gaussian(
         resid = t - Phi_all[:, keep] @ mu
         log_ml = _gaussian_log_ml(N, beta, float(resid @ resid), alpha, mu, fac)
         trace.append(log_ml)
-    act, w, C, a = _rescale(active[keep], mu, Sigma, alpha, norms)
-    return SBLResult(
-        active=act,
-        mean=w,
-        covariance=C,
-        alpha=a,
-        beta=float(beta),
-        evidence_trace=torch.tensor(trace, dtype=torch.float64),
-        log_evidence=float(log_ml),
+    return _result(
+        active[keep],
+        mu,
+        Sigma,
+        alpha,
+        norms,
+        beta=beta,
+        trace=trace,
+        log_ml=log_ml,
         n_iter=it,
         converged=converged,
     )
@@ -773,15 +791,15 @@ def fast_bernoulli(
         Phi = design.columns(active) / norms[torch.tensor(active, device=device)]
         mode = posterior_mode(Phi, t, alpha, torch.zeros_like(alpha))
         trace.append(mode.log_ml)
-    act, w, C, a = _rescale(torch.tensor(active, device=device), mode.mu, mode.Sigma, alpha, norms)
-    return SBLResult(
-        active=act,
-        mean=w,
-        covariance=C,
-        alpha=a,
+    return _result(
+        torch.tensor(active, device=device),
+        mode.mu,
+        mode.Sigma,
+        alpha,
+        norms,
         beta=math.nan,
-        evidence_trace=torch.tensor(trace, dtype=torch.float64),
-        log_evidence=float(mode.log_ml),
+        trace=trace,
+        log_ml=mode.log_ml,
         n_iter=it,
         converged=converged,
     )
@@ -839,15 +857,15 @@ def em_bernoulli(
         mode = posterior_mode(Phi_all[:, keep], t, alpha, mu)
         trace.append(mode.log_ml)
     assert mode is not None
-    act, w, C, a = _rescale(active[keep], mode.mu, mode.Sigma, alpha, norms)
-    return SBLResult(
-        active=act,
-        mean=w,
-        covariance=C,
-        alpha=a,
+    return _result(
+        active[keep],
+        mode.mu,
+        mode.Sigma,
+        alpha,
+        norms,
         beta=math.nan,
-        evidence_trace=torch.tensor(trace, dtype=torch.float64),
-        log_evidence=float(mode.log_ml),
+        trace=trace,
+        log_ml=mode.log_ml,
         n_iter=it,
         converged=converged,
     )
