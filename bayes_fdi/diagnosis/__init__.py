@@ -39,6 +39,7 @@ from bayes_fdi.diagnosis.model_inputs import (
     model_inputs,
 )
 from bayes_fdi.diagnosis.normal_models import NormalModels
+from bayes_fdi.diagnosis.online import OnlineDiagnoser
 from bayes_fdi.diagnosis.seva import (
     ClassDistribution,
     NoveltyReference,
@@ -71,6 +72,7 @@ __all__ = [
     "NegativePressureDropWarning",
     "NormalModels",
     "NoveltyReference",
+    "OnlineDiagnoser",
     "SVMClassifier",
     "SevaRecord",
     "SevaStatus",
