@@ -227,10 +227,12 @@ class ARWhitener:
 
     def update(self, z: float) -> float:
         """The innovation of one standardised residual (NaN for NaN; O(order) time)."""
+        self._check()
         return float(self.advance(np.array([z], dtype=np.float64), self._state)[0])
 
     def run(self, z: Any) -> np.ndarray:
         """Innovations of a sequence, continuing from the current state (equals `update`)."""
+        self._check()
         return self.advance(z, self._state)
 
 
@@ -533,7 +535,8 @@ def cusum_arl(threshold: Any, k: float) -> np.ndarray:
     if k == 0:
         return b**2
     a = 2.0 * k * b
-    return (np.exp(a) - a - 1.0) / (2.0 * k * k)
+    with np.errstate(over="ignore"):  # an infinite ARL for an enormous threshold is right
+        return (np.exp(a) - a - 1.0) / (2.0 * k * k)
 
 
 def cusum_threshold(arl: float, k: float, *, n_sides: int = 1) -> float:

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -145,6 +145,9 @@ class OnlineDiagnoser(BaseEstimator):
     calibrator
         Unfitted recalibrator of the group probabilities, fitted on the calibration runs (e.g.
         ``bayes_fdi.calibration.TemperatureScaler()``); None: none.
+    max_signatures_per_fault
+        Training signatures kept per fault for the classifier (a seeded subset; bounds the
+        cost of the RVC tree, default 80).
     group_threshold
         Held-out pairwise confusion from which two faults form one isolability group.
     detect_rate
@@ -196,6 +199,7 @@ class OnlineDiagnoser(BaseEstimator):
         max_whiten_order: int = 8,
         isolation_classifier: Any = None,
         calibrator: Any = None,
+        max_signatures_per_fault: int = 80,
         group_threshold: float = 0.15,
         detect_rate: float = 0.5,
         p_fault: float = 0.8,
@@ -213,6 +217,7 @@ class OnlineDiagnoser(BaseEstimator):
         self.max_whiten_order = max_whiten_order
         self.isolation_classifier = isolation_classifier
         self.calibrator = calibrator
+        self.max_signatures_per_fault = max_signatures_per_fault
         self.group_threshold = group_threshold
         self.detect_rate = detect_rate
         self.p_fault = p_fault
@@ -225,10 +230,10 @@ class OnlineDiagnoser(BaseEstimator):
     def fit(
         self,
         normal_runs: xr.Dataset,
-        fault_runs: xr.Dataset | None = None,
+        fault_runs: xr.Dataset | Sequence[xr.Dataset] | None = None,
         *,
-        validation_runs: xr.Dataset | None = None,
-        calibration_runs: xr.Dataset | None = None,
+        validation_runs: xr.Dataset | Sequence[xr.Dataset] | None = None,
+        calibration_runs: xr.Dataset | Sequence[xr.Dataset] | None = None,
     ) -> OnlineDiagnoser:
         """Fit detection on fault-free runs and, given fault runs, isolation.
 
@@ -238,7 +243,8 @@ class OnlineDiagnoser(BaseEstimator):
             Fault-free runs (channels CV, P1, P2, T1, X, F; NaN gaps allowed).
         fault_runs
             Runs with a fault (coordinates ``state``, ``onset``; ``strength`` optional) to
-            train the isolation classifier on. None: detection only (a detection is then an
+            train the isolation classifier on (a dataset, or a list of datasets such as campaigns
+            of different durations). None: detection only (a detection is then an
             ``"unknown"`` fault).
         validation_runs, calibration_runs
             Held-out fault runs for the isolability groups and the probability calibration.
@@ -373,6 +379,13 @@ class OnlineDiagnoser(BaseEstimator):
         sample
             Mapping with ``CV, P1, P2, T1, X, F`` (normalised; NaN = missing) and optionally
             ``time`` (s; default the number of seconds since `reset`).
+
+        Returns
+        -------
+        SevaRecord
+            The second's record; the stream's other values of that second (``DD``, ``FFID``,
+            ``indicated``, the statistics, innovations and probabilities over the classifier's
+            faults) are in ``last_``.
         """
         self._check_fitted()
         if not hasattr(self, "_stream"):
@@ -385,6 +398,13 @@ class OnlineDiagnoser(BaseEstimator):
         self._seconds += 1
         out = self._process(arrays, self._stream)
         dec = self._decide(arrays, out)
+        self.last_ = {
+            "time": t, "DD": bool(out["DD"][0]), "FFID": bool(dec["FFID"][0]),
+            "indicated": dec["indicated"][0].copy(), "stat_X": float(out["stat_X"][0]),
+            "stat_F": float(out["stat_F"][0]), "r_X": float(out["r_X"][0]),
+            "r_F": float(out["r_F"][0]), "fault_proba": out["fault_proba"][0].copy(),
+            "group_proba": out["group_proba"][0].copy(),
+        }  # fmt: skip
         return self._record(arrays, out, dec, t)
 
     def _record(self, arrays, out, dec, t: float) -> SevaRecord:
@@ -439,8 +459,11 @@ class OnlineDiagnoser(BaseEstimator):
         """
         self._check_fitted()
         single = "run" not in recording.dims
-        ds = recording.expand_dims("run") if single else recording
-        validate_dataset(ds[[c for c in CHANNELS if c in ds]], require=CHANNELS, allow_nan=True)
+        ds = recording
+        if single:  # one run: scalar coordinates (a selected run's labels) are not carried
+            ds = ds.drop_vars([c for c in ds.coords if ds[c].ndim == 0]).expand_dims("run")
+        channels = ds[[c for c in CHANNELS if c in ds.data_vars]].reset_coords(drop=True)
+        validate_dataset(channels, require=CHANNELS, allow_nan=True)
         n_runs, n_t = ds.sizes["run"], ds.sizes["time"]
         data = {c: np.asarray(ds[c].transpose("run", "time").values, dtype=np.float64)
                 for c in CHANNELS}  # fmt: skip
@@ -495,7 +518,7 @@ class OnlineDiagnoser(BaseEstimator):
             clear_level=float(self.clear_level_), coverage=float(self.coverage),
             features=",".join(ISOLATION_FEATURES),
         )  # fmt: skip
-        return out.isel(run=0) if single else out
+        return out.isel(run=0, drop=True) if single else out
 
     @property
     def _faults(self) -> tuple[str, ...]:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -52,8 +53,6 @@ SIGNATURE_AGES: tuple[int, ...] = (
 #: what the sensors cannot split once the signature has settled; the calibrated
 #: probabilities carry the uncertainty of the first seconds.
 GROUP_MIN_AGE = 20
-#: Signatures per fault kept for the classifier fit (a seeded subset; bounds the RVC cost).
-MAX_ROWS_PER_FAULT = 150
 #: White Gaussian samples per channel behind the GLR's theoretical threshold floor.
 WHITE_SAMPLES = 200_000
 
@@ -94,6 +93,7 @@ def _check_params(diag: Any) -> None:
         "coverage": 0 < diag.coverage < 1,
         "detect_rate": 0 <= diag.detect_rate <= 1,
         "input_margin": diag.input_margin >= 0,
+        "max_signatures_per_fault": diag.max_signatures_per_fault >= 2,
     }
     for name, ok in checks.items():
         if not ok:
@@ -147,7 +147,8 @@ def _fit_detection(diag: Any, normal_runs: xr.Dataset) -> None:
 
 def _signatures(diag: Any, runs: xr.Dataset) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """Isolation signatures of fault runs at `SIGNATURE_AGES` after each detection that
-    follows the fault's onset: rows, fault labels, ages, and per fault the detected share."""
+    follows the fault's onset: rows, fault labels, ages, and per fault whether each of its
+    runs was detected after the onset."""
     validate_dataset(runs, require=CHANNELS, allow_nan=True)
     if "state" not in runs.coords:
         raise ValueError("fault runs need a 'state' coordinate (the fault of each run)")
@@ -179,8 +180,29 @@ def _signatures(diag: Any, runs: xr.Dataset) -> tuple[np.ndarray, np.ndarray, np
                     labels.append(state)
                     ages.append(a)
     X = np.asarray(rows, dtype=np.float64).reshape(-1, len(ISOLATION_FEATURES))
-    rates = {f: float(np.mean(v)) for f, v in detected.items()}
-    return X, np.asarray(labels, dtype=str), np.asarray(ages, dtype=np.int64), rates
+    return X, np.asarray(labels, dtype=str), np.asarray(ages, dtype=np.int64), detected
+
+
+def _as_list(runs: xr.Dataset | Sequence[xr.Dataset]) -> list[xr.Dataset]:
+    return [runs] if isinstance(runs, xr.Dataset) else list(runs)
+
+
+def _signatures_of(
+    diag: Any, runs: xr.Dataset | Sequence[xr.Dataset]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """`_signatures` of a dataset or of several (e.g. campaigns of different durations);
+    the last item maps each fault to whether each of its runs was detected."""
+    parts = [_signatures(diag, r) for r in _as_list(runs)]
+    detected: dict[str, list[bool]] = {}
+    for p in parts:
+        for f, flags in p[3].items():
+            detected.setdefault(f, []).extend(flags)
+    return (
+        np.concatenate([p[0] for p in parts]),
+        np.concatenate([p[1] for p in parts]),
+        np.concatenate([p[2] for p in parts]),
+        detected,
+    )
 
 
 def _cap_rows(y: np.ndarray, cap: int, rng: np.random.Generator) -> np.ndarray:
@@ -196,9 +218,9 @@ def _cap_rows(y: np.ndarray, cap: int, rng: np.random.Generator) -> np.ndarray:
 def fit_online(
     diag: Any,
     normal_runs: xr.Dataset,
-    fault_runs: xr.Dataset | None,
-    validation_runs: xr.Dataset | None,
-    calibration_runs: xr.Dataset | None,
+    fault_runs: xr.Dataset | Sequence[xr.Dataset] | None,
+    validation_runs: xr.Dataset | Sequence[xr.Dataset] | None,
+    calibration_runs: xr.Dataset | Sequence[xr.Dataset] | None,
 ) -> None:
     """Fit an `OnlineDiagnoser` in place (see the module docstring)."""
     _check_params(diag)
@@ -218,14 +240,18 @@ def fit_online(
     if fault_runs is not None:
         t0 = time.perf_counter()
         if validation_runs is None or calibration_runs is None:
-            train, val, cal = split_fault_runs(fault_runs)
-            validation_runs = val if validation_runs is None else validation_runs
-            calibration_runs = cal if calibration_runs is None else calibration_runs
+            parts = [split_fault_runs(r) for r in _as_list(fault_runs)]
+            train = [p[0] for p in parts]
+            validation_runs = [p[1] for p in parts] if validation_runs is None else validation_runs
+            calibration_runs = (
+                [p[2] for p in parts] if calibration_runs is None else calibration_runs
+            )
         else:
             train = fault_runs
-        X, y, _, rates = _signatures(diag, train)
-        Xv, yv, av, _ = _signatures(diag, validation_runs)
-        Xc, yc, _, _ = _signatures(diag, calibration_runs)
+        X, y, _, detected = _signatures_of(diag, train)
+        rates = {f: float(np.mean(v)) for f, v in detected.items()}
+        Xv, yv, av, _ = _signatures_of(diag, validation_runs)
+        Xc, yc, _, _ = _signatures_of(diag, calibration_runs)
         seconds["signatures"] = time.perf_counter() - t0
         counts = {f: int(np.sum(y == f)) for f in rates}
         undetectable = sorted(
@@ -240,7 +266,7 @@ def fit_online(
             rng = np.random.default_rng(None if diag.random_state is None
                                         else [diag.random_state, 5])  # fmt: skip
             keep = np.flatnonzero(np.isin(y, known))
-            keep = keep[_cap_rows(y[keep], MAX_ROWS_PER_FAULT, rng)]
+            keep = keep[_cap_rows(y[keep], int(diag.max_signatures_per_fault), rng)]
             vkeep = np.isin(yv, known) & (av >= GROUP_MIN_AGE)
             ckeep = np.isin(yc, known)
             diag.isolator_ = FaultIsolator(
