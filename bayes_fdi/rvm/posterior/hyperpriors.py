@@ -18,7 +18,10 @@ __all__ = ["Hyperpriors"]
 class Hyperpriors(NamedTuple):
     """Gamma hyperpriors (shape ``a``, rate ``b``) on the weight precisions and noise precision.
 
-    Parameters
+    Construct as ``Hyperpriors(a_alpha=0.5, b_alpha=5e-5, a_beta=1e-6, b_beta=1e-6,
+    relative=True)`` (an immutable named tuple).
+
+    Attributes
     ----------
     a_alpha, b_alpha : float
         Shape and rate of ``alpha_i ~ Gamma(a_alpha, b_alpha)`` for every basis function.

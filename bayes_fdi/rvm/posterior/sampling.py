@@ -130,17 +130,19 @@ def sample_posterior(
         else:
             log_beta = None
             weights = model.weights_from_latent(log_alpha, raw["v"])
+        elapsed = time.perf_counter() - t0
         variables = {"log_alpha": log_alpha, "weights": weights}
         if log_beta is not None:
             variables["log_beta"] = log_beta
-        diagnostics = PosteriorDiagnostics.from_nuts(variables, st, time.perf_counter() - t0)
+        diagnostics = PosteriorDiagnostics.from_nuts(variables, st, elapsed)
         bad_r_hat = num_chains > 1 and diagnostics.max_r_hat > 1.01
         if bad_r_hat or diagnostics.n_divergences:
             warnings.warn(
                 f"NUTS chains may not have converged ({diagnostics}); check "
-                "posterior.diagnostics, run longer or with more chains. Large R-hat with many "
-                "overlapping basis functions usually means a multimodal posterior (chains switch "
-                "on different subsets of similar basis functions).",
+                "posterior.diagnostics, run longer or with more chains (R-hat < 1.01 needs a bulk "
+                "ESS of several hundred per chain; 4 chains are recommended). Large R-hat with "
+                "many overlapping basis functions usually means a multimodal posterior (chains "
+                "switch on different subsets of similar basis functions).",
                 ConvergenceWarning,
                 stacklevel=2,
             )
