@@ -49,6 +49,8 @@ def test_rvc_binary_posterior_matches_type2_and_keeps_labels():
     assert "diverging" in idata.sample_stats
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # every group az.loo needs is there
+        # except the verdict that some point is influential (large Pareto k): about the model
+        warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto")
         loo = az.loo(idata)
     assert loo.n_data_points == n and np.isfinite(loo.elpd_loo)
     # observed labels are the 0/1 indicator of classes_[1]
@@ -69,9 +71,10 @@ def test_rvc_one_vs_rest_posterior():
     proba = post.predict_proba(centres)
     np.testing.assert_allclose(proba.sum(1), 1.0)
     assert list(post.predict(centres)) == ["f1", "f2", "fn"]
-    # clusters 4 sd apart: each centre is clearly its own class
+    # clusters 4 sd apart: each centre is clearly its own class (0.9994 for seeds 0..4)
     assert np.all(proba.max(1) > 0.6)
-    # SVI against RVC's Laplace answer: two approximations, measured within 0.1 on this problem
+    # SVI against RVC's Laplace answer: two approximations of one predictive, 0.1095 apart for
+    # SVI seeds 0..4 alike (the gap is between the approximations, not Monte Carlo noise)
     np.testing.assert_allclose(proba, rvc.predict_proba(centres), atol=0.15)
     idata = post.to_arviz()
     assert {"log_alpha[f1]", "weights[fn]"} <= set(idata.posterior.data_vars)
