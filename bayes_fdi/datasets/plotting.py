@@ -65,7 +65,9 @@ def select_runs(
         for s in states:
             hits = np.flatnonzero(labels == s)
             if not len(hits):
-                raise ValueError(f"no run with state {s!r} (states here: {sorted(set(labels))})")
+                raise ValueError(
+                    f"no run with state {s!r} (states here: {sorted(set(labels.tolist()))})"
+                )
             chosen.append(int(hits[0]))
     if not chosen:
         chosen = [0]

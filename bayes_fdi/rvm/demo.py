@@ -69,9 +69,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--width", type=width_argument, default=2.0, help="RBF width sigma, or 'auto' (default 2.0)"
     )
     parser.add_argument("--method", choices=("fast", "em"), default="fast")
-    parser.add_argument(
-        "--seed", type=non_negative_int, default=0, help="random seed (default 0)"
-    )
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
 
 
 def run_from_cli(args: argparse.Namespace) -> int:
