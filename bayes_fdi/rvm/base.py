@@ -40,9 +40,11 @@ _DTYPES = {"float64": torch.float64, "float32": torch.float32}
 _METHODS = ("fast", "em")
 #: data whose largest magnitude lies in [2^-_SCALE_EXPONENT, 2^_SCALE_EXPONENT] are not rescaled
 _SCALE_EXPONENT = 32
-#: smallest RBF width on rescaled inputs: its square stays a normal float64 (below it the
-#: kernel of distinct rows is exactly 0 and of equal rows exactly 1 either way)
+#: RBF widths are clamped to [2^-500, 2^500]: the square stays a normal float64, and outside
+#: that range the kernel of (rescaled, hence at most ~2^33 apart) rows is the same in float64
+#: (below: 0 between distinct rows, 1 between equal ones; above: 1 everywhere)
 _MIN_SCALED_WIDTH = 2.0**-500
+_MAX_SCALED_WIDTH = 2.0**500
 
 
 def power_of_two_scale(values: Tensor) -> float:
@@ -278,7 +280,7 @@ class RVMBase(BaseEstimator):
         """The RBF width in rescaled input units (``None`` stays ``None``)."""
         if width is None:
             return width
-        return max(width / x_scale, _MIN_SCALED_WIDTH)
+        return min(max(width / x_scale, _MIN_SCALED_WIDTH), _MAX_SCALED_WIDTH)
 
     @staticmethod
     def _output(value: Tensor, like: Any) -> Any:
