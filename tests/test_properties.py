@@ -118,7 +118,7 @@ def classification_problems(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, st
 )
 def rvr_fits_any_finite_data(problem: tuple) -> None:
     X, y, method = problem
-    model = RVR(width=2.0, method=method, max_iter=300).fit(X, y)
+    model = RVR(width=2.0, method=method, max_iter=100).fit(X, y)
     mean, std = model.predict(X, return_std=True)
     assert np.all(np.isfinite(mean)) and np.all(np.isfinite(std))
     assert np.all(std > 0)
@@ -130,7 +130,7 @@ def rvr_fits_any_finite_data(problem: tuple) -> None:
 
 
 test_rvr_fits_any_finite_data, test_rvr_fits_any_finite_data_fuzz = twice(
-    25, 3000, problem=regression_problems()
+    25, 1500, problem=regression_problems()
 )(rvr_fits_any_finite_data)
 
 
@@ -140,7 +140,7 @@ test_rvr_fits_any_finite_data, test_rvr_fits_any_finite_data_fuzz = twice(
 )
 def rvc_probabilities_any_finite_data(problem: tuple) -> None:
     X, y, method = problem
-    model = RVC(width=2.0, method=method, max_iter=300).fit(X, y)
+    model = RVC(width=2.0, method=method, max_iter=100).fit(X, y)
     proba = model.predict_proba(X)
     assert proba.shape == (X.shape[0], np.unique(y).size)
     assert np.all(np.isfinite(proba))
@@ -151,7 +151,7 @@ def rvc_probabilities_any_finite_data(problem: tuple) -> None:
 
 
 test_rvc_probabilities_any_finite_data, test_rvc_probabilities_any_finite_data_fuzz = twice(
-    20, 2000, problem=classification_problems()
+    20, 800, problem=classification_problems()
 )(rvc_probabilities_any_finite_data)
 
 
@@ -168,9 +168,9 @@ def rvr_is_scale_equivariant(problem: tuple, kx: int, ky: int) -> None:
     # normal float and every rescaling below is exact
     X = np.round(X / np.abs(X).max() * 2**20) / 2**20 if np.abs(X).max() > 0 else X
     y = np.round(y / np.abs(y).max() * 2**20) / 2**20 if np.abs(y).max() > 0 else y
-    up = RVR(width=math.ldexp(0.5, kx), method=method, max_iter=300)
+    up = RVR(width=math.ldexp(0.5, kx), method=method, max_iter=100)
     up.fit(np.ldexp(X, kx), np.ldexp(y, ky))
-    down = RVR(width=math.ldexp(0.5, -kx), method=method, max_iter=300)
+    down = RVR(width=math.ldexp(0.5, -kx), method=method, max_iter=100)
     down.fit(np.ldexp(X, -kx), np.ldexp(y, -ky))
     m_up, s_up = up.predict(np.ldexp(X, kx), return_std=True)
     m_dn, s_dn = down.predict(np.ldexp(X, -kx), return_std=True)
@@ -183,7 +183,7 @@ def rvr_is_scale_equivariant(problem: tuple, kx: int, ky: int) -> None:
 
 test_rvr_is_scale_equivariant, test_rvr_is_scale_equivariant_fuzz = twice(
     10,
-    500,
+    300,
     problem=regression_problems(),
     kx=st.integers(40, 400),
     ky=st.integers(40, 400),
@@ -211,7 +211,7 @@ def model_files_round_trip(problem: tuple, classify: bool, tmp_path_factory: Any
 
 
 _round_trip, _round_trip_fuzz = twice(
-    10, 500, problem=regression_problems(), classify=st.booleans()
+    10, 300, problem=regression_problems(), classify=st.booleans()
 )(model_files_round_trip)
 
 
@@ -259,7 +259,7 @@ def simulate_gives_valid_runs(case: tuple) -> None:
 
 
 test_simulate_gives_valid_runs, test_simulate_gives_valid_runs_fuzz = twice(
-    8, 400, case=fault_runs()
+    8, 600, case=fault_runs()
 )(simulate_gives_valid_runs)
 
 
@@ -289,7 +289,7 @@ def gaussian_scores_are_consistent(pred: tuple) -> None:
 
 
 test_gaussian_scores_are_consistent, test_gaussian_scores_are_consistent_fuzz = twice(
-    40, 1500, pred=gaussian_predictions()
+    40, 3000, pred=gaussian_predictions()
 )(gaussian_scores_are_consistent)
 
 
@@ -314,7 +314,7 @@ def probability_scores_are_bounded(case: tuple) -> None:
 
 
 test_probability_scores_are_bounded, test_probability_scores_are_bounded_fuzz = twice(
-    40, 1500, case=class_probabilities()
+    40, 2000, case=class_probabilities()
 )(probability_scores_are_bounded)
 
 
@@ -341,7 +341,7 @@ def netcdf_round_trip_is_exact(channels: dict, tmp_path_factory: Any) -> None:
         np.testing.assert_array_equal(back[name].values, values)  # NaN == NaN here
 
 
-_netcdf, _netcdf_fuzz = twice(15, 800, channels=datasets())(netcdf_round_trip_is_exact)
+_netcdf, _netcdf_fuzz = twice(15, 1000, channels=datasets())(netcdf_round_trip_is_exact)
 
 
 def test_netcdf_round_trip_is_exact(tmp_path_factory):
@@ -377,7 +377,7 @@ def day_file_reader_reads_what_was_written(case: tuple, tmp_path_factory: Any) -
     np.testing.assert_array_equal(ds["X"].values[0], values[:, col] / 100.0)
 
 
-_day, _day_fuzz = twice(15, 800, case=day_files())(day_file_reader_reads_what_was_written)
+_day, _day_fuzz = twice(15, 1000, case=day_files())(day_file_reader_reads_what_was_written)
 
 
 def test_day_file_reader_reads_what_was_written(tmp_path_factory):
