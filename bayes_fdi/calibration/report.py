@@ -53,7 +53,7 @@ from bayes_fdi.calibration import (
     plot_pit_histogram,
     reliability_diagram,
 )
-from bayes_fdi.calibration.recalibration import fold_indices
+from bayes_fdi.calibration.recalibration import LOG_LOSS_RTOL, fold_indices
 
 __all__ = [
     "RECALIBRATORS",
@@ -310,7 +310,11 @@ def _fit_and_select(
     seed: int,
 ) -> tuple[dict[str, Any], str, dict[str, Any]]:
     """Fit every method on ``(p_fit, y_fit)``; select the one of lowest cross-validated
-    log loss on these data alone (temperature when too few runs to cross-validate)."""
+    log loss on these data alone (temperature when too few runs to cross-validate).
+
+    Log losses within a relative `LOG_LOSS_RTOL` of the lowest are ties, won by the first
+    of ``methods`` (the simplest, in the order of `RECALIBRATORS`).
+    """
     fitted = {m: make_recalibrator(m, classes, seed).fit(p_fit, y_fit) for m in methods}
     n = y_fit.shape[0]
     scores: dict[str, float] = {}
@@ -320,7 +324,10 @@ def _fit_and_select(
                 make_recalibrator(m, classes, seed), p_fit, y_fit, classes=classes, cv=cv,
                 random_state=seed,
             )  # fmt: skip
-        selected = min(methods, key=lambda m: (scores[m], methods.index(m)))
+        best = min(scores.values())
+        # ties (within LOG_LOSS_RTOL, e.g. vector scaling that fell back to one temperature in
+        # every cross-validation fit) go to the simplest method, the first in `methods`
+        selected = next(m for m in methods if scores[m] <= best + LOG_LOSS_RTOL * abs(best))
         why = f"lowest {cv}-fold cross-validated log loss on the {n} fitting runs"
     else:
         selected = "temperature" if "temperature" in methods else methods[0]

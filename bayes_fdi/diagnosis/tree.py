@@ -30,7 +30,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-__all__ = ["PAPER_TREE", "HierarchicalClassifier", "TreeNode", "design_tree"]
+__all__ = ["INERTIA_RTOL", "PAPER_TREE", "HierarchicalClassifier", "TreeNode", "design_tree"]
 
 #: The paper's Figure 20 tree over its ten states.
 PAPER_TREE: tuple = (
@@ -90,24 +90,59 @@ def _label(x: Any) -> Any:
     return x.item() if isinstance(x, np.generic) else x
 
 
+#: Two 2-means partitions whose inertias differ by less than this fraction are a tie, broken by
+#: a canonical order of the partitions (see `_split_centroids`). Centroids computed on two BLAS
+#: code paths differ in their last bits (relative 1e-16 .. 1e-13 after the residual models), so a
+#: real difference between two local optima is many orders of magnitude above this, and a tie by
+#: symmetry is resolved the same way on every machine.
+INERTIA_RTOL: float = 1e-9
+
+
+def _inertia(points: np.ndarray, mask: np.ndarray) -> float:
+    """Within-cluster sum of squares of the two-way partition ``mask`` (elementwise numpy)."""
+    total = 0.0
+    for side in (mask, ~mask):
+        group = points[side]
+        total += float(((group - group.mean(axis=0)) ** 2).sum())
+    return total
+
+
 def _split_centroids(centroids: np.ndarray, n_init: int, random_state: int | None) -> np.ndarray:
-    """Boolean mask of one side of a 2-means split of ``centroids`` (guarded)."""
+    """Boolean mask of one side of a 2-means split of ``centroids`` (guarded, deterministic).
+
+    k-means (Lloyd, k-means++ initialisation) is run from ``n_init`` seeded starts, one
+    `sklearn.cluster.KMeans` each; every partition found is scored by its inertia recomputed
+    from the partition itself (`_inertia`), and the lowest wins. Inertias within a relative
+    `INERTIA_RTOL` of the lowest are ties, won by the partition whose mask (oriented so that
+    row 0 is ``True``) is lexicographically largest. The choice thus depends on the set of
+    partitions the starts reach, not on the order they are found in or on the last bits of
+    sums.
+    """
     k = centroids.shape[0]
     if k == 2:
         return np.array([True, False])
-    distinct = np.unique(centroids, axis=0).shape[0]
-    labels = None
-    if distinct >= 2:
-        km = KMeans(n_clusters=2, n_init=n_init, random_state=random_state)
-        labels = km.fit_predict(centroids)
-    if labels is None or len(np.unique(labels)) < 2:
+    found: dict[tuple[bool, ...], float] = {}
+    if np.unique(centroids, axis=0).shape[0] >= 2:
+        seeds = np.random.default_rng(random_state).integers(0, 2**31 - 1, size=max(1, n_init))
+        for seed in seeds:
+            km = KMeans(n_clusters=2, n_init=1, random_state=int(seed))
+            labels = km.fit_predict(centroids)
+            mask = labels == labels[0]
+            if mask.all():
+                continue
+            key = tuple(bool(m) for m in mask)
+            if key not in found:
+                found[key] = _inertia(centroids, mask)
+    if not found:
         # Degenerate: split off the class farthest (mean distance) from the others.
         d = np.sqrt(((centroids[:, None, :] - centroids[None, :, :]) ** 2).sum(-1))
         far = int(np.argmax(d.sum(axis=1)))
         mask = np.zeros(k, dtype=bool)
         mask[far] = True
         return mask
-    return labels == labels[0]
+    best = min(found.values())
+    tied = [key for key, v in found.items() if v <= best + INERTIA_RTOL * abs(best)]
+    return np.array(max(tied))
 
 
 def design_tree(
@@ -122,7 +157,9 @@ def design_tree(
     """Design a binary tree over ``classes`` by recursive 2-means on their centroids.
 
     At each node the class centroids are split in two by k-means (k = 2, ``n_init`` seeded
-    restarts). If k-means gives one cluster (e.g. identical centroids), the class farthest
+    restarts; the partition of lowest inertia wins, near-ties within a relative `INERTIA_RTOL`
+    broken by a fixed order of the partitions, so the same tree comes out on any machine). If
+    k-means gives one cluster (e.g. identical centroids), the class farthest
     from the others (largest summed distance; first on ties) is split off. The smaller group
     goes left; on equal sizes, the group holding the class listed first goes left.
 
