@@ -30,6 +30,8 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from bayes_fdi.rvm.threads import limit_fit_threads
+
 __all__ = ["INERTIA_RTOL", "PAPER_TREE", "HierarchicalClassifier", "TreeNode", "design_tree"]
 
 #: The paper's Figure 20 tree over its ten states.
@@ -281,6 +283,7 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
 
         return RVC(kernel="rbf", width=2.0)
 
+    @limit_fit_threads
     def fit(self, X: Any, y: Any) -> HierarchicalClassifier:
         """Design (or check) the tree and fit one binary classifier per internal node.
 

@@ -10,8 +10,7 @@ limited to :func:`get_fit_threads` threads, and restores the caller's settings a
 summation in a product, so the same seed gives the same fit however many threads the caller's
 process uses.
 
-The limit is process-wide while a fit runs (torch and the BLAS libraries have one pool each):
-other threads of the caller that compute at the same time share it.
+The limits are set in the thread that fits, and restored there when the fit ends.
 """
 
 from __future__ import annotations
@@ -28,10 +27,8 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 
 #: Threads of torch and of the BLAS libraries inside a fit (``None``: leave them as they are).
 _fit_threads: int | None = 1
-#: Open :func:`fit_threads` blocks (the first sets the limits, the last restores them).
-_active: int = 0
-_restore: Callable[[], None] | None = None
-_lock = threading.Lock()
+#: Per-thread nesting depth of :func:`fit_threads` (the outermost block sets and restores).
+_local = threading.local()
 
 
 def get_fit_threads() -> int | None:
@@ -62,43 +59,40 @@ def fit_threads(n: int | None = None) -> Iterator[None]:
     ----------
     n
         Threads inside the block; default :func:`get_fit_threads`. ``None`` there: no limit.
-        While blocks overlap (nested, or in several threads) the first one's limit holds, and
-        the last one to end restores the caller's settings.
+
+    Notes
+    -----
+    Each thread's outermost block sets the limits and restores what that thread saw before;
+    nested blocks keep the outer block's limit. torch keeps a thread count per thread, so a fit
+    in a worker thread runs torch on ``n`` threads too; OpenBLAS (0.3) takes thread-count
+    changes from the thread that started it only, so there its pool stays as it is.
     """
-    global _active, _restore
     limit = get_fit_threads() if n is None else n
-    with _lock:
-        if _active == 0 and limit is not None:
-            _restore = _apply(limit)
-        _active += 1
-    try:
-        yield
-    finally:
-        with _lock:
-            _active -= 1
-            if _active == 0 and _restore is not None:
-                restore, _restore = _restore, None
-                restore()
-
-
-def _apply(limit: int) -> Callable[[], None]:
-    """Set every pool to ``limit`` threads; return the function that restores them."""
+    depth = getattr(_local, "depth", 0)
+    if limit is None or depth > 0:
+        _local.depth = depth + 1
+        try:
+            yield
+        finally:
+            _local.depth = depth
+        return
     import torch
     from threadpoolctl import threadpool_limits
 
-    # threadpoolctl reaches the pools of the libraries loaded so far (numpy's OpenBLAS, scipy's,
-    # OpenMP runtimes); torch's own pool (MKL, OpenMP) is set through torch.
-    limiter = threadpool_limits(limits=limit)
-    before = torch.get_num_threads()
-    if before != limit:
-        torch.set_num_threads(limit)
-
-    def restore() -> None:
-        if torch.get_num_threads() != before:
-            torch.set_num_threads(before)
-        limiter.restore_original_limits()
-
-    return restore
+    torch_before = torch.get_num_threads()
+    # threadpoolctl reaches the pools of the libraries loaded so far (numpy's and scipy's
+    # OpenBLAS, OpenMP runtimes); torch's own pool (MKL, OpenMP) is set through torch.
+    pools = threadpool_limits(limits=limit)
+    _local.depth = 1
+    try:
+        if torch_before != limit:
+            torch.set_num_threads(limit)
+        yield
+    finally:
+        _local.depth = 0
+        if torch.get_num_threads() != torch_before:
+            torch.set_num_threads(torch_before)
+        pools.restore_original_limits()
 
 
 def limit_fit_threads(method: _F) -> _F:
