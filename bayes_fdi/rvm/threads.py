@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
@@ -29,6 +30,8 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 _fit_threads: int | None = 1
 #: Per-thread nesting depth of :func:`fit_threads` (the outermost block sets and restores).
 _local = threading.local()
+#: (number of imported modules, threadpoolctl controller) of the last scan.
+_cached: tuple[int, Any] | None = None
 
 
 def get_fit_threads() -> int | None:
@@ -77,12 +80,11 @@ def fit_threads(n: int | None = None) -> Iterator[None]:
             _local.depth = depth
         return
     import torch
-    from threadpoolctl import threadpool_limits
 
     torch_before = torch.get_num_threads()
     # threadpoolctl reaches the pools of the libraries loaded so far (numpy's and scipy's
     # OpenBLAS, OpenMP runtimes); torch's own pool (MKL, OpenMP) is set through torch.
-    pools = threadpool_limits(limits=limit)
+    pools = _controller().limit(limits=limit)
     _local.depth = 1
     try:
         if torch_before != limit:
@@ -93,6 +95,20 @@ def fit_threads(n: int | None = None) -> Iterator[None]:
         if torch.get_num_threads() != torch_before:
             torch.set_num_threads(torch_before)
         pools.restore_original_limits()
+
+
+def _controller() -> Any:
+    """threadpoolctl's view of the loaded libraries, rebuilt when modules were imported since.
+
+    Building it scans every loaded shared library (milliseconds); a new native library is
+    only loaded by an import, so the count of imported modules tells when to scan again.
+    """
+    global _cached
+    from threadpoolctl import ThreadpoolController
+
+    if _cached is None or _cached[0] != len(sys.modules):
+        _cached = (len(sys.modules), ThreadpoolController())
+    return _cached[1]
 
 
 def limit_fit_threads(method: _F) -> _F:
