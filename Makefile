@@ -25,7 +25,20 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/bayes-fdi reproduce --out results
 
-test: $(STAMP) lint pytest notebooks docs
+# Every stage runs even when an earlier one fails; `make test` fails at the end if any did and
+# ends with one summary line per stage.
+TEST_STAGES := lint pytest notebooks docs
+
+test: $(STAMP)
+	@failed=0; summary=""; \
+	for stage in $(TEST_STAGES); do \
+	  start=$$(date +%s); \
+	  if $(MAKE) --no-print-directory $$stage; then result=passed; \
+	  else result=FAILED; failed=$$((failed + 1)); fi; \
+	  summary="$$summary$$(printf '%-10s %-6s %5d s' "$$stage" "$$result" $$(( $$(date +%s) - start )))\n"; \
+	done; \
+	printf '\n== make test: %d of %d stages failed ==\n%b' "$$failed" "$(words $(TEST_STAGES))" "$$summary"; \
+	test "$$failed" -eq 0
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -2,6 +2,10 @@
 
 - `bayes_fdi.experiments.campaigns`: declarative campaign files (``sim/*.toml``) and their
   simulation (the ``bayes-fdi simulate`` command).
-- `bayes_fdi.experiments.reproduce`: the paper's experiment (``bayes-fdi reproduce``) and
-  `bayes_fdi.experiments.reproduce_report`, its Markdown report.
+- `bayes_fdi.experiments.reproduce`: the paper's experiment (``bayes-fdi reproduce``), built from
+  `campaign_cache` (simulated datasets and their cache), `paper_setup` (states, kernel widths,
+  node classifiers), `paper_pipeline` (the protocol on one dataset), `classification_scores`,
+  `separability` (which states two features can split) and `calibration_headlines`;
+  `bayes_fdi.experiments.reproduce_report` renders its Markdown report from `report_tables`,
+  `report_figures`, `report_sections` and `results_json`.
 """
