@@ -122,15 +122,17 @@ class BenchmarkScenario(NamedTuple):
 
 def _scenario(fault: str, mode: str, size: str | None, strength: float, t_fd: float):
     direction = -1 if fault in _NEGATIVE else 1
-    return BenchmarkScenario(fault, mode, size, strength, direction, t_fd,
-                             t_hor=T_FROM + t_fd + T_OV)  # fmt: skip
+    return BenchmarkScenario(
+        fault, mode, size, strength, direction, t_fd, t_hor=T_FROM + t_fd + T_OV
+    )
 
 
 def _table() -> tuple[BenchmarkScenario, ...]:
     rows = [_scenario(f, "abrupt", s, v, 0.0) for f in _ABRUPT_SMB for s, v in SIZES.items()]
     rows += [_scenario(f, "abrupt", "big", SIZES["big"], 0.0) for f in _ABRUPT_BIG]
-    rows += [_scenario(f, "incipient", None, 1.0, t_fd) for t_fd, fs in _INCIPIENT.items()
-             for f in fs]  # fmt: skip
+    rows += [
+        _scenario(f, "incipient", None, 1.0, t_fd) for t_fd, fs in _INCIPIENT.items() for f in fs
+    ]
     return tuple(rows)
 
 
@@ -184,9 +186,15 @@ def simulate_scenario(
     runs = simulate_replicas(inputs, [scenario.fault_spec()], seeds=seeds)
     ds = xr.concat(runs, dim="run", combine_attrs="drop_conflicts")
     ds = ds.assign_coords(run=np.asarray(seeds, dtype=np.int64))
-    ds.attrs.update(scenario=scenario.name, t_on=scenario.t_on, t_from=scenario.t_from,
-                    t_fd=scenario.t_fd, t_hor=scenario.t_hor, scenario_position=int(position),
-                    seeds=",".join(map(str, seeds)))  # fmt: skip
+    ds.attrs.update(
+        scenario=scenario.name,
+        t_on=scenario.t_on,
+        t_from=scenario.t_from,
+        t_fd=scenario.t_fd,
+        t_hor=scenario.t_hor,
+        scenario_position=int(position),
+        seeds=",".join(map(str, seeds)),
+    )
     return ds
 
 
