@@ -18,11 +18,14 @@ from collections.abc import Sequence
 
 #: command name -> (module path, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "simulate": ("bayes_fdi.campaigns", "simulate a campaign TOML file into a netCDF dataset"),
-    "plot": ("bayes_fdi.plotting", "plot the signals of chosen runs of a dataset"),
-    "reproduce": ("bayes_fdi.reproduce", "reproduce the paper's tables (the main job)"),
+    "simulate": (
+        "bayes_fdi.experiments.campaigns",
+        "simulate a campaign TOML file into a netCDF dataset",
+    ),
+    "plot": ("bayes_fdi.datasets.plotting", "plot the signals of chosen runs of a dataset"),
+    "reproduce": ("bayes_fdi.experiments.reproduce", "reproduce the paper's tables (the main job)"),
     "calibration-report": (
-        "bayes_fdi.calibration_report",
+        "bayes_fdi.calibration.report",
         "write a calibration report for a diagnoser on a test dataset",
     ),
     "benchmark": (

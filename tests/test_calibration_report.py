@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bayes_fdi import calibration_report as cr
+from bayes_fdi.calibration import report as cr
 from bayes_fdi.datasets import make_dataset, save_dataset
 
 CLASSES = ["fn", "f1", "f2"]
@@ -292,7 +292,8 @@ def test_time_split_summary_of_a_correct_gaussian_model(rng):
 
 def test_recalibrate_cross_fits_every_run_out_of_fold(rng):
     """Each fold's temperature column equals a TemperatureScaler fitted on the other folds."""
-    from bayes_fdi.calibration import TemperatureScaler, _fold_indices
+    from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.calibration.recalibration import fold_indices
 
     n, k = 900, 3
     p_true = rng.dirichlet(np.ones(k), size=n)
@@ -301,7 +302,7 @@ def test_recalibrate_cross_fits_every_run_out_of_fold(rng):
     hot /= hot.sum(axis=1, keepdims=True)
     out, info = cr.recalibrate(y, hot, CLASSES, n_folds=3, methods=("temperature",), seed=4)
     y_idx = np.array([CLASSES.index(v) for v in y])
-    folds = _fold_indices(y_idx, 3, 4)
+    folds = fold_indices(y_idx, 3, 4)
     assert sorted(np.concatenate(folds).tolist()) == list(range(n))
     for fold, fit in zip(folds, info["fits"], strict=True):
         rest = np.setdiff1d(np.arange(n), fold)

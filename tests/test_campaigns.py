@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bayes_fdi.campaigns import (
+from bayes_fdi.experiments.campaigns import (
     Campaign,
     CampaignError,
     load_campaign,
@@ -215,9 +215,9 @@ def test_file_errors_name_the_file(tmp_path):
 def test_label_tables_agree_with_the_model_and_the_dataset_format():
     # campaigns keeps its own copies (it imports neither xarray nor the numba model at import
     # time); they must not drift from the tables they copy
-    from bayes_fdi import campaigns
     from bayes_fdi.actuator import FAULT_NAMES, SIGNED_FAULTS
-    from bayes_fdi.datasets import PROFILES, STATES
+    from bayes_fdi.datasets.format import PROFILES, STATES
+    from bayes_fdi.experiments import campaigns
 
     assert campaigns.STATES == STATES
     assert campaigns.FAULTS == FAULT_NAMES

@@ -7,7 +7,7 @@ import pytest
 from sklearn.svm import SVC
 from sklearn.utils.estimator_checks import estimator_checks_generator
 
-from bayes_fdi.baselines import KernelRidgeRegressor, SVMClassifier, svm_classifier
+from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor, SVMClassifier, svm_classifier
 
 
 def test_kernel_ridge_loo_matches_brute_force(rng):

@@ -12,7 +12,7 @@ import pytest
 
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import make_dataset, save_dataset
-from bayes_fdi.plotting import plot_runs, select_runs
+from bayes_fdi.datasets.plotting import plot_runs, select_runs
 
 
 @pytest.fixture

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bayes_fdi.cli import main
-from bayes_fdi.report import confusion_table
+from bayes_fdi.experiments.reproduce_report import confusion_table
 
 # Five states of the paper whose faults move the flow residual strongly in the DAMADICS
 # model (f1: valve clogging, f17: pressure change, f18: bypass open; see the reference's
@@ -37,7 +37,7 @@ ramp = 0.0
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    from bayes_fdi.reproduce import reproduce
+    from bayes_fdi.experiments.reproduce import reproduce
 
     tmp = tmp_path_factory.mktemp("reproduce")
     toml = tmp / "tiny.toml"
@@ -132,7 +132,7 @@ def test_single_threaded_limits_and_restores():
     import torch
     from threadpoolctl import threadpool_info
 
-    from bayes_fdi.reproduce import single_threaded
+    from bayes_fdi.experiments.reproduce import single_threaded
 
     before = torch.get_num_threads()
     with single_threaded():

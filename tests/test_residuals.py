@@ -11,14 +11,14 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 
-from bayes_fdi.baselines import KernelRidgeRegressor
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.residuals import (
+from bayes_fdi.diagnosis import (
     NegativePressureDropWarning,
     NormalModels,
     genetic_width_search,
     model_inputs,
 )
+from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor
 
 NOISE = 0.005
 

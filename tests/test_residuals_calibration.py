@@ -12,8 +12,7 @@ from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.linear_model import BayesianRidge
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.diagnosis import FaultDiagnoser
-from bayes_fdi.residuals import NormalModels
+from bayes_fdi.diagnosis import FaultDiagnoser, NormalModels
 
 LEVELS = np.array([0.5, 0.8, 0.9, 0.95])
 
@@ -177,7 +176,7 @@ def test_no_calibration_keeps_the_regressor_std_and_default_is_cross_fit(rng):
     raw = NormalModels(BayesianRidge(), interval_calibration=None).fit(train)
     assert raw.interval_calibration_ is None and "calibration" not in raw.fit_seconds_
     assert not hasattr(raw, "calibration_fold_")
-    from bayes_fdi.residuals import model_inputs
+    from bayes_fdi.diagnosis import model_inputs
 
     U, _ = model_inputs(train)
     _, std = raw.regressors_["X"].predict(U, return_std=True)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.residuals import MODEL_INPUTS, NormalModels, input_names, model_inputs
+from bayes_fdi.diagnosis import MODEL_INPUTS, NormalModels, input_names, model_inputs
 from bayes_fdi.rvm import RVR
 
 NOISE = 0.003
@@ -204,7 +204,7 @@ def hand_inputs(ds, lag2=False):
 def test_width_searches_and_predictions_use_the_lagged_inputs():
     """Evidence search, GA and predict all see ``3 + len(lags)`` inputs; predictions equal an
     independent fit of the same regressor on hand-built lagged inputs."""
-    from bayes_fdi.baselines import KernelRidgeRegressor
+    from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor
 
     rng = np.random.default_rng(13)
     train, test = first_order_plant(3, rng, T=40), first_order_plant(2, rng, T=40)
@@ -231,7 +231,7 @@ def test_width_searches_and_predictions_use_the_lagged_inputs():
 
 
 def test_default_normal_models_are_the_static_paper_models():
-    from bayes_fdi.baselines import KernelRidgeRegressor
+    from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor
 
     rng = np.random.default_rng(14)
     train, test = first_order_plant(3, rng, T=50), first_order_plant(1, rng, T=50)

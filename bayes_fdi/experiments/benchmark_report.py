@@ -23,7 +23,7 @@ import numpy as np
 
 from bayes_fdi.actuator import FAULT_TABLE, NOISE_STD
 from bayes_fdi.experiments.performance_indices import PICALC_KEYS
-from bayes_fdi.report import markdown_table, to_jsonable
+from bayes_fdi.experiments.reproduce_report import markdown_table, to_jsonable
 
 __all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "render_report", "summarise", "write_report"]
 

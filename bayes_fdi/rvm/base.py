@@ -20,6 +20,7 @@ from torch import Tensor
 
 from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES, Design
 from bayes_fdi.rvm.kernels import RBF, Kernel, Linear, Polynomial
+from bayes_fdi.rvm.persistence import save
 from bayes_fdi.rvm.sparse_bayes import SBLResult
 
 __all__ = ["RVMBase"]
@@ -351,8 +352,6 @@ class RVMBase(BaseEstimator):
 
         See :func:`bayes_fdi.rvm.persistence.save`.
         """
-        from bayes_fdi.rvm.persistence import save
-
         save(self, path)
 
 

@@ -173,7 +173,7 @@ def campaign_file(name: str | os.PathLike) -> Path:
         return path
     candidates = [
         Path.cwd() / "sim" / f"{name}.toml",
-        Path(__file__).resolve().parent.parent / "sim" / f"{name}.toml",
+        Path(__file__).resolve().parents[2] / "sim" / f"{name}.toml",
     ]
     for c in candidates:
         if c.is_file():
@@ -189,7 +189,8 @@ def _file_hash(path: Path) -> str:
 
 def _simulator_hash() -> str:
     """SHA-256 over the simulator's source files (so a changed model never reuses a cache)."""
-    from bayes_fdi import actuator, campaigns
+    from bayes_fdi import actuator
+    from bayes_fdi.experiments import campaigns
 
     files = [*sorted(Path(actuator.__file__).parent.glob("*.py")), Path(campaigns.__file__)]
     digest = hashlib.sha256()
@@ -233,7 +234,7 @@ def load_or_simulate(
         ``campaign`` (name), ``campaign_file``, ``campaign_sha256``, ``cache_file`` (or None),
         ``cached`` (bool), ``simulate_seconds`` (0 when cached).
     """
-    from bayes_fdi import campaigns
+    from bayes_fdi.experiments import campaigns
 
     path = campaign_file(campaign)
     digest = _file_hash(path)
@@ -638,8 +639,9 @@ def select_regression_width(
 
     Both normal models (``X`` and ``F`` on ``(CV, sqrt(P1 - P2), T1)``) are fitted with each
     candidate width on the same random subsample of the fault-free samples; the width with the
-    largest summed log marginal likelihood wins (:func:`bayes_fdi.residuals.evidence_grid_search`,
-    also the default width search of :class:`bayes_fdi.residuals.NormalModels`).
+    largest summed log marginal likelihood wins
+    (:func:`bayes_fdi.diagnosis.width_search.evidence_grid_search`,
+    also the default width search of :class:`bayes_fdi.diagnosis.normal_models.NormalModels`).
     (``RVR(width="auto")`` searches down to much smaller widths, where a fit on thousands of
     samples keeps hundreds of basis functions and takes minutes; the grid stays where the
     evidence peaks on these data.)
@@ -656,7 +658,7 @@ def select_regression_width(
         Subsample seed.
     input_lags
         Lags (seconds) of extra inputs ``CV(t - L)`` of the normal models
-        (:func:`bayes_fdi.residuals.model_inputs`); default ``()``, the paper's inputs.
+        (:func:`bayes_fdi.diagnosis.model_inputs.model_inputs`); default ``()``, the paper's inputs.
 
     Returns
     -------
@@ -664,7 +666,7 @@ def select_regression_width(
     log_evidence : dict
         Width -> summed log evidence.
     """
-    from bayes_fdi.residuals import evidence_grid_search, model_inputs
+    from bayes_fdi.diagnosis import evidence_grid_search, model_inputs
     from bayes_fdi.rvm import RVR
 
     U, _ = model_inputs(normal_runs, warn=False, input_lags=input_lags)
@@ -687,7 +689,8 @@ def select_regression_width(
 def node_classifier(kind: str = "rvm", *, width: float = NODE_WIDTH) -> Any:
     """The binary classifier at each tree node (the paper's Gaussian kernel, sigma = 2).
 
-    Used inside :class:`bayes_fdi.tree.HierarchicalClassifier` with ``node_scaling=True``: each
+    Used inside :class:`bayes_fdi.diagnosis.tree.HierarchicalClassifier` with
+    ``node_scaling=True``: each
     node standardises its own training samples first, so ``sigma`` means "``sigma`` standard
     deviations of this node's data" at every depth — the root separates far-apart groups of
     states, the deepest nodes states a few hundredths apart, and one width fits both.
@@ -696,7 +699,7 @@ def node_classifier(kind: str = "rvm", *, width: float = NODE_WIDTH) -> Any:
     ----------
     kind
         ``"rvm"`` (:class:`bayes_fdi.rvm.RVC`) or ``"svm"``
-        (:func:`bayes_fdi.baselines.svm_classifier`: C = 1, Platt-scaled probabilities).
+        (:func:`bayes_fdi.diagnosis.baselines.svm_classifier`: C = 1, Platt-scaled probabilities).
     width
         Gaussian kernel width sigma.
     """
@@ -705,14 +708,14 @@ def node_classifier(kind: str = "rvm", *, width: float = NODE_WIDTH) -> Any:
 
         return RVC(kernel="rbf", width=width)
     if kind == "svm":
-        from bayes_fdi.baselines import svm_classifier
+        from bayes_fdi.diagnosis.baselines import svm_classifier
 
         return svm_classifier(sigma=width)
     raise ValueError(f"kind must be 'rvm' or 'svm', got {kind!r}")
 
 
 def _tree(kind: str, seed: int) -> Any:
-    from bayes_fdi.tree import HierarchicalClassifier
+    from bayes_fdi.diagnosis.tree import HierarchicalClassifier
 
     return HierarchicalClassifier(node_classifier(kind), node_scaling=True, random_state=seed)
 
@@ -751,7 +754,7 @@ def tree_nodes(clf: Any, prefix: str) -> list[dict[str, Any]]:
 
 def _tree_text(nodes: list[dict[str, Any]], prefix: str) -> str:
     """The fitted tree as text with vectors/samples per node."""
-    from bayes_fdi.report import tree_text
+    from bayes_fdi.experiments.reproduce_report import tree_text
 
     return tree_text(nodes, prefix=prefix)
 
@@ -887,7 +890,8 @@ def evaluate_dataset(
         RVM pipeline's features.
     input_lags
         Lags (s) of extra normal-model inputs ``CV(t - L)`` of the default diagnoser (dynamic
-        normal models, beyond the paper; see :class:`bayes_fdi.residuals.NormalModels`).
+        normal models, beyond the paper; see
+        :class:`bayes_fdi.diagnosis.normal_models.NormalModels`).
         Default ``()``: the paper's static inputs.
 
     Returns
@@ -935,7 +939,7 @@ def _evaluate_dataset(
     input_lags: Sequence[float],
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     from bayes_fdi.diagnosis import FaultDiagnoser
-    from bayes_fdi.features import extract_features
+    from bayes_fdi.diagnosis.features import extract_features
 
     say = progress or (lambda _msg: None)
     states = [str(s) for s in states]
@@ -1102,7 +1106,7 @@ def calibration_headlines(
     test_runs
         Labelled held-out runs (their ``fn`` runs score the normal models).
     out_dir
-        Folder of the full report (:func:`bayes_fdi.calibration_report.write_calibration_report`).
+        Folder of the full report (:func:`bayes_fdi.calibration.report.write_calibration_report`).
     seed
         Seed of the bootstrap and of the cross-fitted recalibration.
     real_record
@@ -1114,7 +1118,7 @@ def calibration_headlines(
     n_folds
         Cross-fitting folds of the recalibration (each test run is recalibrated by
         recalibrators fitted on the other folds; see
-        :func:`bayes_fdi.calibration_report.recalibrate`).
+        :func:`bayes_fdi.calibration.report.recalibrate`).
     title
         Heading of the full report.
 
@@ -1132,7 +1136,7 @@ def calibration_headlines(
     """
     from sklearn.base import clone
 
-    from bayes_fdi.calibration_report import (
+    from bayes_fdi.calibration.report import (
         RECALIBRATORS,
         _write_report,
         split_in_time,
@@ -1234,7 +1238,7 @@ def reproduce(
         info) and ``seconds`` (total wall-clock).
     """
     from bayes_fdi import __version__
-    from bayes_fdi import report as rep
+    from bayes_fdi.experiments import reproduce_report as rep
 
     t_start = time.perf_counter()
     say = _Progress(progress)

@@ -41,7 +41,6 @@ from bayes_fdi.calibration import (
     DirichletScaler,
     ECEResult,
     TemperatureScaler,
-    _fold_indices,
     brier,
     cross_val_log_loss,
     crps_gaussian,
@@ -54,6 +53,7 @@ from bayes_fdi.calibration import (
     plot_pit_histogram,
     reliability_diagram,
 )
+from bayes_fdi.calibration.recalibration import fold_indices
 
 __all__ = [
     "RECALIBRATORS",
@@ -221,7 +221,7 @@ def time_split_summary(
     normal_model
         An unfitted model with ``fit(runs) -> self`` and ``predict(runs) -> Dataset`` of
         ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std`` (e.g.
-        ``bayes_fdi.residuals.NormalModels``).
+        ``bayes_fdi.diagnosis.normal_models.NormalModels``).
     runs
         Fault-free runs.
     fraction
@@ -414,7 +414,7 @@ def recalibrate(
             raise ValueError(f"n_folds must be an integer in [2, {yv.shape[0]}], got {n_folds!r}")
         lookup = {c: i for i, c in enumerate(cls.tolist())}
         y_idx = np.array([lookup[v] for v in yv.tolist()], dtype=np.intp)
-        for fold in _fold_indices(y_idx, int(n_folds), seed):
+        for fold in fold_indices(y_idx, int(n_folds), seed):
             rest = np.setdiff1d(np.arange(yv.shape[0]), fold)
             fitted, sel, info = _fit_and_select(p[rest], yv[rest], cls, methods, cv, seed)
             for m, est in fitted.items():
@@ -846,7 +846,7 @@ def _build_diagnoser(method: str, seed: int) -> Any:
         raise RuntimeError(f"bayes_fdi.diagnosis is not available: {err}") from None
     if method == "rvm":
         return FaultDiagnoser(random_state=seed)
-    from bayes_fdi.baselines import svm_fault_diagnoser
+    from bayes_fdi.diagnosis.baselines import svm_fault_diagnoser
 
     return svm_fault_diagnoser(random_state=seed)
 

@@ -6,7 +6,7 @@ Other statistics are registered here and can be selected by name, and new ones a
 with `register_feature`::
 
     import numpy as np
-    from bayes_fdi.features import register_feature
+    from bayes_fdi.diagnosis.features import register_feature
 
     @register_feature("p95_abs_r2")
     def p95_abs_r2(res):
@@ -14,7 +14,7 @@ with `register_feature`::
         return np.nanpercentile(np.abs(res["r2"].values), 95, axis=1)
 
 A feature function receives the residual dataset (as returned by
-`bayes_fdi.residuals.NormalModels.residuals`) restricted to one window, with dims
+`bayes_fdi.diagnosis.normal_models.NormalModels.residuals`) restricted to one window, with dims
 ``(run, time)``, and returns one value per run. NaN residuals (gaps in plant records) are
 ignored by the built-in statistics (``nanmean`` etc.); a window with no finite residual gives
 NaN, which the diagnoser reports as an error rather than guessing.

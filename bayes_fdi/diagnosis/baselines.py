@@ -1,7 +1,7 @@
 """Non-Bayesian baselines that plug into the same pipeline as the RVMs.
 
 - `svm_classifier`: the paper's SVM node classifier (Gaussian kernel, sigma = 2), for
-  `bayes_fdi.tree.HierarchicalClassifier`. Its probabilities are Platt-scaled
+  `bayes_fdi.diagnosis.tree.HierarchicalClassifier`. Its probabilities are Platt-scaled
   on 5-fold out-of-fold decision values (deterministic folds).
 - `KernelRidgeRegressor`: Gaussian-kernel ridge regression for the normal models, with a
   regularisation chosen by exact leave-one-out error and a *homoscedastic* predictive standard
@@ -205,11 +205,11 @@ def svm_fault_diagnoser(
 
     Kernel ridge normal models (`KernelRidgeRegressor`, fitted on at most
     ``max_train_samples`` fault-free samples: its cost is cubic) and a
-    `bayes_fdi.tree.HierarchicalClassifier` of `svm_classifier` nodes, on the
+    `bayes_fdi.diagnosis.tree.HierarchicalClassifier` of `svm_classifier` nodes, on the
     same features as the RVM pipeline. Extra keyword arguments go to ``FaultDiagnoser``.
     """
     from bayes_fdi.diagnosis import FaultDiagnoser
-    from bayes_fdi.tree import HierarchicalClassifier
+    from bayes_fdi.diagnosis.tree import HierarchicalClassifier
 
     return FaultDiagnoser(
         regressor=KernelRidgeRegressor(width=regression_width),

@@ -1,7 +1,7 @@
 """Turn reproduction results into Markdown tables, figures and JSON.
 
 Every function here is pure (no fitting, no simulation): it takes plain results — the
-dictionaries :func:`bayes_fdi.reproduce.reproduce` builds — and renders them. The tables
+dictionaries :func:`bayes_fdi.experiments.reproduce.reproduce` builds — and renders them. The tables
 follow the layout of the paper (Feng & Wang, Tables 2-9):
 
 - :func:`confusion_table` — rows are the true states (``f1(170)``), columns the identified
@@ -640,7 +640,8 @@ def calibration_table(datasets: Mapping[str, Mapping[str, Any]]) -> str:
     """Headline calibration figures per dataset (RVM pipeline), as a Markdown table.
 
     ``datasets`` maps a dataset name to its results with a ``calibration`` entry
-    (:func:`bayes_fdi.reproduce.calibration_headlines`); datasets without one are skipped.
+    (:func:`bayes_fdi.experiments.reproduce.calibration_headlines`); datasets without one are
+    skipped.
     """
     rows = []
     for name, d in datasets.items():
@@ -702,8 +703,8 @@ def _model_size(nm: Mapping[str, Any]) -> str:
 def dynamic_section(results: Mapping[str, Any]) -> list[str]:
     """Report lines comparing the paper's static normal models with the dynamic ones.
 
-    Uses each dataset's ``dynamic`` entry (see :func:`bayes_fdi.reproduce.reproduce`); empty
-    when there is none.
+    Uses each dataset's ``dynamic`` entry (see :func:`bayes_fdi.experiments.reproduce.reproduce`);
+    empty when there is none.
     """
     datasets = {k: v for k, v in results["datasets"].items() if v.get("dynamic")}
     if not datasets:
@@ -820,7 +821,7 @@ def _normal_models_text(nm: Mapping[str, Any]) -> str:
 
 
 def render_report(results: Mapping[str, Any]) -> str:
-    """The Markdown report of a :func:`bayes_fdi.reproduce.reproduce` run.
+    """The Markdown report of a :func:`bayes_fdi.experiments.reproduce.reproduce` run.
 
     Parameters
     ----------

@@ -2,14 +2,14 @@
 
 `FaultDiagnoser` follows the paper's Figure 21:
 
-1. fit the fault-free models ``g1``, ``g2`` (`bayes_fdi.residuals.NormalModels`) on
+1. fit the fault-free models ``g1``, ``g2`` (`bayes_fdi.diagnosis.normal_models.NormalModels`) on
    fault-free runs;
 2. compute the residuals of the labelled runs and their features (by default the paper's mean
-   ``r1`` and mean ``r2`` over each run, `bayes_fdi.features`);
+   ``r1`` and mean ``r2`` over each run, `bayes_fdi.diagnosis.features`);
 3. standardise the features (mean 0, std 1 over the labelled training runs) so that the paper's
    fixed Gaussian kernel width sigma = 2 means "two training standard deviations" whatever the
    units, and fit the classifier (default: a k-means-designed
-   `bayes_fdi.tree.HierarchicalClassifier` of RVCs).
+   `bayes_fdi.diagnosis.tree.HierarchicalClassifier` of RVCs).
 
 ``diagnose(runs)`` returns, per run (or per window), the most probable state, the full class
 distribution and the residuals with their predictive standard deviations.
@@ -27,10 +27,10 @@ from sklearn.base import BaseEstimator, clone
 from sklearn.preprocessing import StandardScaler
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
-from bayes_fdi.features import DEFAULT_FEATURES, extract_features, window_bounds
-from bayes_fdi.residuals import NormalModels
-from bayes_fdi.seva import NoveltyReference, SevaRecord, seva_records
-from bayes_fdi.tree import HierarchicalClassifier
+from bayes_fdi.diagnosis.features import DEFAULT_FEATURES, extract_features, window_bounds
+from bayes_fdi.diagnosis.normal_models import NormalModels
+from bayes_fdi.diagnosis.seva import NoveltyReference, SevaRecord, seva_records
+from bayes_fdi.diagnosis.tree import HierarchicalClassifier
 
 __all__ = ["FaultDiagnoser"]
 
@@ -54,7 +54,7 @@ class FaultDiagnoser(BaseEstimator):
         ``predict_proba``, ``classes_``). ``None``:
         ``HierarchicalClassifier(RVC(kernel="rbf", width=2.0))`` with a k-means tree.
     features
-        Registered feature names (`bayes_fdi.features.FEATURES`); default the paper's
+        Registered feature names (`bayes_fdi.diagnosis.features.FEATURES`); default the paper's
         ``("mean_r1", "mean_r2")``.
     window, step
         Feature window and hop in samples; ``None`` = one feature vector per run (the paper).
@@ -65,19 +65,21 @@ class FaultDiagnoser(BaseEstimator):
         classifier (keeps a fixed kernel width meaningful for flat classifiers; the default
         tree, which scales per node, is invariant to it).
     width_search, max_train_samples
-        Passed to `bayes_fdi.residuals.NormalModels`. ``width_search="evidence-grid"``
+        Passed to `bayes_fdi.diagnosis.normal_models.NormalModels`. ``width_search="evidence-grid"``
         (default) gives the default regressor (``width="auto"``) the width of largest summed
         log evidence over the grid ``(0.05, 0.1, 0.2, 0.4, 0.8)`` on 600 fault-free samples,
-        as `bayes_fdi.reproduce.select_regression_width` does; ``"evidence"`` runs the RVR's
-        own finer search instead (slow on trajectory data, see `NormalModels`).
+        as `bayes_fdi.experiments.reproduce.select_regression_width` does; ``"evidence"`` runs the
+        RVR's own finer search instead (slow on trajectory data, see `NormalModels`).
     random_state
         Seed for subsampling, the GA and the tree design.
     interval_calibration
-        Passed to `bayes_fdi.residuals.NormalModels`: ``"cross-fit"`` (default) calibrates
+        Passed to `bayes_fdi.diagnosis.normal_models.NormalModels`: ``"cross-fit"`` (default)
+        calibrates
         the predictive standard deviations ``X_hat_std``, ``F_hat_std`` on held-out fault-free
         runs; ``None`` keeps the regressors' own.
     input_lags
-        Passed to `bayes_fdi.residuals.NormalModels`: lags ``L`` (seconds) of extra normal-model
+        Passed to `bayes_fdi.diagnosis.normal_models.NormalModels`: lags ``L`` (seconds) of extra
+        normal-model
         inputs ``CV(t - L)`` (dynamic normal models, beyond the paper; the command is taken as
         held at its first value before a run's first sample). Default ``()``: the paper's
         static inputs ``(CV, sqrt(P1 - P2), T1)``.
@@ -93,7 +95,7 @@ class FaultDiagnoser(BaseEstimator):
     training_features_ : numpy.ndarray
         Unscaled training feature matrix (one row per labelled run or window).
     training_labels_ : numpy.ndarray
-    input_reference_ : bayes_fdi.seva.NoveltyReference
+    input_reference_ : bayes_fdi.diagnosis.seva.NoveltyReference
         Nearest-neighbour reference of the training inputs (fault-free and labelled runs),
         used by :meth:`seva` to flag inputs unlike anything seen in training.
     fit_seconds_ : dict
@@ -305,7 +307,8 @@ class FaultDiagnoser(BaseEstimator):
         return out
 
     def seva(self, runs: xr.Dataset, **kwargs: Any) -> list[SevaRecord]:
-        """The self-validating output: one immutable `bayes_fdi.seva.SevaRecord` per run/window.
+        """The self-validating output: one immutable `bayes_fdi.diagnosis.seva.SevaRecord` per
+        run/window.
 
         Each record holds the measured X and F, their validated values (VMV) and uncertainties
         (VU at ``coverage``, default 95 %), the diagnosed state with its probability, the full
@@ -316,15 +319,15 @@ class FaultDiagnoser(BaseEstimator):
         runs
             Runs to diagnose (channels ``CV, P1, P2, T1, X, F``).
         **kwargs
-            Passed to `bayes_fdi.seva.seva_records`: ``thresholds`` (a
-            `bayes_fdi.seva.SevaThresholds`), ``coverage``, ``calibrator`` (e.g. a fitted
+            Passed to `bayes_fdi.diagnosis.seva.seva_records`: ``thresholds`` (a
+            `bayes_fdi.diagnosis.seva.SevaThresholds`), ``coverage``, ``calibrator`` (e.g. a fitted
             `bayes_fdi.calibration.TemperatureScaler`), ``saturation_limits``.
 
         Returns
         -------
         list of SevaRecord
-            Convert with `bayes_fdi.seva.to_frame`, `~bayes_fdi.seva.to_xarray` or
-            `~bayes_fdi.seva.to_json`.
+            Convert with `bayes_fdi.diagnosis.seva.to_frame`, `~bayes_fdi.diagnosis.seva.to_xarray`
+            or `~bayes_fdi.diagnosis.seva.to_json`.
         """
         self._check_fitted()
         return seva_records(self, runs, **kwargs)

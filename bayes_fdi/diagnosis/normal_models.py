@@ -1,4 +1,4 @@
-"""Residual generation: normal (fault-free) models of the actuator outputs.
+"""Normal (fault-free) models of the actuator outputs: the residual generator.
 
 The paper (eqs. 16-20) models the two measured outputs of a fault-free actuator, the stem
 position ``X`` and the flow ``F``, as functions of three inputs,
@@ -30,376 +30,23 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections.abc import Callable, Sequence
-from typing import Any, NamedTuple
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import xarray as xr
 from sklearn.base import BaseEstimator, clone
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
+from bayes_fdi.diagnosis.model_inputs import check_lags, input_names, model_inputs
+from bayes_fdi.diagnosis.width_search import (
+    WIDTH_GRID,
+    GAResult,
+    evidence_grid_search,
+    genetic_width_search,
+)
 
-__all__ = [
-    "MODEL_INPUTS",
-    "WIDTH_GRID",
-    "EvidenceGridResult",
-    "GAResult",
-    "NegativePressureDropWarning",
-    "NormalModels",
-    "evidence_grid_search",
-    "genetic_width_search",
-    "input_names",
-    "model_inputs",
-]
-
-#: Names of the three regression inputs (columns of `model_inputs`).
-MODEL_INPUTS: tuple[str, ...] = ("CV", "sqrt_dP", "T1")
-#: Default candidate RBF widths of `NormalModels`' ``"evidence-grid"`` width search (the same
-#: grid as `bayes_fdi.reproduce.REGRESSION_WIDTHS`; the inputs are normalised to [0, 1]).
-WIDTH_GRID: tuple[float, ...] = (0.05, 0.1, 0.2, 0.4, 0.8)
-
-
-class NegativePressureDropWarning(UserWarning):
-    """Some samples have ``P1 < P2``; the signed root ``sign(D) sqrt(|D|)`` was used."""
-
-
-def _check_lags(input_lags: Any) -> tuple[float, ...]:
-    """Validate ``input_lags`` (seconds): a sequence of distinct finite positive numbers."""
-    if isinstance(input_lags, (str, bytes)) or not hasattr(input_lags, "__iter__"):
-        raise ValueError(
-            f"input_lags must be a sequence of lags in seconds, e.g. (1, 2); got {input_lags!r}"
-        )
-    lags = []
-    for lag in input_lags:
-        if isinstance(lag, (bool, np.bool_)) or not isinstance(lag, (int, float, np.number)):
-            raise ValueError(f"input_lags must hold numbers (seconds); got {lag!r}")
-        value = float(lag)
-        if not math.isfinite(value) or value <= 0:
-            raise ValueError(f"input_lags must be positive and finite (seconds); got {lag!r}")
-        lags.append(value)
-    if len(set(lags)) != len(lags):
-        raise ValueError(f"input_lags has duplicate lags: {tuple(input_lags)!r}")
-    return tuple(lags)
-
-
-def _lag_name(lag: float) -> str:
-    return f"CV_lag{lag:g}s"
-
-
-def input_names(input_lags: Any = ()) -> tuple[str, ...]:
-    """Names of the columns of ``model_inputs(ds, input_lags=input_lags)``.
-
-    ``("CV", "sqrt_dP", "T1")`` followed by ``"CV_lag{L}s"`` for each lag ``L`` (in the order
-    given), e.g. ``input_names((1, 2.5))`` is
-    ``("CV", "sqrt_dP", "T1", "CV_lag1s", "CV_lag2.5s")``.
-    """
-    return MODEL_INPUTS + tuple(_lag_name(lag) for lag in _check_lags(input_lags))
-
-
-def _lag_steps(ds: xr.Dataset, lags: tuple[float, ...]) -> list[int]:
-    """Each lag as a whole number of sampling steps of ``ds["time"]`` (ValueError otherwise)."""
-    if "time" not in ds.coords:
-        raise ValueError("input_lags need a 'time' coordinate (seconds) to define the lag")
-    t = np.asarray(ds["time"].values)
-    if np.issubdtype(t.dtype, np.datetime64) or np.issubdtype(t.dtype, np.timedelta64):
-        t = (t - t[0]) / np.timedelta64(1, "s")
-    if not np.issubdtype(t.dtype, np.number):
-        raise ValueError(f"the 'time' coordinate must be numeric seconds, got dtype {t.dtype}")
-    t = t.astype(np.float64)
-    if t.size < 2:
-        raise ValueError(
-            f"input_lags need at least 2 time samples to define the sampling step, got {t.size}"
-        )
-    dt = np.diff(t)
-    step = float(dt[0])
-    if not (math.isfinite(step) and step > 0):
-        raise ValueError(f"the 'time' coordinate must increase, got a first step of {step}")
-    if not np.allclose(dt, step, rtol=1e-6, atol=0.0):
-        raise ValueError(
-            "input_lags need a uniform time grid; the 'time' steps range from "
-            f"{dt.min():g} to {dt.max():g} s"
-        )
-    steps = []
-    for lag in lags:
-        ratio = lag / step
-        k = round(ratio)
-        if k < 1 or abs(ratio - k) > 1e-6 * max(1.0, ratio):
-            raise ValueError(
-                f"input lag {lag:g} s is not a whole multiple of the sampling step {step:g} s"
-            )
-        steps.append(int(k))
-    return steps
-
-
-def _held_shift(cv: np.ndarray, k: int) -> np.ndarray:
-    """``cv`` (run, time) delayed by ``k`` samples, held at each run's first value before it."""
-    out = np.empty_like(cv)
-    k = min(k, cv.shape[1])
-    out[:, :k] = cv[:, :1]
-    out[:, k:] = cv[:, : cv.shape[1] - k]
-    return out
-
-
-def model_inputs(
-    ds: xr.Dataset, *, warn: bool = True, input_lags: Any = ()
-) -> tuple[np.ndarray, int]:
-    """Regression inputs ``(CV, sign(D) sqrt(|D|), T1)`` with ``D = P1 - P2``, one row a sample.
-
-    Parameters
-    ----------
-    ds
-        Dataset in the project's format with channels ``CV``, ``P1``, ``P2``, ``T1``.
-    warn
-        Emit a `NegativePressureDropWarning` when some samples have ``P1 < P2``.
-    input_lags
-        Lags ``L`` in seconds (positive, distinct, each a whole multiple of the sampling step of
-        the uniform ``time`` coordinate); one column ``CV(t - L)`` is appended per lag, in the
-        order given (names: `input_names`). Before a run's first sample the command is taken
-        as held at its first value, so ``CV(t - L) = CV(t_0)`` for ``t - L < t_0``: no sample
-        is dropped. A NaN command stays NaN in the lagged columns (``L`` later). Default
-        ``()``: the paper's three static inputs.
-
-    Returns
-    -------
-    inputs : numpy.ndarray
-        ``(n_runs * n_times, 3 + len(input_lags))``, runs stacked in order (row
-        ``r * n_times + t``). NaN inputs stay NaN.
-    n_negative : int
-        Number of samples with ``P1 < P2`` (signed root used; samples kept).
-    """
-    lags = _check_lags(input_lags)
-    validate_dataset(ds, require=INPUT_CHANNELS, allow_nan=True)
-    steps = _lag_steps(ds, lags) if lags else []
-
-    def grid(name: str) -> np.ndarray:
-        return np.asarray(ds[name].transpose("run", "time").values, dtype=np.float64)
-
-    def flat(name: str) -> np.ndarray:
-        return grid(name).ravel()
-
-    dp = flat("P1") - flat("P2")
-    n_negative = int(np.sum(dp < 0))
-    if n_negative and warn:
-        warnings.warn(
-            f"{n_negative} of {dp.size} samples have P1 < P2; using the signed root "
-            "sign(P1-P2)*sqrt(|P1-P2|) for them (samples kept)",
-            NegativePressureDropWarning,
-            stacklevel=2,
-        )
-    root = np.sign(dp) * np.sqrt(np.abs(dp))
-    columns = [flat("CV"), root, flat("T1")]
-    if steps:
-        cv = grid("CV")
-        columns += [_held_shift(cv, k).ravel() for k in steps]
-    return np.column_stack(columns), n_negative
-
-
-class GAResult(NamedTuple):
-    """Result of `genetic_width_search`.
-
-    Attributes
-    ----------
-    width : float
-        The best kernel width found.
-    mse : float
-        Its validation mean squared error.
-    history : numpy.ndarray
-        ``(generations + 1, 2)``: best width and best MSE after each generation (row 0: the
-        initial population).
-    n_evaluations : int
-        Number of distinct model fits.
-    """
-
-    width: float
-    mse: float
-    history: np.ndarray
-    n_evaluations: int
-
-
-def genetic_width_search(
-    make_estimator: Callable[[float], Any],
-    X_train: np.ndarray,
-    y_train: np.ndarray,
-    X_val: np.ndarray,
-    y_val: np.ndarray,
-    *,
-    bounds: tuple[float, float] = (1e-3, 10.0),
-    population: int = 12,
-    generations: int = 10,
-    random_state: int | None = 0,
-) -> GAResult:
-    """Minimise validation MSE over a kernel width with a small real-coded genetic algorithm.
-
-    The genome is ``log10(width)`` within ``bounds``. Each generation keeps the best individual
-    (elitism), fills the rest by binary-tournament selection, blend crossover (BLX-0.5) and
-    Gaussian mutation (probability 0.3, standard deviation 10 % of the log-range), clipped to
-    the bounds. Fitness is the mean squared error of ``make_estimator(width)`` fitted on
-    ``(X_train, y_train)`` and evaluated on ``(X_val, y_val)``; a fit that raises is given
-    infinite MSE. The paper tuned its RVR kernel width the same way (its section 3.2).
-
-    Parameters
-    ----------
-    make_estimator
-        ``width -> unfitted regressor``.
-    X_train, y_train, X_val, y_val
-        Training and validation data.
-    bounds
-        ``(low, high)`` search range of the width (both > 0).
-    population, generations
-        GA sizes; the cost is at most ``population * (generations + 1)`` fits.
-    random_state
-        Seed of the GA's own generator.
-
-    Returns
-    -------
-    GAResult
-    """
-    low, high = (float(b) for b in bounds)
-    if not (0 < low < high) or not (math.isfinite(low) and math.isfinite(high)):
-        raise ValueError(f"bounds must satisfy 0 < low < high, got {bounds}")
-    if population < 2 or generations < 0:
-        raise ValueError("population must be >= 2 and generations >= 0")
-    rng = np.random.default_rng(random_state)
-    lo, hi = math.log10(low), math.log10(high)
-    cache: dict[float, float] = {}
-
-    def fitness(g: float) -> float:
-        key = round(float(g), 10)
-        if key not in cache:
-            try:
-                est = make_estimator(10.0**key)
-                est.fit(X_train, y_train)
-                pred = np.asarray(est.predict(X_val), dtype=np.float64).ravel()
-                mse = float(np.mean((pred - y_val) ** 2))
-                cache[key] = mse if math.isfinite(mse) else math.inf
-            except (ValueError, np.linalg.LinAlgError, RuntimeError):
-                cache[key] = math.inf
-        return cache[key]
-
-    genomes = (
-        np.linspace(lo, hi, population)
-        + rng.uniform(-0.5, 0.5, population) * (hi - lo) / population
-    )
-    genomes = np.clip(genomes, lo, hi)
-    scores = np.array([fitness(g) for g in genomes])
-    history = [(10.0 ** genomes[np.argmin(scores)], scores.min())]
-    sigma_mut = 0.1 * (hi - lo)
-    for _ in range(generations):
-        best = int(np.argmin(scores))
-        children = [genomes[best]]
-        while len(children) < population:
-            parents = []
-            for _k in range(2):
-                i, j = rng.integers(0, population, 2)
-                parents.append(genomes[i] if scores[i] <= scores[j] else genomes[j])
-            a, b = min(parents), max(parents)
-            span = b - a
-            child = rng.uniform(a - 0.5 * span, b + 0.5 * span)
-            if rng.random() < 0.3:
-                child += rng.normal(0.0, sigma_mut)
-            children.append(float(np.clip(child, lo, hi)))
-        genomes = np.array(children)
-        scores = np.array([fitness(g) for g in genomes])
-        history.append((10.0 ** genomes[np.argmin(scores)], scores.min()))
-    best = int(np.argmin(scores))
-    if not math.isfinite(scores[best]):
-        raise ValueError("every kernel width tried by the genetic search failed to fit")
-    return GAResult(
-        width=float(10.0 ** genomes[best]),
-        mse=float(scores[best]),
-        history=np.array(history, dtype=np.float64),
-        n_evaluations=len(cache),
-    )
-
-
-class EvidenceGridResult(NamedTuple):
-    """Result of `evidence_grid_search`.
-
-    Attributes
-    ----------
-    width : float
-        The grid width of largest summed log evidence (the first such in grid order on ties).
-    log_evidence : dict
-        Width -> log evidence summed over the outputs.
-    log_evidence_by_output : dict
-        Output name -> (width -> log evidence of that output's model).
-    n_samples : int
-        Samples each model was fitted on.
-    """
-
-    width: float
-    log_evidence: dict[float, float]
-    log_evidence_by_output: dict[str, dict[float, float]]
-    n_samples: int
-
-
-def evidence_grid_search(
-    make_estimator: Callable[[float], Any],
-    U: np.ndarray,
-    targets: dict[str, np.ndarray],
-    widths: Sequence[float],
-    *,
-    max_samples: int | None = None,
-    rng: np.random.Generator | None = None,
-) -> EvidenceGridResult:
-    """One kernel width for several outputs by maximum summed log evidence over a grid.
-
-    Each output's model ``make_estimator(width)`` is fitted at every grid width on the same
-    samples (a seeded random subset of ``max_samples`` of them when there are more: row
-    indices ``np.sort(rng.choice(n, max_samples, replace=False))``); the width whose log
-    marginal likelihoods (the fitted models' ``log_evidence_``), summed over the outputs, is
-    largest wins. This is the width search of `NormalModels` (``width_search="evidence-grid"``)
-    and of `bayes_fdi.reproduce.select_regression_width`.
-
-    Parameters
-    ----------
-    make_estimator
-        ``width -> unfitted regressor`` whose fitted form has a ``log_evidence_`` attribute
-        (e.g. ``lambda w: bayes_fdi.rvm.RVR(kernel="rbf", width=w)``).
-    U
-        ``(n, d)`` inputs (finite).
-    targets
-        Output name -> ``(n,)`` targets (finite).
-    widths
-        Candidate widths (non-empty).
-    max_samples
-        Subsample size; ``None`` fits on all ``n`` samples.
-    rng
-        Generator of the subsample (needed only when it is drawn).
-
-    Returns
-    -------
-    EvidenceGridResult
-    """
-    widths = [float(w) for w in widths]
-    if not widths:
-        raise ValueError("the width grid is empty")
-    if not targets:
-        raise ValueError("no targets to choose a width for")
-    n = U.shape[0]
-    rows = np.arange(n)
-    if max_samples is not None and n > max_samples:
-        if rng is None:
-            raise ValueError("a subsample needs a random generator (rng)")
-        rows = np.sort(rng.choice(n, size=max_samples, replace=False))
-    by_output: dict[str, dict[float, float]] = {}
-    for name, y in targets.items():
-        by_output[name] = {}
-        for w in widths:
-            est = make_estimator(w).fit(U[rows], np.asarray(y)[rows])
-            if not hasattr(est, "log_evidence_"):
-                raise ValueError(
-                    f"{type(est).__name__} has no log_evidence_ after fit: the evidence grid "
-                    "search needs a Bayesian regressor such as bayes_fdi.rvm.RVR"
-                )
-            by_output[name][w] = float(est.log_evidence_)
-    total = {w: float(sum(by_output[name][w] for name in targets)) for w in widths}
-    return EvidenceGridResult(
-        width=max(total, key=total.__getitem__),
-        log_evidence=total,
-        log_evidence_by_output=by_output,
-        n_samples=int(rows.size),
-    )
+__all__ = ["NormalModels"]
 
 
 def _default_regressor() -> Any:
@@ -550,7 +197,8 @@ class NormalModels(BaseEstimator):
     -----
     Width search. The default ``"evidence-grid"`` gives ``X`` and ``F`` one shared width, the
     grid width of largest summed log evidence, because that is exactly what
-    `bayes_fdi.reproduce.select_regression_width` does (both call `evidence_grid_search`):
+    `bayes_fdi.experiments.reproduce.select_regression_width` does (both call
+    `evidence_grid_search`):
     with ``random_state=0`` and ``evidence_max_samples=600`` (the defaults; ``bayes-fdi
     reproduce`` uses seed 0 and 600 samples) the chosen width is the one of the reproduction.
     The grid spans the widths where the evidence peaks on inputs normalised to [0, 1]. A
@@ -659,7 +307,7 @@ class NormalModels(BaseEstimator):
         if self.max_train_samples is not None and int(self.max_train_samples) < 2:
             raise ValueError("max_train_samples must be at least 2")
         self._check_calibration_params()
-        lags = _check_lags(self.input_lags)
+        lags = check_lags(self.input_lags)
         rng = np.random.default_rng(self.random_state)
         base = self._base()
         U, n_neg = model_inputs(normal_runs, input_lags=lags)
@@ -820,7 +468,7 @@ class NormalModels(BaseEstimator):
         self.std_scale_edges_ = np.empty(0)
         if self.interval_calibration is None:
             return
-        from bayes_fdi.calibration import StdScaler
+        from bayes_fdi.diagnosis.interval_scaling import StdScaler
 
         k = int(self.calibration_folds)
         n_runs, n_times = runs.sizes["run"], runs.sizes["time"]

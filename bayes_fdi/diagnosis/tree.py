@@ -194,7 +194,7 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
     base_estimator
         Unfitted binary probabilistic classifier (``fit``, ``predict_proba``), cloned at every
         node. ``None``: ``bayes_fdi.rvm.RVC(kernel="rbf", width=2.0)`` (the paper's method).
-        For the paper's SVM baseline use `bayes_fdi.baselines.svm_classifier`.
+        For the paper's SVM baseline use `bayes_fdi.diagnosis.baselines.svm_classifier`.
     structure
         ``"kmeans"`` (design the tree by recursive 2-means on the class centroids of the
         training features, see `design_tree`) or a nested tuple of pairs of class labels

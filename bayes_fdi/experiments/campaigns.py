@@ -135,7 +135,8 @@ class RunSpec(NamedTuple):
 class Campaign:
     """A validated simulation campaign (immutable); build it with :func:`load_campaign`.
 
-    Attributes mirror the TOML schema of :mod:`bayes_fdi.campaigns`. ``faults`` maps every fault
+    Attributes mirror the TOML schema of :mod:`bayes_fdi.experiments.campaigns`. ``faults`` maps
+    every fault
     ``f1..f19`` to its resolved :class:`FaultSpec` (defaults merged with overrides); ``scenarios``
     is empty in state mode. ``raw`` is the validated TOML table (for provenance and
     :meth:`replace`); ``path`` the file it came from, if any.
