@@ -67,6 +67,17 @@ def test_seeds_are_disjoint_from_training_and_from_the_fault_free_hours():
         benchmark_seeds(0)
 
 
+def test_no_training_campaign_draws_the_benchmarks_noise_streams():
+    # simulate_campaign(seed=s) draws its noise from a seed derived from s (a 32-bit hash), not
+    # from s itself: none of the derived noise seeds of the training seeds 0..999 may be a
+    # benchmark or fault-free seed, or a training run could share a benchmark run's noise
+    from bayes_fdi.experiments.campaigns import _derived_seeds
+
+    reserved = set(benchmark_seeds(1000)) | {FAULT_FREE_SEED}
+    derived = {_derived_seeds(s)[1] for s in range(1000)}
+    assert not derived & reserved
+
+
 def test_an_incipient_ramp_reaches_its_strength_at_its_time():
     # f18 incipient: the bypass valve's Kv = 19.75 f(t) with f(t) = (t - 900) / 84000, so the
     # true flow of the faulty run exceeds the nominal one by the bypass law 100 Kv sqrt(dp / rho)
