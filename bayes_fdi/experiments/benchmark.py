@@ -65,7 +65,7 @@ CALIBRATION_SECONDS_PER_RUN = 600
 #: groups).
 CONFIDENT = 0.9
 #: Samples per call of ``diagnoser.run`` (runs of equal horizon are batched up to this).
-MAX_BATCH_SAMPLES = 500_000
+MAX_BATCH_SAMPLES = 300_000
 _TRUTH_COORDS = ("state", "strength", "onset", "profile", "ramp")
 _MEASURED = ("X", "F", "P1", "P2", "T1")
 
