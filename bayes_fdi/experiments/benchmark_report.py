@@ -286,12 +286,15 @@ def _effects_table(results: Mapping[str, Any], summary: Mapping[str, Any]) -> st
 def _undetectable_text(results: Mapping[str, Any]) -> list[str]:
     effects = results.get("effects", [])
     blind = [e for e in effects if e["deflection"] < DETECTABLE_DEFLECTION]
+    lines = [
+        f"Faults that no method can detect from CV, P1, P2, T1, X, F (deflection < "
+        f"{DETECTABLE_DEFLECTION:g}):",
+        "",
+    ]
     if not blind:
-        return [
-            "Every scenario's fault moves the measured signals far enough for an ideal "
-            "detector (deflection >= 5)."
-        ]
-    lines = []
+        lines.append(
+            "- none: every fault moves the measured signals far enough for an ideal detector."
+        )
     for e in blind:
         fault = e["scenario"].split()[0]
         info = FAULT_TABLE[fault]
@@ -302,6 +305,29 @@ def _undetectable_text(results: Mapping[str, Any]) -> list[str]:
             f"deflection {e['deflection']:.2f} over the whole faulty part"
         )
         lines.append(f"- **{e['scenario']}** ({info.description}; enters as {info.entry}): {why}.")
+    model = results.get("model_std") or {}
+    if model.get("X") and model.get("F"):
+        hidden = [
+            e
+            for e in effects
+            if e["deflection"] >= DETECTABLE_DEFLECTION
+            and all(e["max"][c] * NOISE_STD < model[c] for c in ("X", "F"))
+            and max(e["max"][c] for c in ("P1", "P2", "T1")) < 1.0
+        ]
+        lines += [
+            "",
+            "Detectable in principle, but every second's effect on X and F stays below the "
+            "normal models' predictive std (and P1, P2, T1 are untouched), so a method that must "
+            "predict X and F from CV, P1, P2, T1 sees it only by accumulating evidence:",
+            "",
+        ]
+        lines += [
+            f"- **{e['scenario']}** ({FAULT_TABLE[e['scenario'].split()[0]].description}): largest "
+            f"effect {e['max']['X'] * NOISE_STD / model['X']:.2f} (X) and "
+            f"{e['max']['F'] * NOISE_STD / model['F']:.2f} (F) predictive std, deflection "
+            f"{e['deflection']:.1f}."
+            for e in hidden
+        ] or ["- none."]
     return lines
 
 
@@ -396,9 +422,6 @@ def render_report(results: Mapping[str, Any]) -> str:
         "for a method that must predict X and F from CV, P1, P2, T1.",
         "",
         _effects_table(results, summary),
-        f"Faults that no method can detect from CV, P1, P2, T1, X, F (deflection < "
-        f"{DETECTABLE_DEFLECTION:g}):",
-        "",
         *_undetectable_text(results),
         "",
     ]
