@@ -179,3 +179,20 @@ def test_the_benchmark_command_is_registered(capsys):
     out = capsys.readouterr().out
     for option in ("--out", "--seeds", "--small", "--quiet"):
         assert option in out
+
+
+def test_results_do_not_depend_on_the_batching(double, tmp_path):
+    scenarios = [BY_NAME["f18 abrupt big"], BY_NAME["f13 incipient"].truncated(1600)]
+    kw = {
+        "n_seeds": 2,
+        "scenarios": scenarios,
+        "hours": 0.05,
+        "real_hour": False,
+        "figures": False,
+        "n_bootstrap": 0,
+        "progress": False,
+    }
+    one_run_each = run_benchmark(double, tmp_path / "a", max_batch_samples=1, **kw)
+    all_at_once = run_benchmark(double, tmp_path / "b", max_batch_samples=10**7, **kw)
+    assert one_run_each["scenarios"] == all_at_once["scenarios"]
+    assert len(all_at_once["scenarios"]) == 4

@@ -187,6 +187,24 @@ def _batches(scenarios, seeds, max_samples):
             yield list(grouped.values())
 
 
+class _Simulations:
+    """Each scenario simulated once with all its seeds, kept until its last run is taken."""
+
+    def __init__(self, scenarios: Sequence[BenchmarkScenario], seeds: Sequence[int]) -> None:
+        self.seeds = list(seeds)
+        self.left = {s.name: len(self.seeds) for s in scenarios}
+        self.cache: dict[str, xr.Dataset] = {}
+
+    def take(self, scenario: BenchmarkScenario, seeds: Sequence[int]) -> xr.Dataset:
+        if scenario.name not in self.cache:
+            self.cache[scenario.name] = simulate_scenario(scenario, self.seeds)
+        runs = self.cache[scenario.name].sel(run=list(seeds))
+        self.left[scenario.name] -= len(seeds)
+        if self.left[scenario.name] == 0:
+            del self.cache[scenario.name]
+        return runs
+
+
 class _Collector:
     """Accumulates per-run indices, calibration samples and counts over the batches."""
 
@@ -276,8 +294,10 @@ def _calibration(col: _Collector, n_bootstrap: int, seed: int, figure: Path | No
     for b in range(n_bootstrap):
         take = np.concatenate([members[i] for i in rng.integers(0, runs.size, runs.size)])
         boots[b] = expected_calibration_error(y[take], proba[take], classes=labels, n_bins=15).value
-    q_lo, q_hi = np.quantile(boots, [0.025, 0.975]) if n_bootstrap else (np.nan, np.nan)
-    lo, hi = max(0.0, 2 * res.value - q_hi), max(0.0, 2 * res.value - q_lo)  # basic interval
+    lo = hi = float("nan")
+    if n_bootstrap:
+        q_lo, q_hi = np.quantile(boots, [0.025, 0.975])
+        lo, hi = max(0.0, 2 * res.value - q_hi), max(0.0, 2 * res.value - q_lo)  # basic interval
     res = res._replace(ci_low=float(lo), ci_high=float(hi))
     if figure is not None:
         import matplotlib.pyplot as plt
@@ -421,10 +441,11 @@ def run_benchmark(
 
         bar = tqdm(total=len(scenarios) * len(seeds), desc="benchmark", unit="run")
     figures_written: dict[str, str] = {}
+    simulations = _Simulations(scenarios, seeds)
     try:
         for batch in batches:
             c0 = time.process_time()
-            parts = [simulate_scenario(s, run_seeds) for s, run_seeds in batch]
+            parts = [simulations.take(s, run_seeds) for s, run_seeds in batch]
             recording = xr.concat(parts, dim="run", combine_attrs="drop_conflicts")
             n_runs = recording.sizes["run"]
             recording = recording.assign_coords(run=np.arange(n_runs))
