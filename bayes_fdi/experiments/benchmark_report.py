@@ -467,10 +467,10 @@ def _calibration_lines(results: Mapping[str, Any]) -> list[str]:
         *lines,
         f"Top-label ECE of the group probabilities over {cal['n_seconds']} detected faulty "
         f"seconds of {cal['n_runs']} runs (at most 600 evenly spaced seconds per run): "
-        f"**{cal['ece']:.3f}**, 95 % interval [{cal['ci_low']:.3f}, {cal['ci_high']:.3f}] "
+        f"**{_num(cal['ece'])}**, 95 % interval [{_num(cal['ci_low'])}, {_num(cal['ci_high'])}] "
         f"(basic bootstrap over runs, {cal['n_bootstrap']} resamples: the seconds of a run are "
-        f"not independent); noise floor {cal['noise_floor']:.3f}, MCE {cal['mce']:.3f}; "
-        f"accuracy {cal['accuracy']:.3f} at mean confidence {cal['mean_confidence']:.3f}. "
+        f"not independent); noise floor {_num(cal['noise_floor'])}, MCE {_num(cal['mce'])}; "
+        f"accuracy {_num(cal['accuracy'])} at mean confidence {_num(cal['mean_confidence'])}. "
         f"Confident (p > 0.9) wrong group: {100 * cw['share']:.2f} % of all faulty seconds.",
         "",
         "![reliability diagram](reliability.png)",
