@@ -196,3 +196,16 @@ def test_results_do_not_depend_on_the_batching(double, tmp_path):
     all_at_once = run_benchmark(double, tmp_path / "b", max_batch_samples=10**7, **kw)
     assert one_run_each["scenarios"] == all_at_once["scenarios"]
     assert len(all_at_once["scenarios"]) == 4
+
+
+def test_nan_decisions_are_low():
+    dd = np.array([np.nan, 1.0, np.nan, 0.0])  # a float DD with BLIND seconds
+    ind = np.array([[np.nan, 0.0], [1.0, 0.0], [np.nan, np.nan], [0.0, 0.0]])
+    stream = xr.Dataset(
+        {"DD": ("time", dd), "indicated": (("time", "group"), ind)},
+        coords={"time": np.arange(4.0), "group": ["f1", "f2"]},
+        attrs={"groups": json.dumps({"f1": ["f1"], "f2": ["f2"]}), "undetectable": "[]"},
+    )
+    sig = decision_signals(stream, "f1")
+    np.testing.assert_array_equal(sig.dd, [0, 1, 0, 0])
+    np.testing.assert_array_equal(sig.pid, [0, 1, 0, 0])

@@ -87,6 +87,12 @@ def rising_edges(high: Any) -> int:
     return int(h[:1].sum() + (h[1:] & ~h[:-1]).sum())
 
 
+def _high(values: Any) -> np.ndarray:
+    """A decision as bool; NaN (no decision, e.g. BLIND) is low, as in :func:`picalc`."""
+    a = np.asarray(values)
+    return a.astype(bool) if a.dtype == bool else np.nan_to_num(a.astype(float)) != 0
+
+
 def decision_signals(stream: xr.Dataset, fault: str) -> DecisionSignals:
     """DD, PID, CID and the indicated groups of one run, given its true fault.
 
@@ -102,8 +108,8 @@ def decision_signals(stream: xr.Dataset, fault: str) -> DecisionSignals:
     groups = json.loads(stream.attrs["groups"])
     undetectable = list(json.loads(stream.attrs.get("undetectable", "[]")))
     labels = [str(g) for g in stream["group"].values]
-    dd = np.asarray(stream["DD"].values, dtype=bool)
-    ind = np.asarray(stream["indicated"].transpose("time", "group").values, dtype=bool)
+    dd = _high(stream["DD"].values)
+    ind = _high(stream["indicated"].transpose("time", "group").values)
     sizes = np.array([len(groups[g]) for g in labels], dtype=np.int64)
     true_group = next((i for i, g in enumerate(labels) if fault in groups[g]), None)
     n_named = ind.sum(axis=1)
@@ -336,7 +342,7 @@ def _fault_free(diagnoser: Any, hours: float) -> dict[str, Any]:
     ds = fault_free_hours(hours)
     stream = diagnoser.run(_strip_truth(ds)).isel(run=0)
     counted = stream["time"].values >= ds.attrs["warmup"]
-    dd = np.asarray(stream["DD"].values, dtype=bool)[counted]
+    dd = _high(stream["DD"].values)[counted]
     status = np.asarray(stream["status"].values).astype(str)[counted]
     alarms = rising_edges(dd)
     return {
@@ -360,7 +366,7 @@ def _real_hour(diagnoser: Any) -> dict[str, Any]:
     half = hour.sizes["time"] // 2
     fresh = clone(diagnoser).fit(hour.isel(time=slice(0, half)))
     stream = fresh.run(_strip_truth(hour.isel(time=slice(half, None)))).isel(run=0)
-    dd = np.asarray(stream["DD"].values, dtype=bool)
+    dd = _high(stream["DD"].values)
     status = np.asarray(stream["status"].values).astype(str)
     return {
         "seconds": int(dd.size),
