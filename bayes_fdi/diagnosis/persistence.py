@@ -70,19 +70,18 @@ flushed to disk, then renamed over the destination.
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import json
 import math
 import os
 import re
-import tempfile
 import warnings
 import zipfile
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
+
+from bayes_fdi.atomic import atomic_path
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
@@ -90,7 +89,6 @@ __all__ = [
     "FORMAT_VERSION",
     "MAX_METADATA_BYTES",
     "SKLEARN_CLASSES",
-    "atomic_path",
     "load",
     "read_metadata",
     "register_persistable",
@@ -478,43 +476,6 @@ def _bayes_fdi_version() -> str:
     from bayes_fdi import __version__
 
     return __version__
-
-
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
-    """Yield a temporary path next to ``path``; on success, flush it and rename it to ``path``.
-
-    The temporary file (``.NAME.XXXX.tmp`` in the destination folder) is fsync'ed, given the
-    permissions a new file gets (``0o666`` less the umask) and moved over ``path`` with
-    ``os.replace``; if the block raises, it is removed and ``path`` is left as it was.
-    """
-    final = os.path.abspath(os.fspath(path))
-    folder, name = os.path.split(final)
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-    os.close(fd)
-    committed = False
-    try:
-        yield tmp
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        umask = os.umask(0o022)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, final)
-        committed = True
-        with contextlib.suppress(OSError):
-            dir_fd = os.open(folder, os.O_RDONLY)
-            try:
-                os.fsync(dir_fd)
-            finally:
-                os.close(dir_fd)
-    finally:
-        if not committed:
-            with contextlib.suppress(FileNotFoundError):
-                os.remove(tmp)
 
 
 def save(obj: Any, path: str | os.PathLike[str]) -> str:
