@@ -50,7 +50,9 @@ an object or array seen before      ``{"__ref__": n}`` (the n-th object or array
 
 Persistable classes: the scikit-learn estimators (``BaseEstimator`` subclasses) and named tuples
 defined in ``bayes_fdi``, the classes registered with `register_persistable` (the RVM kernels,
-`StdScaler`, `NoveltyReference`, ...) and the scikit-learn classes of :data:`SKLEARN_CLASSES`.
+`StdScaler`, `NoveltyReference`, and any plug-in class registered in the running process) and the
+scikit-learn classes of :data:`SKLEARN_CLASSES`. A saved object's state is its ``__dict__``
+(constructor parameters and fitted attributes), so a new class needs nothing more than that.
 A file naming any other class is refused. Objects holding something else (a user-supplied
 callable kernel, a ``numpy.random.Generator`` as ``random_state``) cannot be saved: `save`
 raises a `ValueError` naming the attribute.
@@ -113,8 +115,9 @@ SKLEARN_CLASSES: frozenset[str] = frozenset(
         "sklearn.linear_model._logistic:LogisticRegression",
     }
 )
-#: bayes_fdi classes that are neither estimators nor named tuples but may be saved.
-_BAYES_FDI_CLASSES: set[str] = {
+#: Registered classes (``module:QualName``): bayes_fdi classes that are neither estimators nor
+#: named tuples, and classes registered by `register_persistable` (e.g. a plug-in's estimator).
+_REGISTERED: set[str] = {
     "bayes_fdi.rvm.kernels:RBF",
     "bayes_fdi.rvm.kernels:Linear",
     "bayes_fdi.rvm.kernels:Polynomial",
@@ -132,11 +135,13 @@ def register_persistable(cls: type) -> type:
     """Allow instances of ``cls`` (a class with a ``__dict__``) in saved models; returns ``cls``.
 
     Usable as a class decorator. Estimators (``BaseEstimator`` subclasses) and named tuples
-    defined in ``bayes_fdi`` need no registration.
+    defined in ``bayes_fdi`` need no registration. A class defined elsewhere (a plug-in) must be
+    registered in the process that saves and in the one that loads (its module is imported by
+    the loader only because it was registered).
     """
     if not isinstance(cls, type):
         raise ValueError(f"register_persistable expects a class, got {cls!r}")
-    _BAYES_FDI_CLASSES.add(_class_name(cls))
+    _REGISTERED.add(_class_name(cls))
     return cls
 
 
@@ -150,7 +155,7 @@ def _is_namedtuple(cls: type) -> bool:
 
 def _persistable(cls: type) -> bool:
     name = _class_name(cls)
-    if name in SKLEARN_CLASSES or name in _BAYES_FDI_CLASSES:
+    if name in SKLEARN_CLASSES or name in _REGISTERED:
         return True
     if not cls.__module__.startswith("bayes_fdi."):
         return False
@@ -164,7 +169,7 @@ def _resolve_class(name: Any, source: str) -> type:
     if not isinstance(name, str) or name.count(":") != 1:
         raise ValueError(f"{source}: invalid class name {name!r}")
     module_name, qualname = name.split(":")
-    trusted = name in SKLEARN_CLASSES or module_name.startswith("bayes_fdi.")
+    trusted = name in SKLEARN_CLASSES or name in _REGISTERED or module_name.startswith("bayes_fdi.")
     if not trusted:
         raise ValueError(f"{source}: class {name!r} is not allowed in a bayes_fdi model file")
     try:
