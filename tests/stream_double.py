@@ -3,9 +3,10 @@ recording pipeline only: it produces every variable of the decision stream and c
 stream state across time chunks (``run(chunk, state=..., return_state=True)``).
 
 Linear normal models of X and F on (1, CV, CV one second earlier, sqrt(P1 - P2), T1), fitted by
-least squares on fault-free runs; a one-sided CUSUM of each absolute standardised residual (capped at twice
-the threshold) with hysteresis (on above ``threshold``, off when both sums are back to 0); two isolation groups by
-which sum is larger. A second with a NaN channel is BLIND: no decision, the sums are held.
+least squares on fault-free runs; a one-sided CUSUM of each absolute standardised residual
+(capped at twice the threshold) with hysteresis (on above ``threshold``, off when both sums are
+back to 0); two isolation groups by which sum is larger. A second with a NaN channel is BLIND:
+no decision, the sums are held.
 """
 
 from __future__ import annotations

@@ -274,3 +274,37 @@ def test_many_recordings_on_two_workers_equal_serial(model, tmp_path, rng):
         assert _files(tmp_path / "cluster" / f"rec{i}") == _files(tmp_path / "serial" / f"rec{i}")
     names = sorted(os.listdir(tmp_path / "cluster"))
     assert names == ["rec0", "rec1", "rec2"]
+
+
+def test_fit_from_a_shipped_campaign(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(model_fitting, "new_online_diagnoser", StreamDouble)
+    out = tmp_path / "campaign-model.npz"
+    sets = ["runs_per_state=1", "duration=60", 'states=["fn","f1","f18"]']
+    argv = ["fit", "--campaign", "paper-simulated", "--out", str(out), "--quiet"]
+    for text in sets:
+        argv += ["--set", text]
+    assert main(argv) == 0
+    assert "fitted on campaign paper-simulated" in capsys.readouterr().out
+    assert persistence.load(out).n_fault_runs_ == 2
+    with pytest.raises(SystemExit):
+        main(["fit", "--campaign", "no-such-campaign", "--out", str(out)])
+    assert "shipped: damadics-benchmark, paper-lublin, paper-simulated" in capsys.readouterr().err
+
+
+def test_installed_package_ships_the_campaign_files(tmp_path):
+    """A built wheel holds sim/*.toml as package data (bayes_fdi/data/campaigns)."""
+    import subprocess
+    import sys
+    import zipfile
+    from pathlib import Path
+
+    root = Path(__file__).parents[1]
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+         "-w", str(tmp_path), str(root)],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    (wheel,) = tmp_path.glob("*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    for toml in sorted((root / "sim").glob("*.toml")):
+        assert f"bayes_fdi/data/campaigns/{toml.name}" in names

@@ -38,9 +38,7 @@ def _check_inputs(inputs: xr.Dataset, *, who: str, require=INPUT_CHANNELS) -> np
     if inputs.sizes["run"] < 1:
         raise ValueError(f"{who}: the dataset has no runs")
     n_runs, n_t = inputs.sizes["run"], inputs.sizes["time"]
-    check_memory(
-        8.0 * _VALUES_PER_SAMPLE * n_runs * n_t, f"{who}: {n_runs} run(s) x {n_t} s"
-    )
+    check_memory(8.0 * _VALUES_PER_SAMPLE * n_runs * n_t, f"{who}: {n_runs} run(s) x {n_t} s")
     if time.size > 1 and not np.allclose(np.diff(time), 1.0):
         raise ValueError(f"{who}: the time coordinate must be 1 Hz (steps of 1 s)")
     u = np.empty((inputs.sizes["run"], inputs.sizes["time"], 4))

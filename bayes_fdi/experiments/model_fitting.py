@@ -261,6 +261,18 @@ def _fault_argument(text: str) -> tuple[str, float, str]:
     return state, when, input_file(path)
 
 
+def _campaign_argument(text: str) -> str:
+    """A campaign TOML file, or the name of a shipped campaign."""
+    from bayes_fdi.experiments.shipped_campaigns import campaign_path
+
+    if text.endswith(".toml") or os.path.sep in text:
+        return input_file(text)
+    try:
+        return os.fspath(campaign_path(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments that say how to read recordings (shared by ``fit`` and ``diagnose``)."""
     group = parser.add_argument_group("reading recordings (bayes_fdi.datasets.readers)")
@@ -335,7 +347,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "use",
     )
     source.add_argument(
-        "--campaign", type=input_file, help="simulate this campaign TOML and fit on it"
+        "--campaign",
+        type=_campaign_argument,
+        metavar="TOML_OR_NAME",
+        help="simulate this campaign TOML file, or a shipped campaign by name (e.g. "
+        "damadics-benchmark), and fit on it",
     )
     source.add_argument(
         "--normal",
@@ -359,6 +375,14 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         type=output_file(".npz"),
         help="model file to write (.npz), written atomically",
     )
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="with --campaign: override a campaign key, as bayes-fdi simulate --set",
+    )
     parser.add_argument("--seed", type=int, default=None, help="seed of the simulation")
     parser.add_argument(
         "--small", action="store_true", help="with --default: the quick settings (a few minutes)"
@@ -374,15 +398,18 @@ def run_from_cli(args: argparse.Namespace) -> int:
     progress = not args.quiet
     if args.fault and not args.normal:
         raise UsageError("--fault needs --normal (the fault-free recordings)")
+    if args.overrides and not args.campaign:
+        raise UsageError("--set needs --campaign")
     if args.default:
         fit = _default_fitter()
         model = fit(seed=0 if args.seed is None else args.seed, small=args.small, progress=progress)
         what = "the default training campaigns" + (" (small)" if args.small else "")
     elif args.campaign:
-        from bayes_fdi.experiments.campaigns import CampaignError, load_campaign
+        from bayes_fdi.experiments.campaigns import CampaignError, _parse_set, load_campaign
 
         try:
-            campaign = load_campaign(args.campaign)
+            overrides = dict(_parse_set(text) for text in args.overrides)
+            campaign = load_campaign(args.campaign, **overrides)
         except CampaignError as exc:
             raise UsageError(str(exc)) from exc
         model = fit_from_campaign(campaign, seed=args.seed, progress=progress,

@@ -171,9 +171,12 @@ def campaign_file(name: str | os.PathLike) -> Path:
         if not path.is_file():
             raise ValueError(f"campaign file {os.fspath(path)!r} does not exist")
         return path
+    from bayes_fdi.experiments.shipped_campaigns import campaign_folder
+
     candidates = [
         Path.cwd() / "sim" / f"{name}.toml",
         Path(__file__).resolve().parents[2] / "sim" / f"{name}.toml",
+        campaign_folder() / f"{name}.toml",  # the package data of an installed bayes_fdi
     ]
     for c in candidates:
         if c.is_file():
