@@ -65,6 +65,8 @@ FULL_FIGURE_SECONDS = 2 * 86_400
 #: About this many bins are drawn for a longer recording.
 FIGURE_BINS = 6000
 _CHANNELS = ("CV", "P1", "P2", "T1", "X", "F")
+#: Values per netCDF chunk (about 8 MB of float64).
+_CHUNK_VALUES = 1_000_000
 
 
 def check_stream(stream: xr.Dataset, chunk: xr.Dataset) -> xr.Dataset:
@@ -168,20 +170,26 @@ class StreamNetCDFWriter:
             var[:] = values.astype(object) if values.dtype.kind in "OU" else values
         time = nc.createVariable("time", "f8", ("time",))
         time.units = "s"
+        # chunks of about a million values along time (the default for an unlimited dimension
+        # is one value: slow and large)
+        n_runs = stream.sizes["run"]
+        t_chunk = max(1, min(stream.sizes["time"], _CHUNK_VALUES // n_runs, 86_400))
         for name in (*STREAM_VARIABLES, *_CHANNELS):
             source = chunk if name in _CHANNELS else stream
             da = source[name].transpose("run", "time", ...)
             dims = da.dims
+            extra = tuple(da.sizes[d] for d in dims[2:])
+            sizes = (min(n_runs, _CHUNK_VALUES), t_chunk, *extra)
             kind = da.dtype.kind
             if kind == "b":
-                var = nc.createVariable(name, "i1", dims, zlib=True, complevel=4)
+                var = nc.createVariable(name, "i1", dims, zlib=True, complevel=1,
+                                        chunksizes=sizes)  # fmt: skip
                 var.setncattr("dtype", "bool")
             elif kind in "OU":
-                var = nc.createVariable(name, str, dims)
+                var = nc.createVariable(name, str, dims, chunksizes=sizes)
             else:
-                var = nc.createVariable(
-                    name, da.dtype, dims, zlib=True, complevel=4, fill_value=np.nan
-                )
+                var = nc.createVariable(name, da.dtype, dims, zlib=True, complevel=1,
+                                        fill_value=np.nan, chunksizes=sizes)  # fmt: skip
             for key, value in da.attrs.items():
                 var.setncattr(key, value)
         for key, value in {**stream.attrs, **self.attrs}.items():
