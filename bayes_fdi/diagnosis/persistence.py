@@ -115,18 +115,21 @@ SKLEARN_CLASSES: frozenset[str] = frozenset(
         "sklearn.linear_model._logistic:LogisticRegression",
     }
 )
-#: Registered classes (``module:QualName``): bayes_fdi classes that are neither estimators nor
-#: named tuples, and classes registered by `register_persistable` (e.g. a plug-in's estimator).
-_REGISTERED: set[str] = {
-    "bayes_fdi.rvm.kernels:RBF",
-    "bayes_fdi.rvm.kernels:Linear",
-    "bayes_fdi.rvm.kernels:Polynomial",
-    "bayes_fdi.rvm.kernels:Sum",
-    "bayes_fdi.rvm.kernels:Product",
-    "bayes_fdi.rvm.kernels:Scaled",
-    "bayes_fdi.diagnosis.interval_scaling:StdScaler",
-    "bayes_fdi.diagnosis.seva:NoveltyReference",
-}
+#: Public import paths of the bayes_fdi classes that are neither estimators nor named tuples
+#: but may be saved (resolved to their defining module when needed, so a class may move).
+_BUILTIN_PUBLIC: tuple[str, ...] = (
+    "bayes_fdi.rvm.kernels.RBF",
+    "bayes_fdi.rvm.kernels.Linear",
+    "bayes_fdi.rvm.kernels.Polynomial",
+    "bayes_fdi.rvm.kernels.Sum",
+    "bayes_fdi.rvm.kernels.Product",
+    "bayes_fdi.rvm.kernels.Scaled",
+    "bayes_fdi.diagnosis.interval_scaling.StdScaler",
+    "bayes_fdi.diagnosis.seva.NoveltyReference",
+)
+#: Classes registered by `register_persistable` (``module:QualName``), e.g. a plug-in's.
+_REGISTERED: set[str] = set()
+_BUILTIN: set[str] = set()
 _MEMBER = re.compile(r"^a(\d+)\.npy$")
 _LIBRARIES = ("numpy", "scipy", "scikit-learn", "torch")
 
@@ -149,13 +152,22 @@ def _class_name(cls: type) -> str:
     return f"{cls.__module__}:{cls.__qualname__}"
 
 
+def _builtin() -> set[str]:
+    """``module:QualName`` of the classes of :data:`_BUILTIN_PUBLIC` (imported once)."""
+    if not _BUILTIN:
+        for path in _BUILTIN_PUBLIC:
+            module, _, name = path.rpartition(".")
+            _BUILTIN.add(_class_name(getattr(importlib.import_module(module), name)))
+    return _BUILTIN
+
+
 def _is_namedtuple(cls: type) -> bool:
     return issubclass(cls, tuple) and hasattr(cls, "_fields")
 
 
 def _persistable(cls: type) -> bool:
     name = _class_name(cls)
-    if name in SKLEARN_CLASSES or name in _REGISTERED:
+    if name in SKLEARN_CLASSES or name in _REGISTERED or name in _builtin():
         return True
     if not cls.__module__.startswith("bayes_fdi."):
         return False
