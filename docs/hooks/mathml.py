@@ -19,9 +19,7 @@ _ARITHMATEX = re.compile(r'<(span|div) class="arithmatex">(.*?)</\1>', re.S)
 _CDN_SCRIPT = re.compile(
     r'<script[^>]*src="https?://[^"]*(?:mathjax|MathJax|require\.js|requirejs)[^"]*"[^>]*>\s*</script>'
 )
-_INLINE_MATHJAX_CONFIG = re.compile(
-    r'<script type="text/x-mathjax-config">.*?</script>', re.S
-)
+_INLINE_MATHJAX_CONFIG = re.compile(r'<script type="text/x-mathjax-config">.*?</script>', re.S)
 
 
 def _mathml(match: re.Match, page: str) -> str:
