@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 
 import numpy as np
 import pandas as pd
@@ -308,3 +309,22 @@ def test_installed_package_ships_the_campaign_files(tmp_path):
     names = set(zipfile.ZipFile(wheel).namelist())
     for toml in sorted((root / "sim").glob("*.toml")):
         assert f"bayes_fdi/data/campaigns/{toml.name}" in names
+
+
+def test_progress_on_stderr_and_quiet(model, tmp_path, rng, capsys):
+    from bayes_fdi.progress import busy
+
+    with busy("a long step", interval=0.01):
+        time.sleep(0.05)
+    assert "a long step: 00:0" in capsys.readouterr().err
+    with busy("silent", enabled=False):
+        pass
+    assert capsys.readouterr().err == ""
+    rec = recording(rng, 300, faults=()).isel(run=0)
+    path = tmp_path / "r.nc"
+    rec.to_netcdf(path)
+    argv = ["diagnose", str(path), "--model", _saved(model, tmp_path), "--no-figure"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    assert "diagnosing r" in capsys.readouterr().err  # the chunk progress bar
+    assert main([*argv, "--out", str(tmp_path / "b"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""
