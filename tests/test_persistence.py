@@ -306,3 +306,36 @@ def test_size_limit_is_checked_before_decompressing(saved, tmp_path):
     assert bomb.stat().st_size < 2**20
     with pytest.raises(ValueError, match="exceed the limit"):
         FaultDiagnoser.load(bomb, max_bytes=2**25)
+
+
+def test_enums_tuples_sets_and_odd_dict_keys(tmp_path):
+    """Every JSON encoding of the format, through a generic object of the model layers."""
+    from bayes_fdi.diagnosis import SevaStatus
+    from bayes_fdi.diagnosis.interval_scaling import StdScaler
+
+    obj = StdScaler()
+    obj.extra_ = {
+        "status": SevaStatus.BLURRED,
+        "tuple": (1, 2.5, "x"),
+        "set": {3, 1, 2},
+        "frozen": frozenset({"a"}),
+        "float keys": {0.05: -1.5, 0.1: float("nan")},
+        "inf": float("-inf"),
+        "scalar": np.float32(0.1),
+        "objects": np.array(["fn", None, 3], dtype=object),
+        "empty": np.zeros((0, 3)),
+        "fortran": np.asfortranarray(np.arange(6.0).reshape(2, 3)),
+    }
+    obj.extra_["same"] = obj.extra_["fortran"]  # one array, referenced twice
+    persistence.save(obj, tmp_path / "x.npz")
+    back = persistence.load(tmp_path / "x.npz", expected=StdScaler).extra_
+    assert back["status"] is SevaStatus.BLURRED
+    assert back["tuple"] == (1, 2.5, "x") and back["set"] == {1, 2, 3}
+    assert back["frozen"] == frozenset({"a"}) and isinstance(back["frozen"], frozenset)
+    assert back["float keys"][0.05] == -1.5 and np.isnan(back["float keys"][0.1])
+    assert back["inf"] == float("-inf")
+    assert back["scalar"].dtype == np.float32 and back["scalar"] == np.float32(0.1)
+    assert back["objects"].dtype == object and back["objects"].tolist() == ["fn", None, 3]
+    assert back["empty"].shape == (0, 3)
+    np.testing.assert_array_equal(back["fortran"], np.arange(6.0).reshape(2, 3))
+    assert back["same"] is back["fortran"]

@@ -43,15 +43,18 @@ torch device                        ``{"__torch_device__": "cpu"}``
 object of a persistable class       ``{"__object__": "module:QualName", "state": {attr: value}}``
                                     (its ``__dict__``: parameters and fitted attributes)
 named tuple                         ``{"__namedtuple__": "module:QualName", "fields": {..}}``
+enumeration member                  ``{"__enum__": "module:QualName", "value": ...}``
 scipy ``cKDTree``                   ``{"__kdtree__": {"data": .., "leafsize": ..}}`` (rebuilt)
 an object or array seen before      ``{"__ref__": n}`` (the n-th object or array encoded), so
                                     objects shared inside the model stay shared after loading
 ==================================  ================================================================
 
-Persistable classes: the scikit-learn estimators (``BaseEstimator`` subclasses) and named tuples
-defined in ``bayes_fdi``, the classes registered with `register_persistable` (the RVM kernels,
-`StdScaler`, `NoveltyReference`, and any plug-in class registered in the running process) and the
-scikit-learn classes of :data:`SKLEARN_CLASSES`. A saved object's state is its ``__dict__``
+Persistable classes: every class defined in the model layers (:data:`MODEL_PACKAGES`:
+``bayes_fdi.rvm``, ``bayes_fdi.diagnosis``, ``bayes_fdi.calibration``: estimators, detectors,
+kernels, scalers, recalibrators, result tuples), the estimators (``BaseEstimator`` subclasses)
+and named tuples defined elsewhere in ``bayes_fdi``, the classes registered with
+`register_persistable` (a plug-in's, registered in the running process) and the scikit-learn
+classes of :data:`SKLEARN_CLASSES`. A saved object's state is its ``__dict__``
 (constructor parameters and fitted attributes), so a new class needs nothing more than that.
 A file naming any other class is refused. Objects holding something else (a user-supplied
 callable kernel, a ``numpy.random.Generator`` as ``random_state``) cannot be saved: `save`
@@ -72,6 +75,7 @@ flushed to disk, then renamed over the destination.
 
 from __future__ import annotations
 
+import enum
 import importlib
 import json
 import math
@@ -90,6 +94,7 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "MAX_METADATA_BYTES",
+    "MODEL_PACKAGES",
     "SKLEARN_CLASSES",
     "load",
     "read_metadata",
@@ -115,21 +120,15 @@ SKLEARN_CLASSES: frozenset[str] = frozenset(
         "sklearn.linear_model._logistic:LogisticRegression",
     }
 )
-#: Public import paths of the bayes_fdi classes that are neither estimators nor named tuples
-#: but may be saved (resolved to their defining module when needed, so a class may move).
-_BUILTIN_PUBLIC: tuple[str, ...] = (
-    "bayes_fdi.rvm.kernels.RBF",
-    "bayes_fdi.rvm.kernels.Linear",
-    "bayes_fdi.rvm.kernels.Polynomial",
-    "bayes_fdi.rvm.kernels.Sum",
-    "bayes_fdi.rvm.kernels.Product",
-    "bayes_fdi.rvm.kernels.Scaled",
-    "bayes_fdi.diagnosis.interval_scaling.StdScaler",
-    "bayes_fdi.diagnosis.seva.NoveltyReference",
+#: Packages of the model layers: any class defined there may be saved (estimators, detectors,
+#: kernels, scalers, recalibrators, result tuples).
+MODEL_PACKAGES: tuple[str, ...] = (
+    "bayes_fdi.rvm.",
+    "bayes_fdi.diagnosis.",
+    "bayes_fdi.calibration.",
 )
 #: Classes registered by `register_persistable` (``module:QualName``), e.g. a plug-in's.
 _REGISTERED: set[str] = set()
-_BUILTIN: set[str] = set()
 _MEMBER = re.compile(r"^a(\d+)\.npy$")
 _LIBRARIES = ("numpy", "scipy", "scikit-learn", "torch")
 
@@ -137,10 +136,10 @@ _LIBRARIES = ("numpy", "scipy", "scikit-learn", "torch")
 def register_persistable(cls: type) -> type:
     """Allow instances of ``cls`` (a class with a ``__dict__``) in saved models; returns ``cls``.
 
-    Usable as a class decorator. Estimators (``BaseEstimator`` subclasses) and named tuples
-    defined in ``bayes_fdi`` need no registration. A class defined elsewhere (a plug-in) must be
-    registered in the process that saves and in the one that loads (its module is imported by
-    the loader only because it was registered).
+    Usable as a class decorator. The classes of the model layers and the estimators and named
+    tuples defined in ``bayes_fdi`` need no registration. A class defined elsewhere (a plug-in)
+    must be registered in the process that saves and in the one that loads (its module is
+    imported by the loader only because it was registered).
     """
     if not isinstance(cls, type):
         raise ValueError(f"register_persistable expects a class, got {cls!r}")
@@ -152,22 +151,15 @@ def _class_name(cls: type) -> str:
     return f"{cls.__module__}:{cls.__qualname__}"
 
 
-def _builtin() -> set[str]:
-    """``module:QualName`` of the classes of :data:`_BUILTIN_PUBLIC` (imported once)."""
-    if not _BUILTIN:
-        for path in _BUILTIN_PUBLIC:
-            module, _, name = path.rpartition(".")
-            _BUILTIN.add(_class_name(getattr(importlib.import_module(module), name)))
-    return _BUILTIN
-
-
 def _is_namedtuple(cls: type) -> bool:
     return issubclass(cls, tuple) and hasattr(cls, "_fields")
 
 
 def _persistable(cls: type) -> bool:
     name = _class_name(cls)
-    if name in SKLEARN_CLASSES or name in _REGISTERED or name in _builtin():
+    if name in SKLEARN_CLASSES or name in _REGISTERED:
+        return True
+    if cls.__module__.startswith(MODEL_PACKAGES):
         return True
     if not cls.__module__.startswith("bayes_fdi."):
         return False
@@ -217,6 +209,11 @@ class _Encoder:
         return key
 
     def encode(self, value: Any, where: str) -> Any:
+        if isinstance(value, enum.Enum):  # before str/int: a StrEnum is a str
+            cls = type(value)
+            if not _persistable(cls):
+                raise ValueError(f"{where}: enums of type {cls.__qualname__} cannot be saved")
+            return {"__enum__": _class_name(cls), "value": self.encode(value.value, where)}
         if value is None or isinstance(value, bool | str):
             return value
         if isinstance(value, int) and type(value) is int:
@@ -409,6 +406,12 @@ class _Decoder:
 
         return torch.device(self.device if self.device is not None else node["__torch_device__"])
 
+    def _enum(self, node: dict) -> Any:
+        cls = _resolve_class(node["__enum__"], self.source)
+        if not issubclass(cls, enum.Enum):
+            raise self._fail(f"{node['__enum__']} is not an enumeration")
+        return cls(self.decode(node["value"]))
+
     def _tuple(self, node: dict) -> tuple:
         return tuple(self.decode(v) for v in node["__tuple__"])
 
@@ -464,6 +467,7 @@ _HANDLERS = {
     "__tensor__": _Decoder._tensor,
     "__torch_dtype__": _Decoder._torch_dtype,
     "__torch_device__": _Decoder._torch_device,
+    "__enum__": _Decoder._enum,
     "__tuple__": _Decoder._tuple,
     "__set__": _Decoder._set,
     "__dict__": _Decoder._dict,
