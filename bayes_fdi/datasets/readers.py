@@ -49,6 +49,7 @@ Day files (:func:`read_day_file`)
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -542,7 +543,11 @@ def read_netcdf(
     if not os.path.exists(source):
         raise FileNotFoundError(2, "no such file", source)
     try:
-        opened = xr.open_dataset(source, chunks=dict(chunks) if chunks else None)
+        with _bounded_chunk_cache(bool(chunks)):
+            opened = xr.open_dataset(source, chunks=dict(chunks) if chunks else None)
+            if chunks:  # open every variable now, with the bounded cache
+                for name in opened.variables:
+                    _ = opened.variables[name][(0,) * opened.variables[name].ndim].values
     except (OSError, ValueError, RuntimeError) as exc:
         raise ValueError(f"{source}: not a readable netCDF file ({exc})") from None
     if "run" in opened.dims and "time" in opened.dims and columns is None:
@@ -568,6 +573,27 @@ def read_netcdf(
     raw = {name: np.asarray(opened[chosen[name]].values, dtype=np.float64) for name in CHANNELS}
     opened.close()
     return _build(time, raw, unit_of, resample, source, "netcdf", attrs)
+
+
+#: Chunk cache (bytes) of each variable of a lazily read netCDF file: netCDF's default of 64 MB
+#: per variable fills up as a long recording is read chunk by chunk (384 MB for six channels).
+LAZY_CHUNK_CACHE = 16 * 2**20
+
+
+@contextlib.contextmanager
+def _bounded_chunk_cache(active: bool):
+    """netCDF's default chunk cache set to :data:`LAZY_CHUNK_CACHE` while files are opened."""
+    if not active:
+        yield
+        return
+    import netCDF4
+
+    previous = netCDF4.get_chunk_cache()
+    netCDF4.set_chunk_cache(LAZY_CHUNK_CACHE, 1009, 0.75)
+    try:
+        yield
+    finally:
+        netCDF4.set_chunk_cache(*previous)
 
 
 def _project_dataset(ds: xr.Dataset, units: Any, source: str, lazy: bool) -> xr.Dataset:

@@ -142,9 +142,10 @@ class _Abort(Exception):
 class StreamNetCDFWriter:
     """``seva.nc``: the stream and the recording's channels, appended chunk by chunk.
 
-    Booleans are stored as ``int8`` with the attribute ``dtype = "bool"`` and strings as
-    variable-length strings, as xarray writes them, so ``xarray.open_dataset`` reads the file
-    back as the stream the diagnoser returned.
+    Booleans are stored as ``int8`` with the attribute ``dtype = "bool"`` and text as fixed-width
+    UTF-8 characters (``_Encoding``), as xarray writes them, so ``xarray.open_dataset`` reads the
+    file back as the stream the diagnoser returned. Chunks hold up to an hour, and each variable's
+    chunk cache a few chunks, so memory stays bounded however long the recording.
     """
 
     def __init__(self, path: Any, attrs: dict[str, Any] | None = None) -> None:
@@ -170,10 +171,13 @@ class StreamNetCDFWriter:
             var[:] = values.astype(object) if values.dtype.kind in "OU" else values
         time = nc.createVariable("time", "f8", ("time",))
         time.units = "s"
-        # chunks of about a million values along time (the default for an unlimited dimension
-        # is one value: slow and large)
+        # chunks of up to an hour (the default along an unlimited dimension is one value: slow
+        # and large), and a chunk cache of a few chunks per variable (netCDF's default of 64 MB
+        # per variable grows with every day appended)
         n_runs = stream.sizes["run"]
-        t_chunk = max(1, min(stream.sizes["time"], _CHUNK_VALUES // n_runs, 86_400))
+        t_chunk = max(1, min(stream.sizes["time"], _CHUNK_VALUES // n_runs, 3600))
+        self._width = _text_width(stream)
+        nc.createDimension("text", self._width)
         for name in (*STREAM_VARIABLES, *_CHANNELS):
             source = chunk if name in _CHANNELS else stream
             da = source[name].transpose("run", "time", ...)
@@ -185,11 +189,17 @@ class StreamNetCDFWriter:
                 var = nc.createVariable(name, "i1", dims, zlib=True, complevel=1,
                                         chunksizes=sizes)  # fmt: skip
                 var.setncattr("dtype", "bool")
-            elif kind in "OU":
-                var = nc.createVariable(name, str, dims, chunksizes=sizes)
+            elif kind in "OU":  # fixed-width UTF-8 text, as xarray writes it: bounded memory
+                var = nc.createVariable(name, "S1", (*dims, "text"), zlib=True, complevel=1,
+                                        chunksizes=(*sizes, self._width))  # fmt: skip
+                var.setncattr("_Encoding", "utf-8")
             else:
                 var = nc.createVariable(name, da.dtype, dims, zlib=True, complevel=1,
                                         fill_value=np.nan, chunksizes=sizes)  # fmt: skip
+            item = 1 if kind in "bOU" else da.dtype.itemsize
+            width = self._width if kind in "OU" else 1
+            var.set_var_chunk_cache(size=4 * item * width * math.prod(sizes), nelems=61,
+                                    preemption=0.75)  # fmt: skip
             for key, value in da.attrs.items():
                 var.setncattr(key, value)
         for key, value in {**stream.attrs, **self.attrs}.items():
@@ -209,9 +219,20 @@ class StreamNetCDFWriter:
             if values.dtype == bool:
                 values = values.astype(np.int8)
             elif values.dtype.kind in "OU":
-                values = values.astype(object)
+                values = self._chars(name, values)
             nc[name][:, a:b, ...] = values
         self._written = b
+
+    def _chars(self, name: str, values: np.ndarray) -> np.ndarray:
+        import netCDF4
+
+        encoded = np.char.encode(values.astype(str), "utf-8")
+        if encoded.dtype.itemsize > self._width:
+            raise ValueError(
+                f"the stream's {name} holds a label longer than its groups and faults "
+                f"({encoded.dtype.itemsize} > {self._width} bytes)"
+            )
+        return netCDF4.stringtochar(encoded.astype(f"S{self._width}"))
 
     def close(self) -> None:
         """Finish the file (it appears at ``path`` only now)."""
@@ -221,6 +242,14 @@ class StreamNetCDFWriter:
         """Drop the file."""
         with contextlib.suppress(_Abort):
             self._stack.__exit__(_Abort, _Abort(), None)
+
+
+def _text_width(stream: xr.Dataset) -> int:
+    """Bytes of the longest label a stream can hold (statuses, groups, faults, ``unknown``)."""
+    labels = [*STATUS_SEVERITY, "unknown", "fn"]
+    labels += [str(g) for g in stream["group"].values] + [str(f) for f in stream["fault"].values]
+    current = [str(v) for name in ("state", "status") for v in np.unique(stream[name].values)]
+    return max(len(text.encode("utf-8")) for text in labels + current)
 
 
 # ----------------------------------------------------------------------------------------------
