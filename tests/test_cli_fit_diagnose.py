@@ -328,3 +328,16 @@ def test_progress_on_stderr_and_quiet(model, tmp_path, rng, capsys):
     assert "diagnosing r" in capsys.readouterr().err  # the chunk progress bar
     assert main([*argv, "--out", str(tmp_path / "b"), "--quiet"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_interruption_leaves_no_files(model, tmp_path, rng):
+    class Interrupted(StreamDouble):
+        def run(self, recording, state=None, return_state=False):
+            if state is not None:  # the second chunk
+                raise KeyboardInterrupt
+            return super().run(recording, state=state, return_state=return_state)
+
+    broken = Interrupted().fit(recording(rng, 300, faults=()))
+    with pytest.raises(KeyboardInterrupt):
+        diagnose_recording(broken, recording(rng, 600), tmp_path, name="r", chunk_seconds=250)
+    assert os.listdir(tmp_path / "r") == []  # neither the files nor their partial copies

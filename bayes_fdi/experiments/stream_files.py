@@ -13,8 +13,10 @@ every writer here takes it in time chunks, in order, and keeps only what the nex
   to per-bin means (DD and ``indicated``: any; status: the most severe) for long ones, so that
   `bayes_fdi.experiments.timeline.plot_timeline` draws a day or a year alike.
 
-All files are written atomically (`bayes_fdi.atomic.atomic_path`): they appear complete when
-``close`` succeeds, or not at all.
+All files are written atomically: the long writes go to a hidden ``.NAME.XXXX.partial`` file
+next to the destination, moved over it by `bayes_fdi.atomic.atomic_path` when ``close`` succeeds
+(and removed by ``abort``), so a file appears complete or not at all, and an interruption (Ctrl-C)
+stops the diagnosis at once rather than being deferred to the end of the recording.
 
 Written by hand: netCDF4 appends along an unlimited dimension directly (xarray cannot append to
 a netCDF file); the alarm bookkeeping is the project's.
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
@@ -91,15 +94,39 @@ def check_stream(stream: xr.Dataset, chunk: xr.Dataset) -> xr.Dataset:
 # ----------------------------------------------------------------------------------------------
 # seva.csv
 # ----------------------------------------------------------------------------------------------
+class _PartialFile:
+    """A hidden file next to ``path`` written over a long time, then committed atomically.
+
+    The file is filled while the recording is diagnosed (an interruption can stop that at any
+    time); :meth:`commit` then moves it over ``path`` with `bayes_fdi.atomic.atomic_path`
+    (flushed to disk, renamed), :meth:`discard` removes it.
+    """
+
+    def __init__(self, path: Any) -> None:
+        import tempfile
+
+        self.path = os.path.abspath(os.fspath(path))
+        folder, name = os.path.split(self.path)
+        fd, self.partial = tempfile.mkstemp(prefix=f".{name}.", suffix=".partial", dir=folder)
+        os.close(fd)
+
+    def commit(self) -> None:
+        with atomic_path(self.path) as tmp:
+            os.replace(self.partial, tmp)
+
+    def discard(self) -> None:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(self.partial)
+
+
 class StreamCSVWriter:
     """``seva.csv``: one row per second (and run), columns :data:`CSV_COLUMNS`."""
 
     def __init__(self, path: Any, *, several_runs: bool) -> None:
         self.path = path
         self.several_runs = several_runs
-        self._stack = contextlib.ExitStack()
-        tmp = self._stack.enter_context(atomic_path(path))
-        self._handle = self._stack.enter_context(open(tmp, "w", newline="", encoding="utf-8"))
+        self._file = _PartialFile(path)
+        self._handle = open(self._file.partial, "w", newline="", encoding="utf-8")
         columns = ("run", *CSV_COLUMNS) if several_runs else CSV_COLUMNS
         self._handle.write(",".join(columns) + "\n")
 
@@ -124,16 +151,13 @@ class StreamCSVWriter:
 
     def close(self) -> None:
         """Finish the file (it appears at ``path`` only now)."""
-        self._stack.close()
+        self._handle.close()
+        self._file.commit()
 
     def abort(self) -> None:
         """Drop the file (nothing appears at ``path``)."""
-        with contextlib.suppress(_Abort):
-            self._stack.__exit__(_Abort, _Abort(), None)
-
-
-class _Abort(Exception):
-    pass
+        self._handle.close()
+        self._file.discard()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -151,16 +175,14 @@ class StreamNetCDFWriter:
     def __init__(self, path: Any, attrs: dict[str, Any] | None = None) -> None:
         self.path = path
         self.attrs = dict(attrs or {})
-        self._stack = contextlib.ExitStack()
-        self._tmp = self._stack.enter_context(atomic_path(path))
+        self._file = _PartialFile(path)
         self._nc: Any = None
         self._written = 0
 
     def _create(self, stream: xr.Dataset, chunk: xr.Dataset) -> None:
         import netCDF4
 
-        nc = netCDF4.Dataset(self._tmp, "w", format="NETCDF4")
-        self._stack.callback(nc.close)
+        nc = netCDF4.Dataset(self._file.partial, "w", format="NETCDF4")
         nc.createDimension("run", stream.sizes["run"])
         nc.createDimension("time", None)
         for dim in ("group", "fault"):
@@ -236,12 +258,16 @@ class StreamNetCDFWriter:
 
     def close(self) -> None:
         """Finish the file (it appears at ``path`` only now)."""
-        self._stack.close()
+        if self._nc is not None:
+            self._nc.close()
+        self._file.commit()
 
     def abort(self) -> None:
         """Drop the file."""
-        with contextlib.suppress(_Abort):
-            self._stack.__exit__(_Abort, _Abort(), None)
+        if self._nc is not None:
+            with contextlib.suppress(RuntimeError, OSError):
+                self._nc.close()
+        self._file.discard()
 
 
 def _text_width(stream: xr.Dataset) -> int:
