@@ -10,6 +10,7 @@ import xarray as xr
 from bayes_fdi.actuator import model
 from bayes_fdi.actuator.faults import FAULT_NAMES, Fault
 from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS, validate_dataset
+from bayes_fdi.memory import check_memory
 
 __all__ = ["NOISE_STD", "inject_faults", "simulate", "simulate_replicas"]
 
@@ -19,6 +20,9 @@ __all__ = ["NOISE_STD", "inject_faults", "simulate", "simulate_replicas"]
 NOISE_STD = float(np.sqrt(5e-9 / 0.0025))
 
 _SCALE = {"CV": 1.0, "P1": model.P_RANGE, "P2": model.P_RANGE, "T1": model.T_RANGE}
+#: float64 values held per (run, second) at the peak of `simulate` / `inject_faults`: inputs (4),
+#: model outputs (5) and states (4), noise (5), the output dataset (6) and its deep copy (6)
+_VALUES_PER_SAMPLE = 30
 #: order of the measured channels the kernel returns
 _MEASURED = ("X", "F", "P1", "P2", "T1")
 _HOLDS = {"zero": 0, "linear": 1}
@@ -31,6 +35,10 @@ def _check_inputs(inputs: xr.Dataset, *, who: str, require=INPUT_CHANNELS) -> np
     time = np.asarray(inputs["time"].values, dtype=np.float64)
     if time.size < 1:
         raise ValueError(f"{who}: the dataset has no time samples")
+    if inputs.sizes["run"] < 1:
+        raise ValueError(f"{who}: the dataset has no runs")
+    n_runs, n_t = inputs.sizes["run"], inputs.sizes["time"]
+    check_memory(8.0 * _VALUES_PER_SAMPLE * n_runs * n_t, f"{who}: {n_runs} run(s) x {n_t} s")
     if time.size > 1 and not np.allclose(np.diff(time), 1.0):
         raise ValueError(f"{who}: the time coordinate must be 1 Hz (steps of 1 s)")
     u = np.empty((inputs.sizes["run"], inputs.sizes["time"], 4))
@@ -52,15 +60,22 @@ def _check_inputs(inputs: xr.Dataset, *, who: str, require=INPUT_CHANNELS) -> np
     return np.ascontiguousarray(u)
 
 
-def _validated(fault: Fault, r: int, who: str) -> Fault:
+def _validated(fault: Fault, r: int, who: str, n_t: int) -> Fault:
     try:
-        return fault.validated()
+        checked = fault.validated()
     except ValueError as exc:
         raise ValueError(f"{who}: run {r}: {exc}") from None
+    if checked.onset >= n_t:
+        raise ValueError(
+            f"{who}: run {r}: {checked.name} onset {checked.onset:g} s is at or after the run's "
+            f"end ({n_t} s): the fault would be labelled but never simulated"
+        )
+    return checked
 
 
 def _resolve_faults(inputs: xr.Dataset, faults, who: str) -> list[Fault | None]:
     n_runs = inputs.sizes["run"]
+    n_t = inputs.sizes["time"]
     if faults is None:
         if "state" not in inputs.coords:
             return [None] * n_runs
@@ -81,10 +96,10 @@ def _resolve_faults(inputs: xr.Dataset, faults, who: str) -> list[Fault | None]:
                 str(coords["profile"][r]),
                 float(coords["ramp"][r]),
             )
-            out.append(_validated(fault, r, who))
+            out.append(_validated(fault, r, who, n_t))
         return out
     if isinstance(faults, Fault):
-        return [faults.validated()] * n_runs
+        return [_validated(faults, 0, who, n_t)] * n_runs
     if isinstance(faults, str) or not isinstance(faults, Sequence):
         raise ValueError(
             f"{who}: faults must be None, a Fault or a sequence of Fault-or-None per run, "
@@ -97,7 +112,7 @@ def _resolve_faults(inputs: xr.Dataset, faults, who: str) -> list[Fault | None]:
         if fault is None:
             out.append(None)
         elif isinstance(fault, Fault):
-            out.append(_validated(fault, r, who))
+            out.append(_validated(fault, r, who, n_t))
         else:
             raise ValueError(f"{who}: faults[{r}] must be a Fault or None, got {fault!r}")
     return out
@@ -301,7 +316,7 @@ def _measured(
             run_ids = np.arange(run_ids.size)  # non-integer run labels: use positions
         out += _noise(run_ids, out.shape[1], int(seed))
     np.clip(out, 0.0, 1.0, out=out)
-    ds = inputs.copy()
+    ds = inputs.copy(deep=True)  # the result shares no memory with the caller's dataset
     for i, name in enumerate(_MEASURED):
         ds[name] = (("run", "time"), out[:, :, i])
     ds = _with_fault_coords(ds[list(CHANNELS)], resolved)
@@ -409,7 +424,7 @@ def inject_faults(
         "hold": hold,
     }
     faulty_idx = [r for r, f in enumerate(resolved) if f is not None]
-    ds = real.copy()
+    ds = real.copy(deep=True)  # the result shares no memory with the caller's dataset
     if faulty_idx:
         sub = u[faulty_idx]
         nominal, _ = _run_model(sub, [None] * len(faulty_idx), **kw)

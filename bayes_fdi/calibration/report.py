@@ -312,6 +312,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         default=5,
         help="cross-fitting folds on the test runs when no --calibration is given (default 5)",
     )
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
 def _build_diagnoser(method: str, seed: int) -> Any:
@@ -339,17 +340,21 @@ def run_from_cli(args: argparse.Namespace) -> int:
     normal = train.isel(run=np.flatnonzero(train["state"].values == "fn"))
     if normal.sizes["run"] == 0:
         raise ValueError(f"{args.train} has no fault-free ('fn') runs to fit the normal models")
-    diagnoser = _build_diagnoser(args.method, args.seed).fit(normal, train)
-    path = write_calibration_report(
-        diagnoser,
-        test,
-        args.out,
-        calibration_runs=cal,
-        n_bins=args.n_bins,
-        n_bootstrap=args.n_bootstrap,
-        seed=args.seed,
-        n_folds=args.n_folds,
-        title=f"Calibration report ({args.method.upper()}, test {Path(args.test).name})",
-    )
+    from bayes_fdi.progress import busy
+
+    with busy(f"fitting the {args.method.upper()} diagnoser", enabled=not args.quiet):
+        diagnoser = _build_diagnoser(args.method, args.seed).fit(normal, train)
+    with busy("diagnosing the test runs and writing the report", enabled=not args.quiet):
+        path = write_calibration_report(
+            diagnoser,
+            test,
+            args.out,
+            calibration_runs=cal,
+            n_bins=args.n_bins,
+            n_bootstrap=args.n_bootstrap,
+            seed=args.seed,
+            n_folds=args.n_folds,
+            title=f"Calibration report ({args.method.upper()}, test {Path(args.test).name})",
+        )
     print(path)
     return 0

@@ -50,8 +50,8 @@ def campaign_file(name: str | os.PathLike) -> Path:
     ----------
     name
         A path to a ``.toml`` file, or a shipped campaign name (``"paper-simulated"``,
-        ``"paper-lublin"``) looked up in ``./sim/`` and then in the ``sim/`` folder next to the
-        installed package (the source checkout).
+        ``"paper-lublin"``) looked up in ``./sim/`` and then among the campaigns shipped with the
+        package (`bayes_fdi.experiments.shipped_campaigns`).
 
     Returns
     -------
@@ -62,9 +62,11 @@ def campaign_file(name: str | os.PathLike) -> Path:
         if not path.is_file():
             raise ValueError(f"campaign file {os.fspath(path)!r} does not exist")
         return path
+    from bayes_fdi.experiments.shipped_campaigns import campaign_folder
+
     candidates = [
         Path.cwd() / "sim" / f"{name}.toml",
-        Path(__file__).resolve().parents[2] / "sim" / f"{name}.toml",
+        campaign_folder() / f"{name}.toml",  # the shipped campaigns (checkout or installed)
     ]
     for c in candidates:
         if c.is_file():

@@ -300,7 +300,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="comma-separated lags (s) of CV for the beyond-the-paper dynamic normal models "
         "(default: %(default)s; empty string: skip that part)",
     )
-    parser.add_argument("--no-progress", action="store_true", help="no progress messages")
+    parser.add_argument(
+        "--quiet", "--no-progress", dest="no_progress", action="store_true",
+        help="no progress messages",
+    )  # fmt: skip
 
 
 def run_from_cli(args: argparse.Namespace) -> int:
