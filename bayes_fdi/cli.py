@@ -36,7 +36,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "bayes_fdi.calibration.report",
         "write a calibration report for a diagnoser on a test dataset",
     ),
+    "benchmark": (
+        "bayes_fdi.experiments.benchmark",
+        "score the online diagnoser on the DAMADICS benchmark's 44 scenarios (PICalc indices)",
+    ),
     "rvm-demo": ("bayes_fdi.rvm.demo", "fit an RVM on a small sinc problem and print it"),
+    "fit": ("bayes_fdi.experiments.model_fitting", "fit an online diagnoser and save it to a file"),
+    "diagnose": ("bayes_fdi.experiments.recording_diagnosis", "diagnose recordings, 1 s at a time"),
 }
 
 

@@ -12,7 +12,7 @@ from bayes_fdi.actuator.faults import FAULT_NAMES, Fault
 from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS, validate_dataset
 from bayes_fdi.memory import check_memory
 
-__all__ = ["NOISE_STD", "inject_faults", "simulate"]
+__all__ = ["NOISE_STD", "inject_faults", "simulate", "simulate_replicas"]
 
 #: Standard deviation of DABLib's measurement noise (band-limited white noise of power 5e-9
 #: sampled at 2.5 ms: sqrt(5e-9 / 0.0025)), in normalised full-scale units. DABLib also adds
@@ -281,18 +281,40 @@ def simulate(
     (['CV', 'F', 'P1', 'P2', 'T1', 'X'], ['fn', 'f1'])
     """
     who = "simulate"
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValueError(f"{who}: seed must be an integer >= 0, got {seed!r}")
+    _check_seed(seed, who)
     u = _check_inputs(inputs, who=who)
     resolved = _resolve_faults(inputs, faults, who)
     out, extra = _run_model(
         u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold
     )
+    ds = _measured(inputs, out, resolved, seed, noise=noise, integrator=integrator, hold=hold)
+    if return_states:
+        return ds, _states_dataset(ds, extra)
+    return ds
+
+
+def _check_seed(seed, who: str) -> None:
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"{who}: seed must be an integer >= 0, got {seed!r}")
+
+
+def _measured(
+    inputs: xr.Dataset,
+    clean: np.ndarray,
+    resolved: list[Fault | None],
+    seed: int,
+    *,
+    noise: bool,
+    integrator: str,
+    hold: str,
+) -> xr.Dataset:
+    """The measured dataset from the noise-free outputs ``clean`` (run, time, 5): noise, clip."""
+    out = clean.copy()
     if noise:
         run_ids = np.asarray(inputs["run"].values)
         if not np.issubdtype(run_ids.dtype, np.integer) or (run_ids < 0).any():
             run_ids = np.arange(run_ids.size)  # non-integer run labels: use positions
-        out = out + _noise(run_ids, u.shape[1], int(seed))
+        out += _noise(run_ids, out.shape[1], int(seed))
     np.clip(out, 0.0, 1.0, out=out)
     ds = inputs.copy(deep=True)  # the result shares no memory with the caller's dataset
     for i, name in enumerate(_MEASURED):
@@ -300,10 +322,59 @@ def simulate(
     ds = _with_fault_coords(ds[list(CHANNELS)], resolved)
     ds.attrs.update(seed=int(seed), integrator=integrator, hold=hold, noise=int(bool(noise)))
     ds.attrs.setdefault("bayes_fdi_version", inputs.attrs.get("bayes_fdi_version", ""))
-    validate_dataset(ds, require=CHANNELS)
-    if return_states:
-        return ds, _states_dataset(ds, extra)
-    return ds
+    return validate_dataset(ds, require=CHANNELS)
+
+
+def simulate_replicas(
+    inputs: xr.Dataset,
+    faults: Fault | Sequence[Fault | None] | None = None,
+    seeds: Sequence[int] = (0,),
+    *,
+    integrator: str = "fast",
+    hold: str = "linear",
+    warmup: int = 30,
+    progress: bool = False,
+) -> list[xr.Dataset]:
+    """Simulate once and return one noisy dataset per noise seed.
+
+    The measurement noise is added to the model's outputs and never fed back into it, so the
+    noise-free model is run once and each seed only draws its noise: ``simulate_replicas(
+    inputs, faults, seeds)[i]`` equals ``simulate(inputs, faults, seed=seeds[i], ...)`` bit for
+    bit, at the cost of one simulation instead of ``len(seeds)``.
+
+    Parameters
+    ----------
+    inputs, faults, integrator, hold, warmup, progress
+        As in :func:`simulate`.
+    seeds
+        Noise seeds (integers >= 0), as ``seed`` of :func:`simulate`.
+
+    Returns
+    -------
+    list of xarray.Dataset
+        One dataset per seed, in the order of ``seeds``.
+
+    Examples
+    --------
+    >>> from bayes_fdi.actuator import benchmark_inputs, simulate, simulate_replicas
+    >>> inputs = benchmark_inputs(n_runs=1, duration=30)
+    >>> a, b = simulate_replicas(inputs, None, seeds=[3, 4])
+    >>> a.X.equals(simulate(inputs, seed=3).X), b.X.equals(simulate(inputs, seed=4).X)
+    (True, True)
+    """
+    who = "simulate_replicas"
+    seeds = list(seeds)
+    if not seeds:
+        raise ValueError(f"{who}: give at least one seed")
+    for seed in seeds:
+        _check_seed(seed, who)
+    u = _check_inputs(inputs, who=who)
+    resolved = _resolve_faults(inputs, faults, who)
+    clean, _ = _run_model(
+        u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold
+    )
+    kw = {"noise": True, "integrator": integrator, "hold": hold}
+    return [_measured(inputs, clean, resolved, int(s), **kw) for s in seeds]
 
 
 def inject_faults(

@@ -1,7 +1,8 @@
-"""Plots of actuator runs: the normalised signals of chosen runs, like the paper's Figures 4–11.
+"""Plots of actuator runs: the signals of chosen runs, like the paper's Figures 4–11.
 
-:func:`plot_runs` draws, for each chosen channel, one panel with the selected runs over time
-(``ax=`` a single Axes overlays all channels in it, as the paper's figures do). The ``bayes-fdi
+:func:`plot_runs` draws, for each chosen channel, one panel with the selected runs over time in
+physical units (``ax=`` a single Axes overlays all channels in it, normalised, as the paper's
+figures do). The ``bayes-fdi
 plot FILE.nc`` command wraps it.
 """
 
@@ -18,8 +19,27 @@ from bayes_fdi.atomic import atomic_path, check_output_path
 from bayes_fdi.cli_arguments import UsageError, input_file, output_file, positive_int
 from bayes_fdi.datasets import CHANNELS, load_dataset, validate_dataset
 
-__all__ = ["configure_parser", "plot_runs", "run_from_cli", "select_runs"]
+__all__ = ["configure_parser", "physical_range", "plot_runs", "run_from_cli", "select_runs"]
 
+#: Names of the channels on the axes of physical units.
+CHANNEL_NAMES: dict[str, str] = {
+    "CV": "CV, control value",
+    "P1": "P1, inlet pressure",
+    "P2": "P2, outlet pressure",
+    "T1": "T1, temperature",
+    "X": "X, stem position",
+    "F": "F, flow",
+}
+#: DABLib's ranges (the normalisation of simulated data and of Lublin Actuator 3): physical value
+#: = normalised value x factor, in the unit given.
+DABLIB_RANGES: dict[str, tuple[float, str]] = {
+    "CV": (100.0, "%"),
+    "P1": (4.0, "MPa"),
+    "P2": (4.0, "MPa"),
+    "T1": (200.0, "°C"),
+    "X": (100.0, "%"),
+    "F": (40.0, "t/h"),
+}
 #: Axis labels of the normalised channels.
 CHANNEL_LABELS: dict[str, str] = {
     "CV": "CV (control value)",
@@ -89,6 +109,22 @@ def _run_label(ds: xr.Dataset, r: int) -> str:
     return text + ")"
 
 
+def physical_range(ds: xr.Dataset, channel: str) -> tuple[float, str]:
+    """``(factor, unit)`` turning a normalised channel of ``ds`` into physical units.
+
+    A real record of Lublin Actuator 1 or 2 (attribute ``actuator``) uses that actuator's
+    ranges (`bayes_fdi.datasets.lublin.ACTUATOR_RANGES`); anything else DABLib's
+    (:data:`DABLIB_RANGES`).
+    """
+    from bayes_fdi.datasets.lublin import ACTUATOR_RANGES
+
+    actuator = ds.attrs.get("actuator")
+    if actuator in (1, 2):
+        factor, unit = ACTUATOR_RANGES[int(actuator)][channel]
+        return float(factor), unit.replace("degC", "°C").replace("m3/h", "m³/h")
+    return DABLIB_RANGES[channel]
+
+
 def plot_runs(
     ds: xr.Dataset,
     runs: Sequence[int] | int | None = None,
@@ -97,8 +133,9 @@ def plot_runs(
     *,
     states: Sequence[str] | None = None,
     title: str | None = None,
+    units: str | None = None,
 ):
-    """Plot the normalised signals of chosen runs against time.
+    """Plot the signals of chosen runs against time, in physical units by default.
 
     Parameters
     ----------
@@ -116,6 +153,10 @@ def plot_runs(
         Also draw the first run of each of these states.
     title
         Figure (or axes) title; default the campaign name.
+    units
+        ``"physical"`` (default of the panels: %, MPa, °C, t/h, see :func:`physical_range`) or
+        ``"normalised"`` (default, and the only choice, of the overlay in one Axes, where the
+        channels share one axis as in the paper's figures).
 
     Returns
     -------
@@ -138,8 +179,12 @@ def plot_runs(
     chosen = select_runs(ds, runs, states)
     time = ds["time"].values
     title = ds.attrs.get("campaign", "") if title is None else title
+    if units not in (None, "physical", "normalised"):
+        raise ValueError(f"units must be 'physical' or 'normalised', got {units!r}")
 
     if isinstance(ax, Axes):
+        if units == "physical":
+            raise ValueError("an overlay of several channels in one Axes is drawn normalised")
         fig = ax.figure
         for c in channels:
             for r in chosen:
@@ -161,10 +206,13 @@ def plot_runs(
         if len(axes) != len(channels):
             raise ValueError(f"got {len(axes)} axes for {len(channels)} channel(s)")
         fig = axes[0].figure
+    physical = units in (None, "physical")
     for a, c in zip(axes, channels, strict=True):
+        factor, unit = physical_range(ds, c) if physical else (1.0, "")
         for r in chosen:
-            a.plot(time, ds[c].values[r], lw=1.0, label=_run_label(ds, r))
-        a.set_ylabel(CHANNEL_LABELS.get(c, c), fontsize="small")
+            a.plot(time, ds[c].values[r] * factor, lw=1.0, label=_run_label(ds, r))
+        label = f"{CHANNEL_NAMES[c]} [{unit}]" if physical else CHANNEL_LABELS.get(c, c)
+        a.set_ylabel(label, fontsize="small")
         a.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
     axes[0].legend(fontsize="small", loc="best")

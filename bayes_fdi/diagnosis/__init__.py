@@ -11,7 +11,10 @@
 - `bayes_fdi.diagnosis.tree`: the k-means designed binary tree of classifiers.
 - `bayes_fdi.diagnosis.baselines`: the SVM baseline through the same interfaces.
 - `bayes_fdi.diagnosis.diagnoser`: `FaultDiagnoser`, the paper's offline pipeline.
-- `bayes_fdi.diagnosis.seva`: the self-validating (SEVA) records and statuses.
+- `bayes_fdi.diagnosis.seva`: the self-validating (SEVA) records of a diagnosis
+  (`bayes_fdi.diagnosis.seva_record`: the record and its conversions;
+  `bayes_fdi.diagnosis.seva_rules`: thresholds, screening and status rules;
+  `bayes_fdi.diagnosis.novelty`: the nearest-neighbour novelty reference).
 """
 
 from bayes_fdi.diagnosis.baselines import (

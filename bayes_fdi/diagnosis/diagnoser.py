@@ -17,6 +17,7 @@ distribution and the residuals with their predictive standard deviations.
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from collections.abc import Sequence
@@ -326,6 +327,33 @@ class FaultDiagnoser(BaseEstimator):
             }
         )
         return out
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike[str]) -> str:
+        """Write the fitted diagnoser to ``path`` (no pickle; see
+        `bayes_fdi.diagnosis.persistence` for the format); returns the path.
+
+        Everything fitted is saved: the normal models with their regressors and interval
+        scalers, the feature scaler, the classifier (tree of RVCs or SVMs), the novelty
+        reference. `load` gives a diagnoser whose `diagnose`, `predict_features` and `seva`
+        outputs equal this one's exactly.
+        """
+        from bayes_fdi.diagnosis import persistence
+
+        self._check_fitted()
+        return persistence.save(self, path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str], **kwargs: Any) -> FaultDiagnoser:
+        """Read a diagnoser written by `save`.
+
+        Keyword arguments (``max_bytes``, ``device``) go to
+        `bayes_fdi.diagnosis.persistence.load`. Raises ``ValueError`` for a corrupt, foreign or
+        newer file, or one holding something other than a ``FaultDiagnoser``.
+        """
+        from bayes_fdi.diagnosis import persistence
+
+        return persistence.load(path, expected=cls, **kwargs)
 
     def seva(self, runs: xr.Dataset, **kwargs: Any) -> list[SevaRecord]:
         """The self-validating output: one immutable `bayes_fdi.diagnosis.seva.SevaRecord` per

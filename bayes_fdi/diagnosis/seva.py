@@ -33,23 +33,41 @@ the distance of each standardised input sample to its nearest training sample, d
 high quantile of the same distance among the training samples themselves. RVM predictive
 standard deviations are *not* used for this: with localised kernels the RVR's predictive
 variance shrinks back to the noise level far from the data, so it does not flag novel inputs.
+
+The record and its conversions live in `bayes_fdi.diagnosis.seva_record`, the thresholds and
+status rules in `bayes_fdi.diagnosis.seva_rules`, the novelty reference in
+`bayes_fdi.diagnosis.novelty`; every name stays importable from here.
 """
 
 from __future__ import annotations
 
-import enum
-import json
 import math
-from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import xarray as xr
 from scipy import stats
-from scipy.spatial import cKDTree
 
-from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS, OUTPUT_CHANNELS
+from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS
+from bayes_fdi.diagnosis.features import extract_features, window_bounds
+from bayes_fdi.diagnosis.novelty import NoveltyReference
+from bayes_fdi.diagnosis.seva_record import (
+    ClassDistribution,
+    SevaRecord,
+    SevaStatus,
+    to_frame,
+    to_json,
+    to_xarray,
+)
+from bayes_fdi.diagnosis.seva_rules import (
+    DEFAULT_SATURATION_LIMITS,
+    SevaThresholds,
+    decide_status,
+    entropy,
+    screen_measurements,
+    screen_window,
+)
 
 __all__ = [
     "DEFAULT_SATURATION_LIMITS",
@@ -66,375 +84,6 @@ __all__ = [
     "to_xarray",
 ]
 
-#: Rails of the normalised channels (DABLib clips every measurement to [0, 1]).
-DEFAULT_SATURATION_LIMITS: Mapping[str, tuple[float, float]] = {c: (0.0, 1.0) for c in CHANNELS}
-
-
-class SevaStatus(enum.StrEnum):
-    """Status of a self-validating actuator (Henry & Clarke 1993 naming)."""
-
-    CLEAR = "CLEAR"
-    BLURRED = "BLURRED"
-    DAZZLED = "DAZZLED"
-    BLIND = "BLIND"
-
-
-class SevaThresholds(NamedTuple):
-    """Decision thresholds of the SEVA status (immutable; ``_replace`` to change one).
-
-    Attributes
-    ----------
-    p_clear
-        CLEAR needs ``P(fault-free) >= p_clear`` (default 0.9).
-    p_fault
-        BLURRED needs the diagnosed fault's probability ``>= p_fault`` (default 0.8).
-    max_entropy
-        CLEAR and BLURRED need the normalised entropy ``H(p) / log(n_classes)`` (0 = certain,
-        1 = uniform) ``<= max_entropy`` (default 0.5). With 10 classes a top probability of
-        0.8 already implies an entropy <= 0.41, so this binds only for lower ``p_fault``.
-    novelty_ratio
-        A sample (or a feature vector) is *novel* when its nearest-neighbour distance ratio
-        (:class:`NoveltyReference`: distance to the nearest training row over the 99 % quantile
-        of the training rows' own nearest-neighbour distances) exceeds this (default 1.5).
-        About 1 % of samples drawn like the training data exceed ratio 1, so 1 would flag
-        ordinary runs of small training sets; 1.5 leaves room for that sampling noise while
-        inputs or residual features outside the training envelope score far higher.
-    novelty_fraction
-        DAZZLED when more than this fraction of a window's input samples are novel
-        (default 0.2), or when the run's feature vector is novel.
-    max_missing
-        BLIND when more than this fraction of a channel's samples are NaN/inf (default 0.2).
-    max_saturated
-        BLIND when more than this fraction of an *input* channel's samples (CV, P1, P2, T1)
-        sit at a rail of ``saturation_limits`` (default 0.5): the normal models cannot be
-        evaluated on them.
-    max_output_saturated
-        BLIND when more than this fraction of an *output* channel's samples (X, F) sit at a
-        rail (default 1.0: never). In the DAMADICS benchmark F' saturates at its 40 t/h range
-        even fault-free (about 40 % of the samples of paper-simulated fn runs) and
-        saturation is a learned symptom of f1, f6 and f18, so a saturated output is reported
-        in ``reasons`` (from ``max_saturated`` on) but does not blind the diagnosis. Lower it
-        for plants where a railed output means a broken sensor.
-    saturation_tol
-        A sample is at a rail when within this distance of it, or beyond it (default 1e-9).
-    fault_free
-        Label of the fault-free state (default ``"fn"``).
-    """
-
-    p_clear: float = 0.9
-    p_fault: float = 0.8
-    max_entropy: float = 0.5
-    novelty_ratio: float = 1.5
-    novelty_fraction: float = 0.2
-    max_missing: float = 0.2
-    max_saturated: float = 0.5
-    max_output_saturated: float = 1.0
-    saturation_tol: float = 1e-9
-    fault_free: str = "fn"
-
-    def validate(self) -> SevaThresholds:
-        """Raise ``ValueError`` naming a threshold outside its range; return self."""
-        for name in ("p_clear", "p_fault", "max_entropy", "novelty_fraction"):
-            v = getattr(self, name)
-            if not 0 <= v <= 1:
-                raise ValueError(f"{name} must lie in [0, 1], got {v}")
-        for name in ("max_missing", "max_saturated"):
-            v = getattr(self, name)
-            if not 0 <= v < 1:
-                raise ValueError(f"{name} must lie in [0, 1), got {v}")
-        if not 0 <= self.max_output_saturated <= 1:
-            raise ValueError(
-                f"max_output_saturated must lie in [0, 1], got {self.max_output_saturated}"
-            )
-        if not self.novelty_ratio > 0:
-            raise ValueError(f"novelty_ratio must be > 0, got {self.novelty_ratio}")
-        if self.saturation_tol < 0:
-            raise ValueError("saturation_tol must be >= 0")
-        return self
-
-
-class ClassDistribution(Mapping[str, float]):
-    """Immutable, ordered mapping ``class label -> probability`` (picklable, hashable)."""
-
-    __slots__ = ("_items",)
-
-    def __init__(self, items: Mapping[str, float] | Sequence[tuple[str, float]]) -> None:
-        pairs = items.items() if isinstance(items, Mapping) else items
-        self._items = tuple((str(k), float(v)) for k, v in pairs)
-
-    def __getitem__(self, key: str) -> float:
-        for k, v in self._items:
-            if k == key:
-                return v
-        raise KeyError(key)
-
-    def __iter__(self) -> Iterator[str]:
-        return (k for k, _ in self._items)
-
-    def __len__(self) -> int:
-        return len(self._items)
-
-    def __hash__(self) -> int:
-        return hash(self._items)
-
-    def __eq__(self, other: object) -> bool:
-        if isinstance(other, Mapping):
-            return dict(self._items) == dict(other.items())
-        return NotImplemented
-
-    def __repr__(self) -> str:
-        inner = ", ".join(f"{k!r}: {v:.3g}" for k, v in self._items)
-        return f"ClassDistribution({{{inner}}})"
-
-    def __reduce__(self):
-        return (ClassDistribution, (self._items,))
-
-
-@dataclass(frozen=True, slots=True)
-class SevaRecord:
-    """The SEVA output for one run or window (immutable).
-
-    Attributes
-    ----------
-    run
-        Run index (the dataset's ``run`` coordinate).
-    t_start, t_end
-        First and last time (s) of the window.
-    x_measured, f_measured
-        Mean measured X and F over the window's finite samples (NaN if none).
-    x_vmv, f_vmv
-        Validated measurement values: mean normal-model prediction of X and F.
-    x_vu, f_vu
-        Validated uncertainties: ``z * rms(predictive std)`` over the window, ``z`` the
-        standard-normal quantile of ``coverage`` (the typical per-sample interval half-width,
-        not the uncertainty of the window mean).
-    coverage
-        Central coverage of VMV ± VU (default 0.95).
-    state
-        Diagnosed state (the arg-max class; "" when none could be made).
-    probability
-        Probability of ``state``.
-    distribution
-        Full class distribution (class order of the diagnoser).
-    entropy
-        Normalised entropy ``H / log(n_classes)`` of ``distribution`` (0 certain, 1 uniform).
-    status
-        :class:`SevaStatus`.
-    reasons
-        Human-readable reasons for the status.
-    missing_fraction, saturated_fraction
-        Worst fraction over channels of missing and saturated samples.
-    novel_fraction
-        Fraction of window samples whose inputs are novel (NaN when not checked).
-    feature_novelty
-        Nearest-neighbour distance ratio of the run's feature vector (NaN when not checked).
-    window
-        Window index within the run for windowed diagnoses, else None.
-    """
-
-    run: int
-    t_start: float
-    t_end: float
-    x_measured: float
-    f_measured: float
-    x_vmv: float
-    x_vu: float
-    f_vmv: float
-    f_vu: float
-    coverage: float
-    state: str
-    probability: float
-    distribution: ClassDistribution
-    entropy: float
-    status: SevaStatus
-    reasons: tuple[str, ...] = field(default=())
-    missing_fraction: float = 0.0
-    saturated_fraction: float = 0.0
-    novel_fraction: float = math.nan
-    feature_novelty: float = math.nan
-    window: int | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain-Python dict (JSON-ready: status as its name, distribution as a dict)."""
-        d = {f: getattr(self, f) for f in self.__dataclass_fields__}
-        d["status"] = self.status.value
-        d["distribution"] = dict(self.distribution)
-        d["reasons"] = list(self.reasons)
-        return d
-
-
-# --------------------------------------------------------------------------------------
-# novelty
-# --------------------------------------------------------------------------------------
-class NoveltyReference:
-    """How unlike the training samples new samples are (nearest-neighbour distance ratio).
-
-    Fitted on training rows (e.g. the normal models' input samples CV, P1, P2, T1, or the
-    classifier's training features): columns are standardised by the training mean and
-    standard deviation; the *scale* is the ``quantile`` of every training sample's distance
-    to its nearest other training sample. :meth:`score` returns, per new row, the distance
-    to the nearest training row divided by the scale, so about ``1 - quantile`` of samples
-    drawn like the training data score above 1, and samples far from all training data
-    score >> 1.
-
-    Parameters
-    ----------
-    quantile
-        Quantile of the training nearest-neighbour distances used as the scale (default 0.99).
-    max_points
-        Training rows kept (a seeded random subset above this size; default 20000).
-    random_state
-        Seed of that subset.
-    """
-
-    def __init__(
-        self, *, quantile: float = 0.99, max_points: int = 20_000, random_state: int | None = 0
-    ) -> None:
-        self.quantile = quantile
-        self.max_points = max_points
-        self.random_state = random_state
-
-    def fit(self, X: Any) -> NoveltyReference:
-        """Fit on training rows ``X`` of shape ``(n, d)`` (finite, n >= 3)."""
-        X = np.asarray(X, dtype=np.float64)
-        if X.ndim != 2 or X.shape[0] < 3:
-            raise ValueError(f"NoveltyReference needs (n >= 3, d) training rows, got {X.shape}")
-        if not np.all(np.isfinite(X)):
-            raise ValueError("training rows contain NaN or inf")
-        if not 0 < self.quantile < 1:
-            raise ValueError("quantile must lie in (0, 1)")
-        if X.shape[0] > self.max_points:
-            rng = np.random.default_rng(self.random_state)
-            X = X[rng.choice(X.shape[0], self.max_points, replace=False)]
-        self.center_ = X.mean(axis=0)
-        sd = X.std(axis=0)
-        # constant columns (e.g. a fixed supply pressure) get the scale of the others, so
-        # any departure from the constant counts
-        floor = np.median(sd[sd > 0]) if np.any(sd > 0) else 1.0
-        self.scale_ = np.where(sd > 0, sd, floor)
-        Z = (X - self.center_) / self.scale_
-        self.tree_ = cKDTree(Z)
-        d, _ = self.tree_.query(Z, k=2)
-        nn = d[:, 1]
-        nn_pos = nn[nn > 0]
-        self.threshold_ = float(np.quantile(nn_pos if nn_pos.size else nn, self.quantile))
-        if not self.threshold_ > 0:
-            self.threshold_ = 1e-12
-        self.n_features_in_ = X.shape[1]
-        self.n_samples_fit_ = X.shape[0]
-        return self
-
-    @classmethod
-    def from_runs(
-        cls, runs: xr.Dataset, channels: Sequence[str] = INPUT_CHANNELS, **kwargs: Any
-    ) -> NoveltyReference:
-        """Fit on every finite ``(run, time)`` sample of ``channels`` of a dataset."""
-        X = _stack_samples(runs, channels)
-        return cls(**kwargs).fit(X[np.all(np.isfinite(X), axis=1)])
-
-    def score(self, X: Any) -> np.ndarray:
-        """Nearest-training-row distance ratio per row (> 1: more remote than usual)."""
-        if not hasattr(self, "tree_"):
-            raise ValueError("NoveltyReference is not fitted; call fit first")
-        X = np.asarray(X, dtype=np.float64)
-        if X.ndim != 2 or X.shape[1] != self.n_features_in_:
-            raise ValueError(f"expected (n, {self.n_features_in_}) rows, got {X.shape}")
-        if not np.all(np.isfinite(X)):
-            raise ValueError("rows to score contain NaN or inf")
-        d, _ = self.tree_.query((X - self.center_) / self.scale_, k=1)
-        return d / self.threshold_
-
-
-def _stack_samples(runs: xr.Dataset, channels: Sequence[str]) -> np.ndarray:
-    missing = [c for c in channels if c not in runs]
-    if missing:
-        raise ValueError(f"dataset lacks channel(s) {missing}")
-    return np.stack([runs[c].values.reshape(-1) for c in channels], axis=1)
-
-
-# --------------------------------------------------------------------------------------
-# measurement screening (BLIND)
-# --------------------------------------------------------------------------------------
-def _screen_one(
-    values: Mapping[str, np.ndarray],
-    th: SevaThresholds,
-    limits: Mapping[str, tuple[float, float]],
-) -> tuple[np.ndarray, np.ndarray, tuple[str, ...], tuple[str, ...]]:
-    """Missing/saturated fractions per channel of one run/window, BLIND reasons and notes."""
-    names = list(values)
-    missing = np.zeros(len(names))
-    saturated = np.zeros(len(names))
-    why, notes = [], []
-    for j, c in enumerate(names):
-        v = np.asarray(values[c], dtype=np.float64)
-        if v.size == 0:
-            raise ValueError("a run or window holds no samples")
-        bad = ~np.isfinite(v)
-        missing[j] = bad.mean()
-        if c in limits:
-            lo, hi = limits[c]
-            with np.errstate(invalid="ignore"):
-                rail = (v <= lo + th.saturation_tol) | (v >= hi - th.saturation_tol)
-            saturated[j] = (rail & ~bad).mean()
-        if missing[j] > th.max_missing:
-            why.append(f"{c} missing in {missing[j]:.0%} of samples")
-        limit = th.max_output_saturated if c in OUTPUT_CHANNELS else th.max_saturated
-        if saturated[j] > limit:
-            why.append(f"{c} saturated in {saturated[j]:.0%} of samples")
-        elif saturated[j] > th.max_saturated:
-            notes.append(f"{c} at a rail in {saturated[j]:.0%} of samples (measured mean clipped)")
-    return missing, saturated, tuple(why), tuple(notes)
-
-
-def screen_measurements(
-    runs: xr.Dataset,
-    *,
-    channels: Sequence[str] = CHANNELS,
-    thresholds: SevaThresholds | None = None,
-    saturation_limits: Mapping[str, tuple[float, float]] | None = None,
-) -> dict[str, np.ndarray]:
-    """Per-run missing and saturated fractions and a BLIND flag.
-
-    A sample is missing when NaN/inf, saturated when within ``saturation_tol`` of (or beyond)
-    a rail of ``saturation_limits`` (default: [0, 1] for every normalised channel). BLIND
-    rules: see :class:`SevaThresholds` (``max_missing``, ``max_saturated`` for inputs,
-    ``max_output_saturated`` for X and F).
-
-    Returns
-    -------
-    dict
-        ``missing`` and ``saturated``: ``(n_runs, n_channels)`` fractions; ``blind``:
-        ``(n_runs,)`` bool; ``reasons``: ``(n_runs,)`` object array of tuples of strings.
-    """
-    th = (thresholds or SevaThresholds()).validate()
-    limits = dict(DEFAULT_SATURATION_LIMITS if saturation_limits is None else saturation_limits)
-    absent = [c for c in channels if c not in runs]
-    if absent:
-        raise ValueError(f"dataset lacks channel(s) {absent}")
-    n_runs = runs.sizes["run"]
-    arrays = {c: np.asarray(runs[c].transpose("run", "time").values) for c in channels}
-    missing = np.zeros((n_runs, len(channels)))
-    saturated = np.zeros((n_runs, len(channels)))
-    blind = np.zeros(n_runs, dtype=bool)
-    reasons = np.empty(n_runs, dtype=object)
-    for i in range(n_runs):
-        missing[i], saturated[i], why, _ = _screen_one(
-            {c: a[i] for c, a in arrays.items()}, th, limits
-        )
-        blind[i] = bool(why)
-        reasons[i] = why
-    return {"missing": missing, "saturated": saturated, "blind": blind, "reasons": reasons}
-
-
-# --------------------------------------------------------------------------------------
-# records
-# --------------------------------------------------------------------------------------
-def _entropy(p: np.ndarray) -> float:
-    if p.size < 2 or not np.all(np.isfinite(p)):
-        return math.nan
-    q = p[p > 0]
-    return float(-np.sum(q * np.log(q)) / np.log(p.size))
-
 
 def _nanmean(a: np.ndarray) -> float:
     a = np.asarray(a, dtype=np.float64)
@@ -446,47 +95,6 @@ def _rms(a: np.ndarray) -> float:
     a = np.asarray(a, dtype=np.float64)
     ok = np.isfinite(a)
     return float(np.sqrt(np.mean(a[ok] ** 2))) if ok.any() else math.nan
-
-
-def _status(
-    th: SevaThresholds,
-    blind_reasons: tuple[str, ...],
-    state: str,
-    prob: float,
-    ent: float,
-    diagnosed: bool,
-    novel_frac: float,
-    feat_nov: float,
-) -> tuple[SevaStatus, list[str]]:
-    """The SEVA decision rules, in order: BLIND, DAZZLED, then CLEAR or BLURRED."""
-    if blind_reasons:
-        return SevaStatus.BLIND, list(blind_reasons)
-    if not diagnosed:
-        return SevaStatus.DAZZLED, ["no class distribution available"]
-    reasons: list[str] = []
-    novel_in = np.isfinite(novel_frac) and novel_frac > th.novelty_fraction
-    novel_ft = np.isfinite(feat_nov) and feat_nov > th.novelty_ratio
-    if novel_in:
-        reasons.append(
-            f"inputs unlike training in {novel_frac:.0%} of samples (> {th.novelty_fraction:.0%})"
-        )
-    if novel_ft:
-        reasons.append(
-            f"residual features unlike training (ratio {feat_nov:.2g} > {th.novelty_ratio})"
-        )
-    flat = ent > th.max_entropy
-    if flat:
-        reasons.append(f"distribution too flat (entropy {ent:.2f} > {th.max_entropy})")
-    if state == th.fault_free:
-        ok_status, need = SevaStatus.CLEAR, ("p_clear", th.p_clear)
-    else:
-        ok_status, need = SevaStatus.BLURRED, ("p_fault", th.p_fault)
-    confident = prob >= need[1]
-    if not confident:
-        reasons.append(f"P({state}) = {prob:.3f} < {need[0]} = {need[1]}")
-    if confident and not (flat or novel_in or novel_ft):
-        return ok_status, [f"P({state}) = {prob:.3f} >= {need[0]} = {need[1]}"]
-    return SevaStatus.DAZZLED, reasons
 
 
 def records_from_diagnosis(
@@ -618,7 +226,7 @@ def records_from_diagnosis(
             tm = (times >= w_start[w]) & (times < w_end[w])
             if not tm.any():
                 raise ValueError(f"window {w} holds no samples of run {i}")
-            missing, saturated, blind_why, notes = _screen_one(
+            missing, saturated, blind_why, notes = screen_window(
                 {c: a[i, tm] for c, a in arrays.items()}, th, limits
             )
             if not_diagnosed and i in not_diagnosed and not blind_why:
@@ -627,7 +235,7 @@ def records_from_diagnosis(
             diagnosed = p.size > 0 and bool(np.all(np.isfinite(p)))
             if diagnosed:
                 k = int(np.argmax(p))
-                state, prob, ent = classes[k], float(p[k]), _entropy(p)
+                state, prob, ent = classes[k], float(p[k]), entropy(p)
             else:
                 state, prob, ent = "", math.nan, math.nan
             novel_frac = math.nan
@@ -636,9 +244,9 @@ def records_from_diagnosis(
                 nv = nv[np.isfinite(nv)]
                 novel_frac = float(nv.mean()) if nv.size else math.nan
             feat_nov = math.nan
-            if feats is not None and np.all(np.isfinite(feats[i, w])):
+            if feats is not None and not np.isnan(feats[i, w]).any():
                 feat_nov = float(feature_reference.score(feats[i, w][None, :])[0])
-            status, reasons = _status(th, blind_why, state, prob, ent, diagnosed, novel_frac,
+            status, reasons = decide_status(th, blind_why, state, prob, ent, diagnosed, novel_frac,
                                       feat_nov)  # fmt: skip
             if input_reference is None and status is not SevaStatus.BLIND:
                 reasons.append("input novelty not checked (no input reference)")
@@ -672,6 +280,83 @@ def records_from_diagnosis(
                 )
             )
     return records
+
+
+_DIAGNOSIS_VARS = ("proba", "X_hat", "X_hat_std", "F_hat", "F_hat_std", "features")
+
+
+def _empty_windows(diagnoser: Any, runs: xr.Dataset) -> np.ndarray | None:
+    """``(n_runs, n_windows)``: True where a window holds no sample with every channel finite.
+
+    None when ``diagnoser`` is not windowed (no ``window`` attribute, or ``window=None``).
+    """
+    window = getattr(diagnoser, "window", None)
+    if window is None:
+        return None
+    bounds = window_bounds(runs.sizes["time"], window, getattr(diagnoser, "step", None))
+    finite = np.ones((runs.sizes["run"], runs.sizes["time"]), dtype=bool)
+    for c in CHANNELS:
+        if c in runs:
+            finite &= np.isfinite(np.asarray(runs[c].transpose("run", "time").values, dtype=float))
+    cum = np.concatenate([np.zeros((finite.shape[0], 1)), np.cumsum(finite, axis=1)], axis=1)
+    return (cum[:, bounds[:, 1]] - cum[:, bounds[:, 0]]) == 0
+
+
+def _diagnose_with_empty_windows(diagnoser: Any, runs: xr.Dataset) -> xr.Dataset:
+    """The windowed diagnosis of a `FaultDiagnoser`, NaN for windows without features.
+
+    ``FaultDiagnoser.diagnose`` refuses a run with a window whose features cannot be computed
+    (no finite residual); here such windows get a NaN distribution (their records are BLIND
+    by the screening) and the other windows of the run are diagnosed as ``diagnose`` would,
+    through the diagnoser's public parts (``normal_models_``, ``feature_names_``,
+    ``predict_features``, ``classes_``).
+    """
+    res = diagnoser.normal_models_.residuals(runs)
+    names = tuple(diagnoser.feature_names_)
+    step = getattr(diagnoser, "step", None)
+    feats, _ = extract_features(res, names, diagnoser.window, step)
+    n_runs, n_win, n_feat = feats.shape
+    flat = feats.reshape(-1, n_feat)
+    ok = np.all(np.isfinite(flat), axis=1)
+    classes = np.asarray(diagnoser.classes_).astype(str)
+    proba = np.full((flat.shape[0], classes.size), np.nan)
+    if ok.any():
+        proba[ok] = diagnoser.predict_features(flat[ok])
+    bounds = window_bounds(runs.sizes["time"], diagnoser.window, step)
+    times = np.asarray(runs["time"].values, dtype=np.float64)
+    out = res[["X_hat", "X_hat_std", "F_hat", "F_hat_std"]].assign_coords(
+        {
+            "class": classes,
+            "feature": list(names),
+            "window_start": ("window", times[bounds[:, 0]]),
+            "window_end": ("window", times[bounds[:, 1] - 1] + 1.0),
+        }
+    )
+    out["proba"] = (("run", "window", "class"), proba.reshape(n_runs, n_win, classes.size))
+    out["features"] = (("run", "window", "feature"), feats)
+    return out
+
+
+def _diagnose(diagnoser: Any, runs: xr.Dataset) -> xr.Dataset:
+    """``diagnoser.diagnose(runs)``; runs with an all-missing window diagnosed window by window.
+
+    One window without a single complete sample must not take the whole batch down: the runs
+    holding such a window go through `_diagnose_with_empty_windows` when the diagnoser is a
+    windowed `FaultDiagnoser` (or exposes the same public parts); other diagnosers get
+    ``diagnose`` and its error.
+    """
+    empty = _empty_windows(diagnoser, runs)
+    parts = ("normal_models_", "feature_names_", "predict_features", "classes_")
+    if empty is None or not empty.any() or not all(hasattr(diagnoser, a) for a in parts):
+        return diagnoser.diagnose(runs)
+    gappy = empty.any(axis=1)
+    pieces = [_diagnose_with_empty_windows(diagnoser, runs.isel(run=np.flatnonzero(gappy)))]
+    if not gappy.all():
+        pieces.append(diagnoser.diagnose(runs.isel(run=np.flatnonzero(~gappy))))
+    pieces = [p[[v for v in _DIAGNOSIS_VARS if v in p.data_vars]] for p in pieces]
+    order = np.concatenate([np.flatnonzero(gappy), np.flatnonzero(~gappy)])
+    joined = xr.concat(pieces, dim="run", coords="minimal", compat="override", join="override")
+    return joined.isel(run=np.argsort(order, kind="stable"))
 
 
 def seva_records(
@@ -716,13 +401,12 @@ def seva_records(
     usable = np.flatnonzero(~screen["blind"])
     diag = None
     if usable.size:
-        part = diagnoser.diagnose(runs.isel(run=usable))
+        part = _diagnose(diagnoser, runs.isel(run=usable))
         if usable.size == runs.sizes["run"]:
             diag = part
         else:
             # NaN rows for BLIND runs: never diagnosed, never shown as a diagnosis
-            names = ("proba", "X_hat", "X_hat_std", "F_hat", "F_hat_std", "features")
-            part = part[[v for v in names if v in part.data_vars]]
+            part = part[[v for v in _DIAGNOSIS_VARS if v in part.data_vars]]
             part = part.assign_coords(run=runs["run"].values[usable])
             diag = part.reindex(run=runs["run"].values)
     skipped = {int(i): tuple(screen["reasons"][i]) for i in np.flatnonzero(screen["blind"])}
@@ -737,97 +421,3 @@ def seva_records(
         not_diagnosed=skipped,
         calibrator=calibrator,
     )
-
-
-# --------------------------------------------------------------------------------------
-# conversions
-# --------------------------------------------------------------------------------------
-_SCALAR_FIELDS = (
-    "run", "window", "t_start", "t_end", "x_measured", "f_measured", "x_vmv", "x_vu", "f_vmv",
-    "f_vu", "coverage", "state", "probability", "entropy", "status", "missing_fraction",
-    "saturated_fraction", "novel_fraction", "feature_novelty",
-)  # fmt: skip
-
-
-def _all_classes(records: Sequence[SevaRecord]) -> list[str]:
-    classes: list[str] = []
-    for r in records:
-        for c in r.distribution:
-            if c not in classes:
-                classes.append(c)
-    return classes
-
-
-def _windowed(records: Sequence[SevaRecord]) -> bool:
-    return any(r.window is not None for r in records)
-
-
-def to_frame(records: Sequence[SevaRecord]):
-    """A :class:`pandas.DataFrame`, one row per record.
-
-    Indexed by ``run`` (or ``(run, window)`` for windowed records). The class distribution
-    becomes columns ``p_<class>`` (NaN where absent); ``reasons`` is joined with ``"; "``;
-    ``status`` is its string value.
-    """
-    import pandas as pd
-
-    classes = _all_classes(records)
-    windowed = _windowed(records)
-    fields = [f for f in _SCALAR_FIELDS if windowed or f != "window"]
-    rows = []
-    for r in records:
-        row = {f: getattr(r, f) for f in fields}
-        row["status"] = r.status.value
-        if windowed:
-            row["window"] = -1 if r.window is None else r.window
-        row.update({f"p_{c}": r.distribution.get(c, math.nan) for c in classes})
-        row["reasons"] = "; ".join(r.reasons)
-        rows.append(row)
-    cols = [*fields, *(f"p_{c}" for c in classes), "reasons"]
-    return pd.DataFrame(rows, columns=cols).set_index(["run", "window"] if windowed else "run")
-
-
-def to_xarray(records: Sequence[SevaRecord]) -> xr.Dataset:
-    """An :class:`xarray.Dataset` of the records.
-
-    Dims ``run`` and ``class`` (windowed records: ``record`` and ``class``, with ``run`` and
-    ``window`` coordinates on ``record``; window -1 for records without one). Scalar fields
-    become variables along the first dim, the distribution ``proba (.., class)`` (NaN where
-    absent), ``reasons`` a string variable.
-    """
-    classes = _all_classes(records)
-    windowed = _windowed(records)
-    dim = "record" if windowed else "run"
-    data: dict[str, Any] = {}
-    for f in _SCALAR_FIELDS:
-        if f in ("run", "window", "state", "status"):
-            continue
-        data[f] = (dim, np.asarray([getattr(r, f) for r in records], dtype=np.float64))
-    data["state"] = (dim, np.asarray([r.state for r in records], dtype=str))
-    data["status"] = (dim, np.asarray([r.status.value for r in records], dtype=str))
-    data["reasons"] = (dim, np.asarray(["; ".join(r.reasons) for r in records], dtype=str))
-    proba = np.array([[r.distribution.get(c, math.nan) for c in classes] for r in records])
-    data["proba"] = ((dim, "class"), proba.reshape(len(records), len(classes)))
-    run = np.array([r.run for r in records], dtype=np.int64)
-    coords: dict[str, Any] = {"class": np.asarray(classes, dtype=str)}
-    if windowed:
-        win = np.array([-1 if r.window is None else r.window for r in records], dtype=np.int64)
-        coords |= {"run": (dim, run), "window": (dim, win)}
-    else:
-        coords["run"] = run
-    return xr.Dataset(data, coords=coords)
-
-
-def _json_safe(v: Any) -> Any:
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: _json_safe(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_json_safe(x) for x in v]
-    return v
-
-
-def to_json(records: Sequence[SevaRecord], *, indent: int | None = 2) -> str:
-    """JSON text: a list of :meth:`SevaRecord.to_dict` objects (NaN written as ``null``)."""
-    return json.dumps([_json_safe(r.to_dict()) for r in records], indent=indent)

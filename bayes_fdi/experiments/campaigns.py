@@ -123,10 +123,23 @@ def check_campaign_memory(campaign: Campaign) -> None:
     check_memory(n_bytes, f"campaign {campaign.name}: {n} run(s) x {duration} s")
 
 
+def _simulate_batch(task: tuple) -> Any:
+    """Simulate one batch ``(source, drive, faults, noise_seed)`` (a task of `run_tasks`)."""
+    from bayes_fdi.actuator import inject_faults, simulate
+
+    source, batch, faults, noise_seed = task
+    if source == "benchmark-inputs":
+        return simulate(batch, faults, seed=noise_seed)
+    return inject_faults(batch, faults, seed=noise_seed)
+
+
 def simulate_campaign(
     campaign: Campaign | str | os.PathLike,
     seed: int | None = None,
     progress: bool = True,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
 ):
     """Simulate every run of a campaign into a dataset.
 
@@ -140,6 +153,9 @@ def simulate_campaign(
         does not depend on ``batch_size``.
     progress
         Show a progress bar (on stderr).
+    workers, scheduler
+        Simulate the batches on a local dask cluster of ``workers`` processes or on the cluster
+        at ``scheduler`` (`bayes_fdi.experiments.distributed`); the result is the same.
 
     Returns
     -------
@@ -154,7 +170,7 @@ def simulate_campaign(
 
     import xarray as xr
 
-    from bayes_fdi.actuator import benchmark_inputs, inject_faults, simulate
+    from bayes_fdi.actuator import benchmark_inputs
 
     if not isinstance(campaign, Campaign):
         campaign = load_campaign(campaign)
@@ -182,27 +198,14 @@ def simulate_campaign(
         extra_coords = {"window_start": ("run", starts.astype(np.int64))}
     drive = drive.assign_coords({k: ("run", v) for k, v in labels.items()})
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    from bayes_fdi.experiments.distributed import run_tasks
 
-        bar = tqdm(total=n, desc=f"simulating {campaign.name}", unit="run")
-    parts = []
-    try:
-        for start in range(0, n, campaign.batch_size):
-            rows = np.arange(start, min(n, start + campaign.batch_size))
-            batch = drive.isel(run=rows)
-            faults = _faults(specs, rows)
-            if campaign.source == "benchmark-inputs":
-                out = simulate(batch, faults, seed=noise_seed)
-            else:
-                out = inject_faults(batch, faults, seed=noise_seed)
-            parts.append(out)
-            if bar is not None:
-                bar.update(len(rows))
-    finally:
-        if bar is not None:
-            bar.close()
+    size = campaign.batch_size
+    batches = [np.arange(a, min(n, a + size)) for a in range(0, n, size)]
+    tasks = [(campaign.source, drive.isel(run=r), _faults(specs, r), noise_seed) for r in batches]
+    parts = run_tasks(_simulate_batch, tasks, workers=workers, scheduler=scheduler,
+                      progress=progress, desc=f"simulating {campaign.name}", unit="run",
+                      sizes=[len(r) for r in batches])  # fmt: skip
     ds = xr.concat(parts, dim="run", combine_attrs="override") if len(parts) > 1 else parts[0]
     ds = ds[["CV", "P1", "P2", "T1", "X", "F"]].assign_coords(extra_coords)
     attrs = {k: v for k, v in ds.attrs.items() if k in ("bayes_fdi_version", "integrator")}
@@ -270,7 +273,12 @@ def configure_parser(parser) -> None:
         help="override a campaign key before validation, e.g. --set runs_per_state=5 "
         "--set faults.strength=[0.6,0.9] (bare keys are [campaign] keys; repeatable)",
     )
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument(
+        "--quiet", "--no-progress", dest="quiet", action="store_true", help="hide the progress bar"
+    )
+    from bayes_fdi.experiments.distributed import add_cluster_arguments
+
+    add_cluster_arguments(parser)
 
 
 def run_from_cli(args) -> int:
@@ -286,7 +294,13 @@ def run_from_cli(args) -> int:
         raise UsageError(str(exc)) from exc
     check_campaign_memory(campaign)
     t0 = time.perf_counter()
-    ds = simulate_campaign(campaign, seed=args.seed, progress=not args.no_progress)
+    ds = simulate_campaign(
+        campaign,
+        seed=args.seed,
+        progress=not args.quiet,
+        workers=args.workers,
+        scheduler=args.scheduler,
+    )
     save_dataset(ds, args.out)
     elapsed = time.perf_counter() - t0
     counts = ", ".join(

@@ -30,6 +30,7 @@ from bayes_fdi.rvm.base import RVMBase, _is_torch
 from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES
 from bayes_fdi.rvm.kernels import RBF, Kernel
 from bayes_fdi.rvm.sparse_bayes import SBLResult, em_bernoulli, fast_bernoulli
+from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.rvm.width import search_width, width_bounds
 
 __all__ = ["RVC"]
@@ -124,6 +125,7 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         columns = [1] if n_classes == 2 else range(n_classes)
         return [torch.tensor(y_idx == c, dtype=X.dtype, device=X.device) for c in columns]
 
+    @limit_fit_threads
     def fit(self, X: Any, y: Any) -> RVC:
         """Fit the classifier by (Laplace) type-II maximum likelihood.
 

@@ -70,6 +70,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--method", choices=("fast", "em"), default="fast")
     parser.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
 def run_from_cli(args: argparse.Namespace) -> int:
@@ -78,8 +79,11 @@ def run_from_cli(args: argparse.Namespace) -> int:
 
     X, y, X_test, f_test = sinc_data(args.n, args.noise, args.seed)
     model = RVR(width=args.width, method=args.method)
+    from bayes_fdi.progress import busy
+
     start = time.perf_counter()
-    model.fit(X, y)
+    with busy(f"fitting the RVR ({args.method}, width {args.width})", enabled=not args.quiet):
+        model.fit(X, y)
     elapsed = time.perf_counter() - start
     rmse = float(np.sqrt(np.mean((model.predict(X_test) - f_test) ** 2)))
     mean_train, std_train = model.predict(X, return_std=True)

@@ -25,6 +25,7 @@ from torch import Tensor
 from bayes_fdi.rvm.base import RVMBase, _is_torch, power_of_two_scale
 from bayes_fdi.rvm.kernels import RBF, Kernel
 from bayes_fdi.rvm.sparse_bayes import SBLResult, em_gaussian, fast_gaussian
+from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.rvm.width import search_width, width_bounds
 
 __all__ = ["RVR"]
@@ -113,6 +114,7 @@ class RVR(RegressorMixin, RVMBase):
         solver = fast_gaussian if self.method == "fast" else em_gaussian
         return solver(design, t, max_iter=self._max_iter(), tol=float(self.tol)), kern
 
+    @limit_fit_threads
     def fit(self, X: Any, y: Any) -> RVR:
         """Fit the RVR by type-II maximum likelihood.
 
