@@ -2,9 +2,8 @@
 
 Each entry builds a batch of runs (or windows) with one bad one and states the SEVA status that
 record must get, while the good records of the same batch are still diagnosed. The last two
-entries are fixed by the online work on `bayes_fdi.diagnosis.seva` (a window with no complete
-sample, an infinite novelty score); they are strict expected failures until that lands, so the
-merge that brings the fix makes them pass and the marker must then go.
+entries (a window with no complete sample, an infinite novelty score) failed before the online
+work on `bayes_fdi.diagnosis.seva`: the batch raised, and the record came out confident.
 """
 
 from __future__ import annotations
@@ -113,18 +112,12 @@ def test_flat_distribution_is_dazzled(rng):
     assert statuses == [SevaStatus.CLEAR, SevaStatus.DAZZLED, SevaStatus.CLEAR]
 
 
-@pytest.mark.xfail(
-    strict=True, reason="an infinite novelty score counted as not novel (fixed on 'online')"
-)
 def test_infinite_feature_novelty_is_dazzled(rng):
     features = np.array([[0.0, 0.0], [1e300, -1e300], [0.0, 0.0]])  # distance overflows to inf
     statuses = _statuses(rng, lambda ch: None, features)
     assert statuses[1] is SevaStatus.DAZZLED
 
 
-@pytest.mark.xfail(
-    strict=True, reason="an all-NaN window failed the whole batch (fixed on 'online')"
-)
 def test_all_missing_window_is_blind_and_the_batch_is_diagnosed(rng):
     normal = make_dataset(_channels(rng, 4))
     ch = _channels(rng, 6)
