@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from collections.abc import Sequence
 
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.atomic import atomic_path, check_output_path
+from bayes_fdi.cli_arguments import UsageError, input_file, output_file, positive_int
 from bayes_fdi.datasets import CHANNELS, load_dataset, validate_dataset
 
 __all__ = ["configure_parser", "physical_range", "plot_runs", "run_from_cli", "select_runs"]
@@ -85,7 +86,9 @@ def select_runs(
         for s in states:
             hits = np.flatnonzero(labels == s)
             if not len(hits):
-                raise ValueError(f"no run with state {s!r} (states here: {sorted(set(labels))})")
+                raise ValueError(
+                    f"no run with state {s!r} (states here: {sorted(set(labels.tolist()))})"
+                )
             chosen.append(int(hits[0]))
     if not chosen:
         chosen = [0]
@@ -218,9 +221,15 @@ def plot_runs(
     return fig
 
 
+#: Image formats ``bayes-fdi plot --out`` writes (chosen by the file name).
+IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     """Add the arguments of ``bayes-fdi plot``."""
-    parser.add_argument("dataset", help="a dataset file (.nc) written by `bayes-fdi simulate`")
+    parser.add_argument(
+        "dataset", type=input_file, help="a dataset file (.nc) written by `bayes-fdi simulate`"
+    )
     parser.add_argument(
         "--runs", type=int, nargs="+", default=None, help="run positions to draw (default 0)"
     )
@@ -237,33 +246,44 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--overlay", action="store_true", help="draw every channel in one panel (as the paper)"
     )
-    parser.add_argument("--out", default=None, help="image file (default: DATASET stem + .png)")
-    parser.add_argument("--dpi", type=int, default=120)
+    parser.add_argument(
+        "--out",
+        type=output_file(*IMAGE_SUFFIXES),
+        default=None,
+        help="image file, .png/.pdf/.svg/.jpg (default: DATASET stem + .png), written atomically",
+    )
+    parser.add_argument("--dpi", type=positive_int, default=120)
 
 
 def run_from_cli(args: argparse.Namespace) -> int:
-    """Run ``bayes-fdi plot``."""
+    """Run ``bayes-fdi plot``: the output path and the selection are checked before drawing."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    try:
-        ds = load_dataset(args.dataset)
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"bayes-fdi plot: {exc}", file=sys.stderr)
-        return 2
-    try:
-        if args.overlay:
-            fig, ax = plt.subplots(figsize=(8.0, 4.5))
-            plot_runs(ds, runs=args.runs, channels=args.channels, ax=ax, states=args.states)
-        else:
-            fig = plot_runs(ds, runs=args.runs, channels=args.channels, states=args.states)
-    except ValueError as exc:
-        print(f"bayes-fdi plot: {exc}", file=sys.stderr)
-        return 2
     out = args.out or os.path.splitext(args.dataset)[0] + ".png"
-    fig.savefig(out, dpi=args.dpi, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        check_output_path(out, suffixes=IMAGE_SUFFIXES, what="image file")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    ds = load_dataset(args.dataset)  # an unreadable file: a runtime error (exit 1)
+    try:
+        select_runs(ds, args.runs, args.states)
+        missing = [c for c in args.channels or () if c not in ds.data_vars]
+        if missing:
+            raise ValueError(f"channel(s) {missing} not in {args.dataset}")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.overlay:
+        fig, ax = plt.subplots(figsize=(8.0, 4.5))
+        plot_runs(ds, runs=args.runs, channels=args.channels, ax=ax, states=args.states)
+    else:
+        fig = plot_runs(ds, runs=args.runs, channels=args.channels, states=args.states)
+    try:
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=args.dpi, bbox_inches="tight", format=out.rsplit(".", 1)[-1])
+    finally:
+        plt.close(fig)
     print(out)
     return 0

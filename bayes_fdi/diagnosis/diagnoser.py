@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import time
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -33,7 +34,14 @@ from bayes_fdi.diagnosis.normal_models import NormalModels
 from bayes_fdi.diagnosis.seva import NoveltyReference, SevaRecord, seva_records
 from bayes_fdi.diagnosis.tree import HierarchicalClassifier
 
-__all__ = ["FaultDiagnoser"]
+__all__ = ["FaultDiagnoser", "ShortRunWarning"]
+
+#: Runs shorter than this fraction of the training runs get a :class:`ShortRunWarning`.
+SHORT_RUN_FRACTION = 0.5
+
+
+class ShortRunWarning(UserWarning):
+    """Runs diagnosed with per-run features are much shorter than the training runs."""
 
 
 def _default_classifier(random_state: int | None) -> HierarchicalClassifier:
@@ -101,6 +109,9 @@ class FaultDiagnoser(BaseEstimator):
         used by :meth:`seva` to flag inputs unlike anything seen in training.
     fit_seconds_ : dict
         Wall-clock seconds: ``normal_models``, ``residuals``, ``classifier``, ``total``.
+    training_run_seconds_ : int
+        Length (samples) of the labelled training runs; with per-run features (``window=None``)
+        :meth:`diagnose` warns (:class:`ShortRunWarning`) on runs shorter than half of it.
     """
 
     def __init__(
@@ -168,7 +179,7 @@ class FaultDiagnoser(BaseEstimator):
         states = np.asarray(labelled_runs["state"].values).astype(str)
         if np.unique(states).size < 2:
             raise ValueError(
-                f"labelled_runs holds one class only ({states[0]!r}); need at least two states"
+                f"labelled_runs holds one class only ({str(states[0])!r}); need at least two states"
             )
         self.fit_seconds_: dict[str, float] = {}
         t0 = time.perf_counter()
@@ -230,6 +241,7 @@ class FaultDiagnoser(BaseEstimator):
                 join="override",
             )
         )
+        self.training_run_seconds_ = int(labelled_runs.sizes["time"])
         self.fit_seconds_["total"] = time.perf_counter() - t_start
         return self
 
@@ -270,6 +282,15 @@ class FaultDiagnoser(BaseEstimator):
             ``window_end`` coordinates (seconds, end exclusive).
         """
         self._check_fitted()
+        trained = getattr(self, "training_run_seconds_", None)
+        if self.window is None and trained and runs.sizes["time"] < SHORT_RUN_FRACTION * trained:
+            warnings.warn(
+                f"diagnosing runs of {runs.sizes['time']} s with a diagnoser trained on runs of "
+                f"{trained} s: per-run features average fewer residuals, so they are noisier "
+                "than in training and the diagnosis is less reliable",
+                ShortRunWarning,
+                stacklevel=2,
+            )
         res = self.normal_models_.residuals(runs)
         feats = self._feature_rows(res, "runs")
         proba = self.predict_features(self._flat(feats))
