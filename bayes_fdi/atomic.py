@@ -14,6 +14,8 @@ is then re-delivered with the handler that was in place before (``KeyboardInterr
 netCDF write instead leaves xarray's file-manager lock held and the process deadlocks in its
 clean-up, which is why the write is never interrupted half-way.
 
+:func:`write_text` and :func:`save_figure` are the two writes most modules need.
+
 :func:`check_output_path` validates a destination before any long work (the command line calls it
 before simulating or fitting).
 
@@ -29,8 +31,16 @@ import signal
 import tempfile
 import threading
 from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
 
-__all__ = ["atomic_path", "check_output_path", "deferred_signals"]
+__all__ = [
+    "atomic_path",
+    "check_output_path",
+    "deferred_signals",
+    "save_figure",
+    "write_text",
+]
 
 #: Signals deferred during a write.
 DEFERRED_SIGNALS: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)
@@ -129,6 +139,30 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
             if not committed:
                 with contextlib.suppress(FileNotFoundError):
                     os.remove(tmp)
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically; return the path."""
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as handle:
+        handle.write(text)
+    return Path(path)
+
+
+def save_figure(fig: Any, path: str | os.PathLike[str], **savefig_kwargs: Any) -> Path:
+    """Write a matplotlib figure to ``path`` atomically and close it; return the path.
+
+    The format follows the file name's suffix (``.png``, ``.svg``, ``.pdf``); ``savefig_kwargs``
+    go to :meth:`matplotlib.figure.Figure.savefig` (e.g. ``dpi``).
+    """
+    import matplotlib.pyplot as plt
+
+    suffix = Path(path).suffix.lstrip(".").lower() or None
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format=suffix, **savefig_kwargs)
+    finally:
+        plt.close(fig)
+    return Path(path)
 
 
 def check_output_path(

@@ -200,8 +200,8 @@ CLI_CASES: dict[str, CliCase] = {
             "nonexistent",
             "--no-progress",
         ],
-        1,
-        "campaign 'nonexistent' not found",
+        2,
+        "--campaign: campaign 'nonexistent' not found",
     ),
     "reproduce: unknown state": CliCase(
         lambda t: ["reproduce", "--out", str(t / "o"), "--states", "fn,f42"],

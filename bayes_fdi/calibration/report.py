@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.atomic import save_figure, write_text
 from bayes_fdi.calibration.intervals import plot_pit_histogram
 from bayes_fdi.calibration.metrics import expected_calibration_error, reliability_diagram
 from bayes_fdi.calibration.nodes import node_calibration
@@ -240,8 +241,7 @@ def _write_report(
                             title=f"{label}: ECE {_fmt_ece(summaries[k]['ece'])}")  # fmt: skip
     fig.suptitle("Whole tree, top-label reliability (equal-width bins)", fontsize=10)
     fig.tight_layout()
-    fig.savefig(fig_dir / "reliability_whole_tree.png", dpi=120)
-    plt.close(fig)
+    save_figure(fig, fig_dir / "reliability_whole_tree.png", dpi=120)
 
     # ---- per node
     nodes = getattr(getattr(diagnoser, "classifier_", None), "nodes_", None)
@@ -281,16 +281,14 @@ def _write_report(
         for ax, (name, d) in zip(np.atleast_1d(axes), normal.items(), strict=True):
             plot_pit_histogram(d["_pit"], 10, ax=ax, title=f"PIT of {name} (n = {d['n']})")
         fig.tight_layout()
-        fig.savefig(fig_dir / "pit_normal_models.png", dpi=120)
-        plt.close(fig)
+        save_figure(fig, fig_dir / "pit_normal_models.png", dpi=120)
     results["normal_models"] = normal
     results["n_fault_free_runs"] = int(fn.size)
 
     # ---- write
     clean = _strip_private(results)
-    (out / "calibration.json").write_text(json.dumps(clean, indent=2))
-    report = out / "report.md"
-    report.write_text(_markdown(clean, node_note))
+    write_text(out / "calibration.json", json.dumps(clean, indent=2))
+    report = write_text(out / "report.md", _markdown(clean, node_note))
     return report, clean
 
 

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from bayes_fdi.actuator import FAULT_TABLE, NOISE_STD
+from bayes_fdi.atomic import write_text
 from bayes_fdi.experiments.performance_indices import PICALC_KEYS
 from bayes_fdi.experiments.reproduce_report import markdown_table, to_jsonable
 
@@ -71,19 +72,12 @@ PUBLISHED: tuple[tuple[str, str, str, str], ...] = (
 )
 
 
-def _atomic_write(path: Path, text: str) -> Path:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-    return path
-
-
 def write_report(results: Mapping[str, Any], out: str | os.PathLike) -> tuple[Path, Path]:
     """Write ``benchmark.json`` and ``benchmark.md`` into ``out``; return their paths."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    js = _atomic_write(out / "benchmark.json", json.dumps(to_jsonable(results), indent=1) + "\n")
-    md = _atomic_write(out / "benchmark.md", render_report(results))
+    js = write_text(out / "benchmark.json", json.dumps(to_jsonable(results), indent=1) + "\n")
+    md = write_text(out / "benchmark.md", render_report(results))
     return js, md
 
 

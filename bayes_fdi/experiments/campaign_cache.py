@@ -83,9 +83,13 @@ def _file_hash(path: Path) -> str:
 def _simulator_hash() -> str:
     """SHA-256 over the simulator's source files (so a changed model never reuses a cache)."""
     from bayes_fdi import actuator
-    from bayes_fdi.experiments import campaigns
+    from bayes_fdi.experiments import campaign_spec, campaigns
 
-    files = [*sorted(Path(actuator.__file__).parent.glob("*.py")), Path(campaigns.__file__)]
+    files = [
+        *sorted(Path(actuator.__file__).parent.glob("*.py")),
+        Path(campaign_spec.__file__),
+        Path(campaigns.__file__),
+    ]
     digest = hashlib.sha256()
     for f in files:
         digest.update(f.name.encode())

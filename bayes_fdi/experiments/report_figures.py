@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from bayes_fdi.atomic import save_figure
+
 __all__ = [
     "plot_features",
     "plot_residuals",
@@ -23,13 +25,8 @@ __all__ = [
 
 def _save(fig: Any, path: str | os.PathLike) -> Path:
     """Lay out ``fig``, write it to ``path`` (PNG, 110 dpi), close it; return the path."""
-    import matplotlib.pyplot as plt
-
     fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 def plot_residuals(

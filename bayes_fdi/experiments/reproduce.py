@@ -39,6 +39,8 @@ from typing import Any
 
 import xarray as xr
 
+from bayes_fdi.atomic import write_text
+from bayes_fdi.cli_arguments import UsageError
 from bayes_fdi.datasets import validate_dataset
 from bayes_fdi.experiments.calibration_headlines import calibration_headlines
 from bayes_fdi.experiments.campaign_cache import (
@@ -260,7 +262,7 @@ def reproduce(
     results["seconds"] = time.perf_counter() - t_start
     results["figures"] = figures
     results = rep.to_jsonable(results)
-    (out / "report.md").write_text(rep.render_report(results))
+    write_text(out / "report.md", rep.render_report(results))
     rep.write_json(results, out / "results.json")
     say(f"done in {results['seconds']:.0f} s: {out / 'report.md'}")
     return results
@@ -311,14 +313,18 @@ def run_from_cli(args: argparse.Namespace) -> int:
     states = [s.strip() for s in args.states.split(",") if s.strip()]
     unknown = sorted(set(states) - set(ALL_STATES))
     if unknown:
-        raise SystemExit(f"bayes-fdi reproduce: unknown state(s) {unknown}; use fn, f1..f19")
+        raise UsageError(f"--states: unknown state(s) {unknown}; use fn, f1..f19")
     try:
         lags = tuple(float(v) for v in args.dynamic_lags.split(",") if v.strip())
     except ValueError:
-        raise SystemExit(
-            f"bayes-fdi reproduce: --dynamic-lags must be comma-separated seconds, "
-            f"got {args.dynamic_lags!r}"
+        raise UsageError(
+            f"--dynamic-lags must be comma-separated seconds, got {args.dynamic_lags!r}"
         ) from None
+    for name in args.campaign or ():
+        try:  # every campaign is found before any work starts
+            campaign_file(name)
+        except ValueError as exc:
+            raise UsageError(f"--campaign: {exc}") from None
     results = reproduce(
         args.out,
         dynamic_lags=lags,

@@ -11,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from bayes_fdi.atomic import write_text
+
 __all__ = [
     "to_jsonable",
     "write_json",
@@ -45,6 +47,4 @@ def to_jsonable(obj: Any) -> Any:
 
 def write_json(results: Mapping[str, Any], path: str | os.PathLike) -> Path:
     """Write ``results`` as indented JSON (see :func:`to_jsonable`) and return the path."""
-    path = Path(path)
-    path.write_text(json.dumps(to_jsonable(results), indent=2, sort_keys=False) + "\n")
-    return path
+    return write_text(path, json.dumps(to_jsonable(results), indent=2, sort_keys=False) + "\n")

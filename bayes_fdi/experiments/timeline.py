@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from bayes_fdi import atomic
+
 __all__ = ["PHYSICAL_UNITS", "STATUS_COLOURS", "plot_timeline", "save_figure"]
 
 #: Normalised channel -> (factor to physical units, unit), as DABLib normalises them.
@@ -58,17 +60,7 @@ def _one_run(ds: xr.Dataset, what: str) -> xr.Dataset:
 
 def save_figure(fig: Any, path: str | os.PathLike, *, dpi: int = 100) -> Path:
     """Write ``fig`` atomically (a temporary file renamed), close it; return the path."""
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    try:
-        fig.savefig(tmp, dpi=dpi)
-        os.replace(tmp, path)
-    finally:
-        plt.close(fig)
-        tmp.unlink(missing_ok=True)
-    return path
+    return atomic.save_figure(fig, path, dpi=dpi)
 
 
 def _bin_width(n: int) -> int:
