@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bayes_fdi.campaigns import (
+from bayes_fdi.experiments.campaigns import (
     Campaign,
     CampaignError,
     load_campaign,
@@ -78,7 +78,7 @@ def test_damadics_benchmark_file_lists_the_44_scenarios():
     }  # fmt: skip
     ramps = {s.state + "@" + str(int(s.ramp)) for s in faulty if s.profile == "incipient"}
     assert ramps == {
-        *(f"{f}@86400" for f in ("f2", "f3", "f5", "f6", "f9", "f11", "f18")),
+        *(f"{f}@84000" for f in ("f2", "f3", "f5", "f6", "f9", "f11", "f18")),
         "f4@3600", "f17@3600", "f13@900",
     }  # fmt: skip
     assert all(s.strength < 0 for s in faulty if s.state in ("f12", "f14", "f19"))
@@ -215,9 +215,9 @@ def test_file_errors_name_the_file(tmp_path):
 def test_label_tables_agree_with_the_model_and_the_dataset_format():
     # campaigns keeps its own copies (it imports neither xarray nor the numba model at import
     # time); they must not drift from the tables they copy
-    from bayes_fdi import campaigns
     from bayes_fdi.actuator import FAULT_NAMES, SIGNED_FAULTS
-    from bayes_fdi.datasets import PROFILES, STATES
+    from bayes_fdi.datasets.format import PROFILES, STATES
+    from bayes_fdi.experiments import campaigns
 
     assert campaigns.STATES == STATES
     assert campaigns.FAULTS == FAULT_NAMES

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from bayes_fdi.baselines import KernelRidgeRegressor
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.diagnosis import FaultDiagnoser
-from bayes_fdi.residuals import NormalModels
+from bayes_fdi.diagnosis import FaultDiagnoser, NormalModels
+from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor
 
 OFFSETS = {"fn": (0.0, 0.0), "f1": (0.04, 0.0), "f2": (0.0, -0.04)}
 

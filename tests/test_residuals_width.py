@@ -8,8 +8,13 @@ from conftest import sine_inputs
 from sklearn.linear_model import Ridge
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.diagnosis import FaultDiagnoser
-from bayes_fdi.residuals import WIDTH_GRID, NormalModels, evidence_grid_search, model_inputs
+from bayes_fdi.diagnosis import (
+    WIDTH_GRID,
+    FaultDiagnoser,
+    NormalModels,
+    evidence_grid_search,
+    model_inputs,
+)
 from bayes_fdi.rvm import RVR
 
 GRID = (0.05, 0.1, 0.2, 0.4, 0.8)
@@ -124,7 +129,7 @@ def test_grid_search_uses_the_lagged_inputs():
 
 def test_select_regression_width_is_the_same_search(rng):
     """`select_regression_width` and the default `NormalModels` search agree exactly."""
-    from bayes_fdi.reproduce import select_regression_width
+    from bayes_fdi.experiments.reproduce import select_regression_width
 
     normal = trajectory_runs(4, rng)
     width, evidence = select_regression_width(normal, seed=3, max_samples=150)

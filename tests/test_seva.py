@@ -1,4 +1,4 @@
-"""Tests of the SEVA output (bayes_fdi.seva) on constructed diagnoses."""
+"""Tests of the SEVA output (bayes_fdi.diagnosis.seva) on constructed diagnoses."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 import xarray as xr
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.seva import (
+from bayes_fdi.diagnosis.seva import (
     ClassDistribution,
     NoveltyReference,
     SevaRecord,
@@ -340,3 +340,61 @@ def test_calibrator_is_applied_before_the_rules(rng):
     want = np.array(under[0]) ** (1 / ts.temperature_)
     assert recs[0].probability == pytest.approx(want[0] / want.sum())
     assert [r.status for r in recs] == [SevaStatus.CLEAR, SevaStatus.BLURRED]
+
+
+def _windowed_fault_diagnoser(rng):
+    """A small windowed FaultDiagnoser (kernel ridge normal models, logistic classifier)."""
+    from sklearn.linear_model import LogisticRegression
+
+    from bayes_fdi.diagnosis import FaultDiagnoser, KernelRidgeRegressor
+
+    normal = make_dataset(_runs(rng, 4))
+    ch = _runs(rng, 6)
+    ch["X"][3:] += 0.05  # the faulty runs: a stem offset
+    labelled = make_dataset(ch, state=["fn"] * 3 + ["f1"] * 3)
+    return FaultDiagnoser(
+        KernelRidgeRegressor(width=0.3),
+        LogisticRegression(),
+        window=25,
+        width_search=None,
+        interval_calibration=None,
+    ).fit(normal, labelled)
+
+
+def test_all_missing_window_is_blind_not_an_error(rng):
+    diag = _windowed_fault_diagnoser(rng)
+    ch = _runs(rng, 2)
+    ch["X"][1, 25:50] = np.nan  # run 1, window 1: not one complete sample (12.5 % of the run)
+    runs = _make(ch)
+    with pytest.raises(ValueError, match="not finite"):
+        diag.diagnose(runs)  # the whole batch would fail; SEVA must not
+    recs = seva_records(diag, runs)
+    assert [(r.run, r.window) for r in recs] == [(i, w) for i in range(2) for w in range(8)]
+    assert recs[9].status is SevaStatus.BLIND
+    assert recs[9].state == "" and len(recs[9].distribution) == 0
+    assert "X missing in 100% of samples" in recs[9].reasons
+    # every other window is diagnosed exactly as diagnose() does on gap-free data: a window
+    # only sees its own samples (static models), so filling window 1 cannot change the others
+    filled = ch["X"].copy()
+    filled[1, 25:50] = ch["CV"][1, 25:50]
+    ref = diag.diagnose(_make({**ch, "X": filled}))["proba"].values.reshape(16, -1)
+    others = [k for k in range(16) if k != 9]
+    got = np.array([[recs[k].distribution[c] for c in diag.classes_] for k in others])
+    np.testing.assert_array_equal(got, ref[others])
+    assert all(recs[k].status is not SevaStatus.BLIND for k in others)
+
+
+def test_infinite_novelty_counts_as_novel(rng):
+    ref = NoveltyReference().fit(rng.normal(size=(200, 2)))
+    score = ref.score(np.array([[0.0, 0.0], [np.inf, 0.0], [0.0, -np.inf]]))
+    assert score[0] < 1 and np.isinf(score[1:]).all()
+    with pytest.raises(ValueError, match="NaN"):
+        ref.score(np.array([[np.nan, 0.0]]))
+    runs = make_dataset(_runs(rng, 2))
+    diag = _diagnosis(runs, [CONFIDENT_F2, CONFIDENT_F2])
+    diag["features"] = (("run", "feature"), np.array([[0.0, 0.0], [np.inf, 0.0]]))
+    recs = records_from_diagnosis(diag, runs, feature_reference=ref)
+    assert recs[0].status is SevaStatus.BLURRED
+    assert recs[1].feature_novelty == np.inf  # infinitely remote, by construction
+    assert recs[1].status is SevaStatus.DAZZLED
+    assert any("unlike training" in s for s in recs[1].reasons)

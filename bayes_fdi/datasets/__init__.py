@@ -1,25 +1,32 @@
-"""Datasets: labelled actuator runs as an :class:`xarray.Dataset`.
+"""Datasets: labelled actuator runs (``run`` x ``time`` x channels) and the readers that make them.
 
-One dataset type is used throughout the project:
-
-- dims ``run`` and ``time`` (seconds, 1 Hz; the ``time`` coordinate holds seconds);
-- data variables ``CV``, ``P1``, ``P2``, ``T1``, ``X``, ``F`` of shape ``(run, time)``,
-  normalised as DABLib does (P/4 MPa, T1/200 °C, X in [0, 1] of closing, F/40 t/h);
-- per-run coordinates ``state`` (``"fn"`` or ``"f1"`` .. ``"f19"``), ``strength`` (signed, as the
-  benchmark's fault vector), ``onset`` (s), ``profile`` (``"abrupt"`` or ``"incipient"``) and
-  ``ramp`` (s, duration of an incipient ramp to full strength; 0 for abrupt);
-- attributes ``campaign``, ``seed`` and ``bayes_fdi_version``.
-
-Datasets are saved and loaded as netCDF (``.nc``).
+- `bayes_fdi.datasets.format`: the one dataset type used throughout the project (dims ``run`` and
+  ``time``, channels ``CV, P1, P2, T1, X, F`` normalised as DABLib does, per-run labels), with
+  `make_dataset`, `validate_dataset`, `save_dataset` and `load_dataset` (netCDF).
+- `bayes_fdi.datasets.lublin`: the real Lublin hour shipped with the package, the benchmark's day
+  files and the table of the real fault events.
+- `bayes_fdi.datasets.readers`: recordings from CSV, MATLAB, netCDF and day files, in any declared
+  units, on the model's 1-s grid (`read_recording`).
+- `bayes_fdi.datasets.plotting`: signal plots of chosen runs (the ``bayes-fdi plot`` command).
 """
 
-from __future__ import annotations
-
-import os
-from collections.abc import Iterable, Sequence
-
-import numpy as np
-import xarray as xr
+from bayes_fdi.datasets.format import (
+    CHANNELS,
+    INPUT_CHANNELS,
+    OUTPUT_CHANNELS,
+    STATES,
+    load_dataset,
+    make_dataset,
+    save_dataset,
+    validate_dataset,
+)
+from bayes_fdi.datasets.lublin import (
+    LUBLIN_FAULT_EVENTS,
+    find_gaps,
+    load_lublin_day,
+    load_lublin_example,
+)
+from bayes_fdi.datasets.readers import read_recording
 
 __all__ = [
     "CHANNELS",
@@ -32,185 +39,7 @@ __all__ = [
     "load_lublin_day",
     "load_lublin_example",
     "make_dataset",
+    "read_recording",
     "save_dataset",
     "validate_dataset",
 ]
-
-INPUT_CHANNELS: tuple[str, ...] = ("CV", "P1", "P2", "T1")
-OUTPUT_CHANNELS: tuple[str, ...] = ("X", "F")
-CHANNELS: tuple[str, ...] = INPUT_CHANNELS + OUTPUT_CHANNELS
-STATES: tuple[str, ...] = ("fn", *(f"f{i}" for i in range(1, 20)))
-PROFILES: tuple[str, ...] = ("abrupt", "incipient")
-RUN_COORDS: tuple[str, ...] = ("state", "strength", "onset", "profile", "ramp")
-
-
-def _version() -> str:
-    from bayes_fdi import __version__
-
-    return __version__
-
-
-def make_dataset(
-    channels: dict[str, np.ndarray],
-    *,
-    state: Sequence[str] | str = "fn",
-    strength: Sequence[float] | float = 0.0,
-    onset: Sequence[float] | float = 0.0,
-    profile: Sequence[str] | str = "abrupt",
-    ramp: Sequence[float] | float = 0.0,
-    campaign: str = "",
-    seed: int | None = None,
-    attrs: dict | None = None,
-    allow_nan: bool = False,
-) -> xr.Dataset:
-    """Build a dataset in the project's format from ``(run, time)`` arrays.
-
-    Parameters
-    ----------
-    channels
-        Mapping of channel name (a subset of ``CHANNELS``) to arrays of shape
-        ``(n_runs, n_times)``, or ``(n_times,)`` for a single run.
-    state, strength, onset, profile, ramp
-        Per-run labels; a scalar applies to every run.
-    campaign, seed, attrs
-        Stored as dataset attributes (with the package version).
-    allow_nan
-        Whether NaN gaps are allowed in the channels (as in :func:`validate_dataset`).
-
-    Returns
-    -------
-    xarray.Dataset
-        A validated dataset.
-    """
-    if not channels:
-        raise ValueError("make_dataset needs at least one channel")
-    unknown = set(channels) - set(CHANNELS)
-    if unknown:
-        raise ValueError(f"unknown channel(s) {sorted(unknown)}; known channels are {CHANNELS}")
-    arrays = {}
-    for name, values in channels.items():
-        arr = np.asarray(values, dtype=np.float64)
-        if arr.ndim == 1:
-            arr = arr[None, :]
-        if arr.ndim != 2:
-            raise ValueError(f"channel {name!r} must be 1-D or 2-D (run, time), got {arr.shape}")
-        arrays[name] = arr
-    shapes = {a.shape for a in arrays.values()}
-    if len(shapes) != 1:
-        found = {k: v.shape for k, v in arrays.items()}
-        raise ValueError(f"channels have different shapes: {found}")
-    n_runs, n_times = shapes.pop()
-
-    def per_run(value, name, dtype):
-        if isinstance(value, str) or np.ndim(value) == 0:
-            return np.full(n_runs, value, dtype=dtype)
-        out = np.asarray(value, dtype=dtype)
-        if out.shape != (n_runs,):
-            raise ValueError(f"{name} must be a scalar or have one entry per run ({n_runs})")
-        return out
-
-    coords = {
-        "run": np.arange(n_runs),
-        "time": np.arange(n_times, dtype=np.float64),
-        "state": ("run", per_run(state, "state", object).astype(str)),
-        "strength": ("run", per_run(strength, "strength", np.float64)),
-        "onset": ("run", per_run(onset, "onset", np.float64)),
-        "profile": ("run", per_run(profile, "profile", object).astype(str)),
-        "ramp": ("run", per_run(ramp, "ramp", np.float64)),
-    }
-    ds = xr.Dataset(
-        {name: (("run", "time"), arr) for name, arr in arrays.items()},
-        coords=coords,
-        attrs={
-            "campaign": campaign,
-            "seed": -1 if seed is None else int(seed),
-            "bayes_fdi_version": _version(),
-            **(attrs or {}),
-        },
-    )
-    validate_dataset(ds, require=(), allow_nan=allow_nan)
-    return ds
-
-
-def validate_dataset(
-    ds: xr.Dataset, require: Iterable[str] = INPUT_CHANNELS, *, allow_nan: bool = False
-) -> xr.Dataset:
-    """Check that ``ds`` is in the project's format; raise ``ValueError`` naming the problem.
-
-    Parameters
-    ----------
-    ds
-        The dataset to check.
-    require
-        Channels that must be present.
-    allow_nan
-        Whether NaN gaps are allowed in the channels (real plant records have them).
-
-    Returns
-    -------
-    xarray.Dataset
-        ``ds`` itself, unchanged.
-    """
-    if not isinstance(ds, xr.Dataset):
-        raise ValueError(f"expected an xarray.Dataset, got {type(ds).__name__}")
-    for dim in ("run", "time"):
-        if dim not in ds.dims:
-            raise ValueError(f"dataset has no {dim!r} dimension (dims are {tuple(ds.dims)})")
-    missing = [c for c in require if c not in ds.data_vars]
-    if missing:
-        raise ValueError(f"dataset lacks channel(s) {missing}")
-    unknown = [v for v in ds.data_vars if v not in CHANNELS]
-    if unknown:
-        raise ValueError(f"unknown channel(s) {unknown}; known channels are {CHANNELS}")
-    for name in ds.data_vars:
-        if ds[name].dims != ("run", "time"):
-            raise ValueError(f"channel {name!r} has dims {ds[name].dims}, expected ('run', 'time')")
-        values = ds[name].values
-        if not np.issubdtype(values.dtype, np.number):
-            raise ValueError(f"channel {name!r} is not numeric (dtype {values.dtype})")
-        if np.isinf(values).any():
-            raise ValueError(f"channel {name!r} contains inf")
-        if not allow_nan and np.isnan(values).any():
-            raise ValueError(
-                f"channel {name!r} contains {int(np.isnan(values).sum())} NaN value(s)"
-            )
-    if "state" in ds.coords:
-        bad = sorted(set(map(str, ds["state"].values)) - set(STATES))
-        if bad:
-            raise ValueError(f"unknown state label(s) {bad}; states are fn, f1..f19")
-    if "profile" in ds.coords:
-        bad = sorted(set(map(str, ds["profile"].values)) - set(PROFILES))
-        if bad:
-            raise ValueError(f"unknown profile(s) {bad}; profiles are {PROFILES}")
-    return ds
-
-
-def save_dataset(ds: xr.Dataset, path: str | os.PathLike) -> None:
-    """Save a dataset to netCDF (``.nc``); :func:`load_dataset` reads it back exactly."""
-    validate_dataset(ds, require=(), allow_nan=True)
-    encoding = {name: {"zlib": True, "complevel": 4} for name in ds.data_vars}
-    ds.to_netcdf(path, engine="netcdf4", encoding=encoding)
-
-
-def load_dataset(path: str | os.PathLike) -> xr.Dataset:
-    """Load a dataset saved by :func:`save_dataset` (fully into memory) and validate it."""
-    try:
-        with xr.open_dataset(path, engine="netcdf4") as opened:
-            ds = opened.load()
-    except FileNotFoundError:
-        raise
-    except Exception as exc:  # netCDF4 raises OSError / RuntimeError variants
-        raise ValueError(f"cannot read dataset {os.fspath(path)!r}: {exc}") from exc
-    for name in ("state", "profile"):
-        if name in ds.coords:
-            ds = ds.assign_coords({name: ("run", ds[name].values.astype(str))})
-    return validate_dataset(ds, require=(), allow_nan=True)
-
-
-# Real plant data (defined in their own module, which builds on the functions above).
-from bayes_fdi.datasets.lublin import (  # noqa: E402
-    LUBLIN_FAULT_EVENTS,
-    find_gaps,
-    load_lublin_day,
-    load_lublin_example,
-)

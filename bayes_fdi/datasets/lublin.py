@@ -34,7 +34,7 @@ from typing import NamedTuple
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.datasets import CHANNELS, make_dataset
+from bayes_fdi.datasets.format import CHANNELS, make_dataset
 
 __all__ = [
     "ACTUATOR_COLUMNS",

@@ -7,7 +7,7 @@ re-estimation (``method="em"``); ``load`` restores a model written by ``.save``.
 
 from bayes_fdi.rvm.classification import RVC
 from bayes_fdi.rvm.kernels import RBF, Kernel, Linear, Polynomial, Product, Scaled, Sum
-from bayes_fdi.rvm.persistence import load
+from bayes_fdi.rvm.loading import load
 from bayes_fdi.rvm.regression import RVR
 from bayes_fdi.rvm.sparse_bayes import NumericalWarning, SBLResult
 

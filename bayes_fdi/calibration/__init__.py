@@ -1,0 +1,64 @@
+"""Calibration of probabilistic diagnoses and of the normal models' predictive intervals.
+
+A diagnoser is *calibrated* when its stated probabilities are frequencies: among the runs it
+diagnoses as ``f2`` with probability 0.8, about 80 % really are ``f2``. A normal model is
+calibrated when its 95 % predictive intervals contain about 95 % of fault-free measurements.
+
+- `bayes_fdi.calibration.metrics`: ECE (top-label, classwise, bootstrap intervals, noise floor),
+  log loss, Brier score, reliability diagrams.
+- `bayes_fdi.calibration.recalibration`: temperature, vector and Dirichlet scaling, and the
+  cross-validated log loss that chooses between them.
+- `bayes_fdi.calibration.nodes`: binary calibration of each node of a hierarchical classifier.
+- `bayes_fdi.calibration.intervals`: coverage, PIT and CRPS of Gaussian predictive distributions
+  (and `StdScaler`, which recalibrates them).
+- `bayes_fdi.calibration.report`: the calibration report (``bayes-fdi calibration-report``),
+  built from `bayes_fdi.calibration.summaries` (its numbers), `.recalibrator_selection`
+  (cross-fitted recalibration and the choice of recalibrator) and `.report_markdown` (its text).
+"""
+
+from bayes_fdi.calibration.intervals import (
+    DEFAULT_LEVELS,
+    CoverageResult,
+    StdScaler,
+    crps_gaussian,
+    interval_coverage,
+    pit_histogram,
+    pit_values,
+    plot_pit_histogram,
+)
+from bayes_fdi.calibration.metrics import (
+    ECEResult,
+    brier,
+    expected_calibration_error,
+    log_loss,
+    reliability_diagram,
+)
+from bayes_fdi.calibration.nodes import NodeCalibration, node_calibration
+from bayes_fdi.calibration.recalibration import (
+    DEFAULT_REG_GRID,
+    DirichletScaler,
+    TemperatureScaler,
+    cross_val_log_loss,
+)
+
+__all__ = [
+    "DEFAULT_LEVELS",
+    "DEFAULT_REG_GRID",
+    "CoverageResult",
+    "DirichletScaler",
+    "ECEResult",
+    "NodeCalibration",
+    "StdScaler",
+    "TemperatureScaler",
+    "brier",
+    "cross_val_log_loss",
+    "crps_gaussian",
+    "expected_calibration_error",
+    "interval_coverage",
+    "log_loss",
+    "node_calibration",
+    "pit_histogram",
+    "pit_values",
+    "plot_pit_histogram",
+    "reliability_diagram",
+]
