@@ -207,3 +207,20 @@ def test_nan_decisions_are_low():
     sig = decision_signals(stream, "f1")
     np.testing.assert_array_equal(sig.dd, [0, 1, 0, 0])
     np.testing.assert_array_equal(sig.pid, [0, 1, 0, 0])
+
+
+def test_timeline_axes_use_the_recordings_own_ranges(double):
+    """A Lublin Actuator-1 record is drawn in its own ranges, anything else in DABLib's."""
+    from bayes_fdi.datasets.lublin import ACTUATOR_RANGES
+
+    rec = simulate(benchmark_inputs(n_runs=1, duration=120), seed=3)
+    stream = double.run(rec)
+    fig = plot_timeline(stream, rec)
+    assert fig.axes[0].get_ylabel() == "X [%]" and fig.axes[1].get_ylabel() == "F [t/h]"
+    line = fig.axes[1].get_lines()[0]  # the measured flow: F' x 40 t/h
+    np.testing.assert_allclose(line.get_ydata(), rec["F"].values[0] * 40.0)
+    rec1 = rec.assign_attrs(actuator=1)
+    fig1 = plot_timeline(stream, rec1)
+    factor, unit = ACTUATOR_RANGES[1]["F"]
+    assert fig1.axes[1].get_ylabel() == f"F [{unit.replace('m3/h', 'm³/h')}]"
+    np.testing.assert_allclose(fig1.axes[1].get_lines()[0].get_ydata(), rec["F"].values[0] * factor)

@@ -18,6 +18,7 @@ import xarray as xr
 from bayes_fdi.atomic import atomic_path, check_output_path
 from bayes_fdi.cli_arguments import UsageError, input_file, output_file, positive_int
 from bayes_fdi.datasets import CHANNELS, load_dataset, validate_dataset
+from bayes_fdi.datasets.units import DABLIB_RANGES
 
 __all__ = ["configure_parser", "physical_range", "plot_runs", "run_from_cli", "select_runs"]
 
@@ -29,16 +30,6 @@ CHANNEL_NAMES: dict[str, str] = {
     "T1": "T1, temperature",
     "X": "X, stem position",
     "F": "F, flow",
-}
-#: DABLib's ranges (the normalisation of simulated data and of Lublin Actuator 3): physical value
-#: = normalised value x factor, in the unit given.
-DABLIB_RANGES: dict[str, tuple[float, str]] = {
-    "CV": (100.0, "%"),
-    "P1": (4.0, "MPa"),
-    "P2": (4.0, "MPa"),
-    "T1": (200.0, "°C"),
-    "X": (100.0, "%"),
-    "F": (40.0, "t/h"),
 }
 #: Axis labels of the normalised channels.
 CHANNEL_LABELS: dict[str, str] = {

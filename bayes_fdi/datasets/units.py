@@ -14,8 +14,18 @@ from typing import Any
 
 from bayes_fdi.datasets.format import CHANNELS
 
-__all__ = ["PHYSICAL_UNITS", "UNITS", "normalise", "parse_units", "to_physical"]
+__all__ = ["DABLIB_RANGES", "PHYSICAL_UNITS", "UNITS", "normalise", "parse_units", "to_physical"]
 
+#: DABLib's ranges (the normalisation of simulated data and of Lublin Actuator 3) for plots:
+#: physical value = normalised value x factor, in the unit given.
+DABLIB_RANGES: dict[str, tuple[float, str]] = {
+    "CV": (100.0, "%"),
+    "P1": (4.0, "MPa"),
+    "P2": (4.0, "MPa"),
+    "T1": (200.0, "°C"),
+    "X": (100.0, "%"),
+    "F": (40.0, "t/h"),
+}
 #: The physical units of ``units="physical"``.
 PHYSICAL_UNITS: dict[str, str] = {
     "CV": "%",

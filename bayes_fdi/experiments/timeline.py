@@ -23,18 +23,10 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi import atomic
+from bayes_fdi.datasets.plotting import physical_range
 
-__all__ = ["PHYSICAL_UNITS", "STATUS_COLOURS", "plot_timeline", "save_figure"]
+__all__ = ["STATUS_COLOURS", "plot_timeline", "save_figure"]
 
-#: Normalised channel -> (factor to physical units, unit), as DABLib normalises them.
-PHYSICAL_UNITS: dict[str, tuple[float, str]] = {
-    "CV": (100.0, "%"),
-    "P1": (4.0, "MPa"),
-    "P2": (4.0, "MPa"),
-    "T1": (200.0, "°C"),
-    "X": (100.0, "% of stroke"),
-    "F": (40.0, "t/h"),
-}
 #: Colours of the SEVA statuses in the status strip.
 STATUS_COLOURS: dict[str, str] = {
     "CLEAR": "#2ca02c",
@@ -89,8 +81,9 @@ def _line(ax: Any, t: np.ndarray, values: np.ndarray, w: int, **kw: Any) -> None
         ax.fill_between(t, lo, hi, color=kw.get("color"), alpha=0.2, lw=0)
 
 
-def _band(ax: Any, t: np.ndarray, w: int, stream: xr.Dataset, channel: str, measured):
-    factor, unit = PHYSICAL_UNITS[channel]
+def _band(ax: Any, t: np.ndarray, w: int, stream: xr.Dataset, channel: str, recording):
+    factor, unit = physical_range(recording, channel)
+    measured = recording[channel].values
     _line(ax, t, measured * factor, w, lw=0.6, color="k", label=f"{channel}' measured")
     mean_name, std_name = f"{channel}_hat", f"{channel}_hat_std"
     if mean_name in stream and std_name in stream:
@@ -171,19 +164,24 @@ def plot_timeline(
     w = _bin_width(t.size)
     tw = _reduce(tt, w)[0]
     for ax, channel in zip(axes[:2], ("X", "F"), strict=True):
-        _band(ax, tw, w, stream, channel, recording[channel].values)
+        _band(ax, tw, w, stream, channel, recording)
     if w > 1:
         axes[0].set_title(f"signals: mean per {w} s, min-max shaded", fontsize=8, loc="left")
     ax = axes[2]
-    _line(ax, tw, recording["CV"].values * 100, w, lw=0.6, color="C2", label="CV [%]")
-    ax.set_ylabel("CV [%]")
+    cv_factor, cv_unit = physical_range(recording, "CV")
+    _line(ax, tw, recording["CV"].values * cv_factor, w, lw=0.6, color="C2",
+          label=f"CV [{cv_unit}]")  # fmt: skip
+    ax.set_ylabel(f"CV [{cv_unit}]")
     twin = ax.twinx()
     for name, colour in (("P1", "C4"), ("P2", "C5")):
-        _line(twin, tw, recording[name].values * 4.0, w, lw=0.5, color=colour,
-              label=f"{name}' [MPa]")  # fmt: skip
-    twin.set_ylabel("P [MPa]")
-    t1 = recording["T1"].values * 200.0
-    ax.set_title(f"T1' {np.nanmin(t1):.1f} .. {np.nanmax(t1):.1f} °C", fontsize=8, loc="right")
+        factor, p_unit = physical_range(recording, name)
+        _line(twin, tw, recording[name].values * factor, w, lw=0.5, color=colour,
+              label=f"{name} [{p_unit}]")  # fmt: skip
+    twin.set_ylabel(f"P [{p_unit}]")
+    t1_factor, t1_unit = physical_range(recording, "T1")
+    t1 = recording["T1"].values * t1_factor
+    t1_text = f"T1 {np.nanmin(t1):.1f} .. {np.nanmax(t1):.1f} {t1_unit}"
+    ax.set_title(t1_text, fontsize=8, loc="right")
     lines = ax.get_lines() + twin.get_lines()
     ax.legend(lines, [ln.get_label() for ln in lines], loc="upper left", fontsize=7, ncol=3)
 
