@@ -7,6 +7,12 @@ wires them together. A command module provides two functions::
     run_from_cli(args: argparse.Namespace) -> int
 
 and is imported only when its command runs (``--help`` of the top level stays fast).
+
+Error conventions (every command): exit status 2 for a bad command line (an argparse error, or a
+:class:`~bayes_fdi.cli_arguments.UsageError` raised by the command), 1 for an error while the
+command runs, 130 when interrupted (Ctrl-C); the error is one line on stderr,
+``bayes-fdi COMMAND: error: MESSAGE``, with no traceback unless ``--debug`` is given (before or
+after the command name).
 """
 
 from __future__ import annotations
@@ -15,6 +21,8 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+
+from bayes_fdi.cli_arguments import UsageError
 
 #: command name -> (module path, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -28,8 +36,17 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "bayes_fdi.calibration.report",
         "write a calibration report for a diagnoser on a test dataset",
     ),
+    "benchmark": (
+        "bayes_fdi.experiments.benchmark",
+        "score the online diagnoser on the DAMADICS benchmark's 44 scenarios (PICalc indices)",
+    ),
     "rvm-demo": ("bayes_fdi.rvm.demo", "fit an RVM on a small sinc problem and print it"),
+    "fit": ("bayes_fdi.experiments.model_fitting", "fit an online diagnoser and save it to a file"),
+    "diagnose": ("bayes_fdi.experiments.recording_diagnosis", "diagnose recordings, 1 s at a time"),
 }
+
+
+_DEBUG_HELP = "on an error, show the full traceback instead of a one-line message"
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
@@ -41,9 +58,11 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         description="Bayesian fault detection and isolation for SEVA pneumatic actuators.",
     )
     parser.add_argument("--version", action="version", version=f"bayes_fdi {__version__}")
+    parser.add_argument("--debug", action="store_true", help=_DEBUG_HELP)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, (module_path, help_text) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
+        p.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=_DEBUG_HELP)
         if name == command:
             module = importlib.import_module(module_path)
             module.configure_parser(p)
@@ -51,16 +70,52 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (an OSError as 'reason: path')."""
+    if isinstance(exc, OSError) and exc.strerror:
+        text = exc.strerror + (f": {exc.filename!r}" if exc.filename else "")
+    else:
+        text = str(exc) or type(exc).__name__
+        if isinstance(exc, KeyError):  # str(KeyError) is the repr of the key
+            text = f"missing key {text}"
+    return " ".join(text.split())
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``bayes-fdi``."""
+    """Entry point of ``bayes-fdi``; returns the exit status (see the module docstring)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     command = next((a for a in argv if a in COMMANDS), None)
     parser = build_parser(command)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse: --help/--version (0) or a usage error (2)
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
     if args.command is None:
         parser.print_help()
         return 2
-    return int(args._module.run_from_cli(args) or 0)
+    prefix = f"bayes-fdi {args.command}"
+    try:
+        return int(args._module.run_from_cli(args) or 0)
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print(f"{prefix}: interrupted", file=sys.stderr)
+        return 130
+    except SystemExit as exc:
+        if isinstance(exc.code, int | None) or args.debug:
+            raise
+        print(f"{prefix}: error: {' '.join(str(exc.code).split())}", file=sys.stderr)
+        return 2
+    except UsageError as exc:
+        if args.debug:
+            raise
+        print(f"{prefix}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except Exception as exc:
+        if args.debug:
+            raise
+        print(f"{prefix}: error: {_one_line(exc)} (--debug shows the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bayes_fdi.actuator import NOISE_STD, Fault, benchmark_inputs, inject_faults, simulate
+from bayes_fdi.actuator import (
+    NOISE_STD,
+    Fault,
+    benchmark_inputs,
+    inject_faults,
+    simulate,
+    simulate_replicas,
+)
 from bayes_fdi.datasets import make_dataset
 
 
@@ -115,6 +122,21 @@ def test_same_seed_same_data_and_noise_independent_of_the_batch():
     alone = simulate(inputs.isel(run=[2]), seed=11)
     np.testing.assert_array_equal(alone.X.values[0], a.X.values[2])
     np.testing.assert_array_equal(alone.F.values[0], a.F.values[2])
+
+
+def test_replicas_equal_separate_simulations_also_on_the_rails():
+    # f1 (clogging) and f10 big hold X and F on the rails for most of the run: there, adding
+    # noise before the clip (simulate) and after a clip would differ, so equality checks that
+    # the replicas add their noise to the unclipped outputs as simulate does.
+    inputs = benchmark_inputs(n_runs=3, duration=200, vary=True, seed=5)
+    faults = [None, Fault("f1", 1.0, 50.0), Fault("f10", 1.0, 50.0)]
+    replicas = simulate_replicas(inputs, faults, seeds=[7, 8])
+    for seed, got in zip([7, 8], replicas, strict=True):
+        xr.testing.assert_identical(got, simulate(inputs, faults, seed=seed))
+    with pytest.raises(ValueError, match="seed must be an integer"):
+        simulate_replicas(inputs, faults, seeds=[-1])
+    with pytest.raises(ValueError, match="at least one seed"):
+        simulate_replicas(inputs, faults, seeds=[])
 
 
 @pytest.mark.parametrize(

@@ -63,6 +63,7 @@ def test_ece_of_calibrated_sampler_is_sampling_noise_only(rng, strategy):
     noise = _expected_ece_calibrated(res)
     # the binned ECE of a calibrated model is its sampling noise, ~ sqrt(2/pi) sigma per bin
     assert res.value < 3 * noise
+    # and below twice its worst case: sqrt(2/pi) sqrt(15 bins * 1/4 / 20 000) = 0.011
     assert res.value < 0.02
     # the basic interval reaches down to (about) zero, the true ECE
     assert res.ci_low <= noise
@@ -80,6 +81,8 @@ def test_noise_floor_is_the_mean_ece_of_calibrated_models(rng):
         r = expected_calibration_error(y, p, n_bins=10)
         eces.append(r.value)
         floors.append(r.noise_floor)
+    # one calibrated ECE (10 bins of ~200 runs) is a sum of half-normal bin gaps: relative sd
+    # about sqrt(pi/2 - 1) / sqrt(10) = 0.24; the mean of 40 has 0.038, so 0.12 is 3 sd
     assert np.mean(eces) == pytest.approx(np.mean(floors), rel=0.12)
 
 
@@ -95,7 +98,8 @@ def test_basic_bootstrap_interval_covers_the_true_ece(rng):
         hits_basic += basic.ci_low <= 0.1 <= basic.ci_high
         hits_pct += pct.ci_low <= 0.1 <= pct.ci_high
         assert pct.value == basic.value
-    # nominal 95 %: allow for Monte-Carlo error of 40 replicates
+    # nominal 95 %: the hit rate of 40 replicates has sd sqrt(0.95 * 0.05 / 40) = 0.034, so
+    # 0.85 is 2.9 sd below nominal
     assert hits_basic / reps >= 0.85
     assert hits_basic >= hits_pct
 
@@ -104,9 +108,12 @@ def test_ece_of_constant_overconfidence_is_the_shift(rng):
     conf = rng.uniform(0.6, 1.0, size=100_000)
     y, p = _top_label_sample(rng, conf.size, 3, conf, conf - 0.1)
     res = expected_calibration_error(y, p, n_bins=10, n_bootstrap=100, random_state=0)
+    # conf ~ U(0.6, 1) fills 4 bins of 25 000 runs; each bin's gap has sd
+    # sqrt(0.8 * 0.2 / 25 000) = 0.0025, their weighted mean 0.0013: 0.006 is 4.6 sd
     assert res.value == pytest.approx(0.1, abs=0.006)
     assert res.ci_low < 0.1 < res.ci_high or abs(res.value - 0.1) < 0.004
-    # every non-empty bin is over-confident by ~0.1, so MCE ~ 0.1 too
+    # every non-empty bin is over-confident by ~0.1, so MCE ~ 0.1 too (the largest of 4 bin
+    # gaps of sd 0.0025: 0.03 is 12 sd, it only has to tell 0.1 from other gaps)
     assert res.mce == pytest.approx(0.1, abs=0.03)
 
 
@@ -117,6 +124,7 @@ def test_ece_of_one_signed_miscalibration_is_mean_gap(rng, strategy, n_bins):
     conf = rng.uniform(0.6, 1.0, size=200_000)
     y, p = _top_label_sample(rng, conf.size, 5, conf, conf**2)
     res = expected_calibration_error(y, p, n_bins=n_bins, strategy=strategy)
+    # sampling sd of the binned gap sum: sqrt(E[c^2 (1 - c^2)] / 200 000) = 0.001; 0.004 = 4 sd
     assert res.value == pytest.approx(0.8 - 0.784 / 1.2, abs=0.004)
 
 
@@ -146,10 +154,12 @@ def test_uniform_bins_match_sklearn_calibration_curve(rng):
     prob_true, prob_pred = calibration_curve(y, p1, n_bins=10, strategy="uniform")
     counts = res.bin_counts[1]
     ok = counts > 0
+    # the same bin means (scikit-learn's own, see metrics._sklearn_reliability): rounding only
     np.testing.assert_allclose(res.bin_accuracy[1][ok], prob_true, rtol=1e-12)
     np.testing.assert_allclose(res.bin_confidence[1][ok], prob_pred, rtol=1e-12)
     ece_sklearn = np.sum(counts[ok] / counts.sum() * np.abs(prob_true - prob_pred))
-    # for two classes the classwise ECE of class 0 equals that of class 1 (bins mirror)
+    # for two classes the classwise ECE of class 0 equals that of class 1 (bins mirror); the
+    # mirrored bins of class 0 are summed in another order, hence rounding, far inside 1e-9
     assert res.value == pytest.approx(ece_sklearn, rel=1e-9)
 
 
@@ -161,7 +171,7 @@ def test_classwise_vs_top_label_on_two_classes(rng):
     p = np.column_stack([1 - p1, p1])
     top = expected_calibration_error(y, p, n_bins=10)
     cw = expected_calibration_error(y, p, n_bins=10, classwise=True)
-    assert cw.value == pytest.approx(top.value, rel=1e-12)
+    assert cw.value == pytest.approx(top.value, rel=1e-12)  # same sums, another order
     # gaps that cancel in the top-label view but not per class:
     # p1 = 0.7 with P(y=1) = 0.8 (top-label gap +0.1), p1 = 0.3 with P(y=1) = 0.4 (gap -0.1)
     high = rng.random(n) < 0.5
@@ -170,6 +180,8 @@ def test_classwise_vs_top_label_on_two_classes(rng):
     p = np.column_stack([1 - p1, p1])
     top = expected_calibration_error(y, p, n_bins=10)
     cw = expected_calibration_error(y, p, n_bins=10, classwise=True)
+    # both kinds of run fall in the 0.7 bin, whose top-label gap is 0 in expectation with sd
+    # sqrt(0.24 / 40 000) = 0.0024 (0.01 = 4 sd); each class's gaps are 0.1 with the same sd
     assert top.value < 0.01
     assert cw.value == pytest.approx(0.1, abs=0.01)
     assert cw.bin_counts.shape == (2, 10)
@@ -188,7 +200,7 @@ def test_ece_string_labels_and_class_order(rng):
     names = np.array(["fn", "f1", "f2"])
     res_a = expected_calibration_error(names[y], p, classes=names, classwise=True)
     res_b = expected_calibration_error(y, p, classes=[0, 1, 2], classwise=True)
-    assert res_a.value == pytest.approx(res_b.value)
+    assert res_a.value == pytest.approx(res_b.value)  # the same numbers, labels renamed
     # default classes are the sorted labels, which would misalign these columns
     res_c = expected_calibration_error(names[y], p, classwise=True)
     assert res_c.value > res_a.value + 0.05
@@ -235,23 +247,31 @@ def test_temperature_scaling_recovers_known_temperature(rng):
     hot = np.exp((logits - logits.max(axis=1, keepdims=True)) / 0.5)
     hot /= hot.sum(axis=1, keepdims=True)
     ts = TemperatureScaler().fit(hot, y)
+    # maximum likelihood on 20 000 runs: the inverse temperature's standard error is about
+    # 1 / sqrt(n * Fisher information) ~ 0.5 %; 5 % is 10 se and still tells 2 from 1.5 or 2.5
     assert ts.temperature_ == pytest.approx(2.0, rel=0.05)
     assert ts.nll_after_ < ts.nll_before_
     q = ts.transform(hot)
     np.testing.assert_allclose(q.sum(axis=1), 1.0, atol=1e-12)
     np.testing.assert_array_equal(q.argmax(axis=1), hot.argmax(axis=1))
+    # T within 5 % of 2 moves a probability by at most ~0.25 * |log-odds| * 5 % < 0.02
     np.testing.assert_allclose(q, p_true, atol=0.02)
     before = expected_calibration_error(y, hot).value
     after = expected_calibration_error(y, q).value
+    # recalibrated: sampling noise only (worst case 0.011, as above); the hot model's ECE is
+    # an order of magnitude above it
     assert after < 0.02 < before
     # logits input gives the same temperature
     ts2 = TemperatureScaler(input="logits").fit(logits / 0.5, y)
+    # the same likelihood, minimised to Brent's tolerance 1e-8 in 1/T from another start
     assert ts2.temperature_ == pytest.approx(ts.temperature_, rel=1e-3)
 
 
 def test_temperature_of_calibrated_model_is_one(rng):
     y, p = _calibrated_sample(rng, 20_000, 4, concentration=0.5)
     ts = TemperatureScaler().fit(p, y)
+    # calibrated by construction: the MLE of T is 1 up to its standard error (~1 % on 20 000
+    # runs); 0.05 is 5 se
     assert ts.temperature_ == pytest.approx(1.0, abs=0.05)
 
 
@@ -309,11 +329,14 @@ def test_node_calibration_on_known_nodes(rng):
     res = node_calibration(nodes, x, y, n_bins=10)
     assert res[0].n_samples == n
     assert res[1].n_samples == int(right0.sum())
+    # calibrated node: sampling noise, at most sqrt(2/pi) sqrt(10 * 1/4 / 30 000) = 0.007;
+    # the slope-3 node is off by ~0.1 in its outer bins
     assert res[0].ece.value < 0.02
     assert res[1].ece.value > 0.05
     # log loss of the calibrated node ~ the conditional entropy E[H(sigmoid(x))]
     s = 1 / (1 + np.exp(-x[:, 0]))
     ent = -np.mean(s * np.log(s) + (1 - s) * np.log(1 - s))
+    # the mean of 30 000 log losses of sd ~0.4 has sd 0.0023: 0.01 is 4 sd
     assert res[0].log_loss == pytest.approx(ent, abs=0.01)
     assert res[2].n_samples == 0 and res[2].ece is None and np.isnan(res[2].brier)
 
@@ -357,6 +380,8 @@ def test_crps_closed_form_matches_monte_carlo(rng):
         x = mu + sigma * rng.normal(size=400_000)
         xp = mu + sigma * rng.normal(size=400_000)
         mc = np.mean(np.abs(x - y)) - 0.5 * np.mean(np.abs(x - xp))
+        # Monte Carlo with 400 000 draws: sd of the estimate about 1.2 sigma / sqrt(4e5)
+        # = 0.002 sigma; 0.01 sigma is 5 sd
         assert crps_gaussian(y, mu, sigma) == pytest.approx(mc, abs=0.01 * sigma)
     # std -> 0: absolute error
     assert crps_gaussian(1.0, 0.2, 1e-9) == pytest.approx(0.8, abs=1e-6)
@@ -404,6 +429,8 @@ def test_std_scaler_recovers_a_known_factor(rng, method):
     y = mean + true_std * rng.normal(size=n)
     stated = true_std / 1.6  # an over-confident model: every std 1.6 times too small
     sc = StdScaler(method=method).fit(y[: n // 2], mean[: n // 2], stated[: n // 2])
+    # a scale fitted on 20 000 standardised residuals: relative se 1/sqrt(2n) = 0.5 % (MLE),
+    # a few times that for the 95 % coverage quantile; 3 % covers both
     assert sc.scale_ == pytest.approx(1.6, rel=0.03)
     cov = interval_coverage(y[n // 2 :], mean[n // 2 :], sc.transform(stated[n // 2 :]))
     se = np.sqrt(cov.levels * (1 - cov.levels) / (n // 2))
@@ -429,6 +456,7 @@ def test_node_calibration_uses_the_nodes_own_scaling(rng):
     own = tree.node_probabilities(X)
     exact = node_calibration(tree.nodes_, X, y, p_right=lambda n, Z: own[:, n.index][_rows(n, y)])
     for a, b in zip(default, exact, strict=True):
+        # the same probabilities computed along two paths: equal up to rounding
         assert a.accuracy == pytest.approx(b.accuracy)
         assert a.log_loss == pytest.approx(b.log_loss)
     assert min(r.accuracy for r in default) > 0.95

@@ -78,7 +78,7 @@ def test_damadics_benchmark_file_lists_the_44_scenarios():
     }  # fmt: skip
     ramps = {s.state + "@" + str(int(s.ramp)) for s in faulty if s.profile == "incipient"}
     assert ramps == {
-        *(f"{f}@86400" for f in ("f2", "f3", "f5", "f6", "f9", "f11", "f18")),
+        *(f"{f}@84000" for f in ("f2", "f3", "f5", "f6", "f9", "f11", "f18")),
         "f4@3600", "f17@3600", "f13@900",
     }  # fmt: skip
     assert all(s.strength < 0 for s in faulty if s.state in ("f12", "f14", "f19"))

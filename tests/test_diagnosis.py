@@ -59,6 +59,8 @@ def test_end_to_end_small_campaign(data):
     assert list(diag.classes_) == sorted(OFFSETS)
     out = diag.diagnose(test)
     assert out.sizes["run"] == 30 and out.sizes["class"] == 5 and out.sizes["feature"] == 2
+    # offsets >= 0.03 apart against run means of noise sd 0.005 / sqrt(100) = 0.0005: the
+    # states are separable; 0.95 still allows one of the 30 runs to fall to a model error
     accuracy = float((out["state"].values == out["true_state"].values).mean())
     assert accuracy >= 0.95
     proba = out["proba"].values
@@ -74,6 +76,7 @@ def test_end_to_end_small_campaign(data):
     # Fault-free runs' mean residuals are near 0; f1's mean r1 is near its +0.04 offset.
     feats = out["features"].values
     is_f1 = out["true_state"].values == "f1"
+    # run means: noise sd 0.0005, plus the kernel ridge model's error of a few 1e-3 at most
     assert np.abs(feats[is_f1, 0] - 0.04).max() < 0.005
 
 
@@ -86,6 +89,8 @@ def test_svm_baseline_and_flat_classifier_plug_in(data):
     ).fit(normal, labelled)
     out = flat.diagnose(test)
     np.testing.assert_allclose(out["proba"].values.sum(axis=1), 1.0)
+    # a linear classifier on these (separable, not linearly separable in one step for all five
+    # states) features: at most 3 of the 30 runs wrong
     assert float((out["state"].values == out["true_state"].values).mean()) >= 0.9
 
 
@@ -108,6 +113,8 @@ def test_windowed_diagnosis_labels_pre_onset_windows_fn(rng):
     np.testing.assert_array_equal(out["window_start"].values, [0, 25, 50, 75])
     np.testing.assert_array_equal(out["window_end"].values, [25, 50, 75, 100])
     pred = out["state"].values
+    # windows of 25 samples: run-mean noise 0.005 / 5 = 0.001 against offsets >= 0.03; 0.9
+    # allows 3 of the 30 windows on either side of the onset to fall to a model error
     assert (pred[:, :2] == "fn").mean() >= 0.9
     assert (pred[:, 2:] == test["state"].values[:, None]).mean() >= 0.9
     np.testing.assert_allclose(out["proba"].values.sum(axis=-1), 1.0)

@@ -52,8 +52,11 @@ def test_rvm_pipeline_on_simulated_campaign(campaign):
     diag = FaultDiagnoser(RVR(kernel="rbf", width=0.3), random_state=0).fit(normal, train)
     out = diag.diagnose(test)
     accuracy = check_output(diag, out, test)
+    # these six states are the ones the two features separate (see docs/reproduce.md), but
+    # with 6 training runs of 200 s per state the tree is rough: at most 3 of 36 runs wrong
     assert accuracy >= 0.9
-    # Fault-free residuals are small against the predictive std (the model fits normal data).
+    # Fault-free residuals are small against the predictive std (the model fits normal data):
+    # a calibrated model gives an RMS of 1; 3 allows for the width fixed away from the optimum
     fn = out.isel(run=np.flatnonzero(out["true_state"].values == "fn"))
     assert float(np.sqrt(np.mean(fn["z1"].values ** 2))) < 3.0
     assert diag.classifier_.export_text().startswith("RVM1: ")
@@ -63,4 +66,4 @@ def test_svm_baseline_on_simulated_campaign(campaign):
     normal, train, test = campaign
     diag = svm_fault_diagnoser(max_train_samples=600).fit(normal, train)
     accuracy = check_output(diag, diag.diagnose(test), test)
-    assert accuracy >= 0.9
+    assert accuracy >= 0.9  # as for the RVM pipeline above

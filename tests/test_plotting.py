@@ -34,12 +34,13 @@ def test_one_panel_per_requested_channel(ds):
     fig = plot_runs(ds, runs=[0, 2], channels=["X", "F"])
     axes = fig.get_axes()
     assert len(axes) == 2
-    assert [a.get_ylabel().split("'")[0] for a in axes] == ["X", "F"]
-    for a, c in zip(axes, ["X", "F"], strict=True):
+    # physical units: X in % (x 100), F in t/h (x 40), DABLib's ranges
+    assert [a.get_ylabel() for a in axes] == ["X, stem position [%]", "F, flow [t/h]"]
+    for a, c, factor in zip(axes, ["X", "F"], [100.0, 40.0], strict=True):
         lines = a.get_lines()
         assert len(lines) == 2
-        np.testing.assert_array_equal(lines[0].get_ydata(), ds[c].values[0])
-        np.testing.assert_array_equal(lines[1].get_ydata(), ds[c].values[2])
+        np.testing.assert_array_equal(lines[0].get_ydata(), ds[c].values[0] * factor)
+        np.testing.assert_array_equal(lines[1].get_ydata(), ds[c].values[2] * factor)
         np.testing.assert_array_equal(lines[1].get_xdata(), np.arange(60.0))
     assert "f1 (+0.80)" in axes[0].get_legend().get_texts()[1].get_text()
     plt.close(fig)
@@ -93,3 +94,20 @@ def test_cli_errors_are_reported(ds, tmp_path, capsys):
     save_dataset(ds, tmp_path / "d.nc")
     assert main(["plot", str(tmp_path / "d.nc"), "--runs", "9"]) == 2
     assert "run 9 out of range" in capsys.readouterr().err
+
+
+def test_units_normalised_and_actuator_ranges(ds):
+    fig = plot_runs(ds, channels=["P1"], units="normalised")
+    np.testing.assert_array_equal(fig.get_axes()[0].get_lines()[0].get_ydata(), ds["P1"].values[0])
+    plt.close(fig)
+    act1 = ds.assign_attrs(actuator=1)  # Lublin Actuator 1: P over 0-1000 kPa
+    fig = plot_runs(act1, channels=["P1"])
+    assert fig.get_axes()[0].get_ylabel() == "P1, inlet pressure [kPa]"
+    np.testing.assert_array_equal(
+        fig.get_axes()[0].get_lines()[0].get_ydata(), ds["P1"].values[0] * 1000.0
+    )
+    plt.close(fig)
+    fig, ax = plt.subplots()
+    with pytest.raises(ValueError, match="drawn normalised"):
+        plot_runs(ds, ax=ax, units="physical")
+    plt.close(fig)

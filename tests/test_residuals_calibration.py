@@ -73,7 +73,8 @@ def test_calibrated_intervals_reach_nominal_coverage(heavy, seed):
     for name in ("X", "F"):
         a_raw, cov_raw = coverage(raw.predict(test), test, name)
         a_cal, cov_cal = coverage(cal.predict(test), test, name)
-        # 95 % coverage of the held-out runs within a binomial tolerance (independent noise)
+        # 95 % coverage of the held-out runs within a binomial tolerance (independent noise;
+        # 4 se) plus 0.01 for the factors fitted on 24 training runs (their own se ~0.5 %)
         assert abs(cov_cal[-1] - 0.95) < binomial_tol(0.95, a_cal.size) + 0.01
         # the constant-variance intervals are far off at some level, the calibrated are not
         assert np.max(np.abs(cov_raw - LEVELS)) > 0.12
@@ -82,6 +83,9 @@ def test_calibrated_intervals_reach_nominal_coverage(heavy, seed):
         off_cal = [abs(np.mean(a_cal[p] <= z95) - 0.95) for p in (slow, fast)]
         assert max(off_cal) < max(off_raw) - 0.01
         if not heavy:  # Gaussian within a bin: every level and both fifths are close
+            # left: the variation of the noise sd within each of the 5 speed bins (a fifth of
+            # the range each), which moves coverage by ~0.02-0.03; both bounds leave a margin
+            # over that and the binomial se of a fifth (1200 samples: 0.006)
             assert np.max(np.abs(cov_cal - LEVELS)) < 0.05
             assert max(off_cal) < 0.035 < max(off_raw)
         # heavy (Student-t) noise: a Gaussian interval matched in variance is too wide at 50 %

@@ -10,7 +10,7 @@ See ``docs/actuator.md`` for the model, its integrators and validation, and the 
 from bayes_fdi.actuator.faults import FAULT_NAMES, FAULT_TABLE, SIGNED_FAULTS, Fault, FaultInfo
 from bayes_fdi.actuator.inputs import benchmark_inputs
 from bayes_fdi.actuator.model import PARAMETERS, flow_rate, vapour_pressure, water_density
-from bayes_fdi.actuator.simulate import NOISE_STD, inject_faults, simulate
+from bayes_fdi.actuator.simulate import NOISE_STD, inject_faults, simulate, simulate_replicas
 
 __all__ = [
     "FAULT_NAMES",
@@ -24,6 +24,7 @@ __all__ = [
     "flow_rate",
     "inject_faults",
     "simulate",
+    "simulate_replicas",
     "vapour_pressure",
     "water_density",
 ]

@@ -8,6 +8,11 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.datasets import make_dataset
+from bayes_fdi.memory import check_memory
+
+#: float64 values held per (run, second) at the peak of `benchmark_inputs`: the four signals,
+#: their normalised copies and the dataset's copies
+_VALUES_PER_SAMPLE = 14
 
 __all__ = ["benchmark_inputs"]
 
@@ -84,6 +89,10 @@ def benchmark_inputs(
         raise ValueError(f"benchmark_inputs: n_runs must be an integer >= 1, got {n_runs!r}")
     if isinstance(duration, bool) or not isinstance(duration, int | np.integer) or duration < 1:
         raise ValueError(f"benchmark_inputs: duration must be an integer >= 1, got {duration!r}")
+    check_memory(
+        8.0 * _VALUES_PER_SAMPLE * n_runs * duration,
+        f"benchmark_inputs: {n_runs} run(s) x {duration} s",
+    )
     if not 0.0 <= float(amplitude_jitter) < 1.0:
         raise ValueError("benchmark_inputs: amplitude_jitter must lie in [0, 1)")
     for name, value in (

@@ -10,8 +10,9 @@ import xarray as xr
 from bayes_fdi.actuator import model
 from bayes_fdi.actuator.faults import FAULT_NAMES, Fault
 from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS, validate_dataset
+from bayes_fdi.memory import check_memory
 
-__all__ = ["NOISE_STD", "inject_faults", "simulate"]
+__all__ = ["NOISE_STD", "inject_faults", "simulate", "simulate_replicas"]
 
 #: Standard deviation of DABLib's measurement noise (band-limited white noise of power 5e-9
 #: sampled at 2.5 ms: sqrt(5e-9 / 0.0025)), in normalised full-scale units. DABLib also adds
@@ -19,6 +20,9 @@ __all__ = ["NOISE_STD", "inject_faults", "simulate"]
 NOISE_STD = float(np.sqrt(5e-9 / 0.0025))
 
 _SCALE = {"CV": 1.0, "P1": model.P_RANGE, "P2": model.P_RANGE, "T1": model.T_RANGE}
+#: float64 values held per (run, second) at the peak of `simulate` / `inject_faults`: inputs (4),
+#: model outputs (5) and states (4), noise (5), the output dataset (6) and its deep copy (6)
+_VALUES_PER_SAMPLE = 30
 #: order of the measured channels the kernel returns
 _MEASURED = ("X", "F", "P1", "P2", "T1")
 _HOLDS = {"zero": 0, "linear": 1}
@@ -31,6 +35,10 @@ def _check_inputs(inputs: xr.Dataset, *, who: str, require=INPUT_CHANNELS) -> np
     time = np.asarray(inputs["time"].values, dtype=np.float64)
     if time.size < 1:
         raise ValueError(f"{who}: the dataset has no time samples")
+    if inputs.sizes["run"] < 1:
+        raise ValueError(f"{who}: the dataset has no runs")
+    n_runs, n_t = inputs.sizes["run"], inputs.sizes["time"]
+    check_memory(8.0 * _VALUES_PER_SAMPLE * n_runs * n_t, f"{who}: {n_runs} run(s) x {n_t} s")
     if time.size > 1 and not np.allclose(np.diff(time), 1.0):
         raise ValueError(f"{who}: the time coordinate must be 1 Hz (steps of 1 s)")
     u = np.empty((inputs.sizes["run"], inputs.sizes["time"], 4))
@@ -52,15 +60,22 @@ def _check_inputs(inputs: xr.Dataset, *, who: str, require=INPUT_CHANNELS) -> np
     return np.ascontiguousarray(u)
 
 
-def _validated(fault: Fault, r: int, who: str) -> Fault:
+def _validated(fault: Fault, r: int, who: str, n_t: int) -> Fault:
     try:
-        return fault.validated()
+        checked = fault.validated()
     except ValueError as exc:
         raise ValueError(f"{who}: run {r}: {exc}") from None
+    if checked.onset >= n_t:
+        raise ValueError(
+            f"{who}: run {r}: {checked.name} onset {checked.onset:g} s is at or after the run's "
+            f"end ({n_t} s): the fault would be labelled but never simulated"
+        )
+    return checked
 
 
 def _resolve_faults(inputs: xr.Dataset, faults, who: str) -> list[Fault | None]:
     n_runs = inputs.sizes["run"]
+    n_t = inputs.sizes["time"]
     if faults is None:
         if "state" not in inputs.coords:
             return [None] * n_runs
@@ -81,10 +96,10 @@ def _resolve_faults(inputs: xr.Dataset, faults, who: str) -> list[Fault | None]:
                 str(coords["profile"][r]),
                 float(coords["ramp"][r]),
             )
-            out.append(_validated(fault, r, who))
+            out.append(_validated(fault, r, who, n_t))
         return out
     if isinstance(faults, Fault):
-        return [faults.validated()] * n_runs
+        return [_validated(faults, 0, who, n_t)] * n_runs
     if isinstance(faults, str) or not isinstance(faults, Sequence):
         raise ValueError(
             f"{who}: faults must be None, a Fault or a sequence of Fault-or-None per run, "
@@ -97,7 +112,7 @@ def _resolve_faults(inputs: xr.Dataset, faults, who: str) -> list[Fault | None]:
         if fault is None:
             out.append(None)
         elif isinstance(fault, Fault):
-            out.append(_validated(fault, r, who))
+            out.append(_validated(fault, r, who, n_t))
         else:
             raise ValueError(f"{who}: faults[{r}] must be a Fault or None, got {fault!r}")
     return out
@@ -266,29 +281,100 @@ def simulate(
     (['CV', 'F', 'P1', 'P2', 'T1', 'X'], ['fn', 'f1'])
     """
     who = "simulate"
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValueError(f"{who}: seed must be an integer >= 0, got {seed!r}")
+    _check_seed(seed, who)
     u = _check_inputs(inputs, who=who)
     resolved = _resolve_faults(inputs, faults, who)
     out, extra = _run_model(
         u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold
     )
+    ds = _measured(inputs, out, resolved, seed, noise=noise, integrator=integrator, hold=hold)
+    if return_states:
+        return ds, _states_dataset(ds, extra)
+    return ds
+
+
+def _check_seed(seed, who: str) -> None:
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"{who}: seed must be an integer >= 0, got {seed!r}")
+
+
+def _measured(
+    inputs: xr.Dataset,
+    clean: np.ndarray,
+    resolved: list[Fault | None],
+    seed: int,
+    *,
+    noise: bool,
+    integrator: str,
+    hold: str,
+) -> xr.Dataset:
+    """The measured dataset from the noise-free outputs ``clean`` (run, time, 5): noise, clip."""
+    out = clean.copy()
     if noise:
         run_ids = np.asarray(inputs["run"].values)
         if not np.issubdtype(run_ids.dtype, np.integer) or (run_ids < 0).any():
             run_ids = np.arange(run_ids.size)  # non-integer run labels: use positions
-        out = out + _noise(run_ids, u.shape[1], int(seed))
+        out += _noise(run_ids, out.shape[1], int(seed))
     np.clip(out, 0.0, 1.0, out=out)
-    ds = inputs.copy()
+    ds = inputs.copy(deep=True)  # the result shares no memory with the caller's dataset
     for i, name in enumerate(_MEASURED):
         ds[name] = (("run", "time"), out[:, :, i])
     ds = _with_fault_coords(ds[list(CHANNELS)], resolved)
     ds.attrs.update(seed=int(seed), integrator=integrator, hold=hold, noise=int(bool(noise)))
     ds.attrs.setdefault("bayes_fdi_version", inputs.attrs.get("bayes_fdi_version", ""))
-    validate_dataset(ds, require=CHANNELS)
-    if return_states:
-        return ds, _states_dataset(ds, extra)
-    return ds
+    return validate_dataset(ds, require=CHANNELS)
+
+
+def simulate_replicas(
+    inputs: xr.Dataset,
+    faults: Fault | Sequence[Fault | None] | None = None,
+    seeds: Sequence[int] = (0,),
+    *,
+    integrator: str = "fast",
+    hold: str = "linear",
+    warmup: int = 30,
+    progress: bool = False,
+) -> list[xr.Dataset]:
+    """Simulate once and return one noisy dataset per noise seed.
+
+    The measurement noise is added to the model's outputs and never fed back into it, so the
+    noise-free model is run once and each seed only draws its noise: ``simulate_replicas(
+    inputs, faults, seeds)[i]`` equals ``simulate(inputs, faults, seed=seeds[i], ...)`` bit for
+    bit, at the cost of one simulation instead of ``len(seeds)``.
+
+    Parameters
+    ----------
+    inputs, faults, integrator, hold, warmup, progress
+        As in :func:`simulate`.
+    seeds
+        Noise seeds (integers >= 0), as ``seed`` of :func:`simulate`.
+
+    Returns
+    -------
+    list of xarray.Dataset
+        One dataset per seed, in the order of ``seeds``.
+
+    Examples
+    --------
+    >>> from bayes_fdi.actuator import benchmark_inputs, simulate, simulate_replicas
+    >>> inputs = benchmark_inputs(n_runs=1, duration=30)
+    >>> a, b = simulate_replicas(inputs, None, seeds=[3, 4])
+    >>> a.X.equals(simulate(inputs, seed=3).X), b.X.equals(simulate(inputs, seed=4).X)
+    (True, True)
+    """
+    who = "simulate_replicas"
+    seeds = list(seeds)
+    if not seeds:
+        raise ValueError(f"{who}: give at least one seed")
+    for seed in seeds:
+        _check_seed(seed, who)
+    u = _check_inputs(inputs, who=who)
+    resolved = _resolve_faults(inputs, faults, who)
+    clean, _ = _run_model(
+        u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold
+    )
+    kw = {"noise": True, "integrator": integrator, "hold": hold}
+    return [_measured(inputs, clean, resolved, int(s), **kw) for s in seeds]
 
 
 def inject_faults(
@@ -338,7 +424,7 @@ def inject_faults(
         "hold": hold,
     }
     faulty_idx = [r for r, f in enumerate(resolved) if f is not None]
-    ds = real.copy()
+    ds = real.copy(deep=True)  # the result shares no memory with the caller's dataset
     if faulty_idx:
         sub = u[faulty_idx]
         nominal, _ = _run_model(sub, [None] * len(faulty_idx), **kw)

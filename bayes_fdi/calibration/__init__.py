@@ -11,7 +11,9 @@ calibrated when its 95 % predictive intervals contain about 95 % of fault-free m
 - `bayes_fdi.calibration.nodes`: binary calibration of each node of a hierarchical classifier.
 - `bayes_fdi.calibration.intervals`: coverage, PIT and CRPS of Gaussian predictive distributions
   (and `StdScaler`, which recalibrates them).
-- `bayes_fdi.calibration.report`: the calibration report (``bayes-fdi calibration-report``).
+- `bayes_fdi.calibration.report`: the calibration report (``bayes-fdi calibration-report``),
+  built from `bayes_fdi.calibration.summaries` (its numbers), `.recalibrator_selection`
+  (cross-fitted recalibration and the choice of recalibrator) and `.report_markdown` (its text).
 """
 
 from bayes_fdi.calibration.intervals import (

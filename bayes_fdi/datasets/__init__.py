@@ -5,6 +5,8 @@
   `make_dataset`, `validate_dataset`, `save_dataset` and `load_dataset` (netCDF).
 - `bayes_fdi.datasets.lublin`: the real Lublin hour shipped with the package, the benchmark's day
   files and the table of the real fault events.
+- `bayes_fdi.datasets.readers`: recordings from CSV, MATLAB, netCDF and day files, in any declared
+  units, on the model's 1-s grid (`read_recording`).
 - `bayes_fdi.datasets.plotting`: signal plots of chosen runs (the ``bayes-fdi plot`` command).
 """
 
@@ -24,6 +26,7 @@ from bayes_fdi.datasets.lublin import (
     load_lublin_day,
     load_lublin_example,
 )
+from bayes_fdi.datasets.readers import read_recording
 
 __all__ = [
     "CHANNELS",
@@ -36,6 +39,7 @@ __all__ = [
     "load_lublin_day",
     "load_lublin_example",
     "make_dataset",
+    "read_recording",
     "save_dataset",
     "validate_dataset",
 ]

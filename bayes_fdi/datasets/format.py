@@ -10,7 +10,10 @@ One dataset type is used throughout the project:
   ``ramp`` (s, duration of an incipient ramp to full strength; 0 for abrupt);
 - attributes ``campaign``, ``seed`` and ``bayes_fdi_version``.
 
-Datasets are saved and loaded as netCDF (``.nc``).
+Datasets are saved and loaded as netCDF (``.nc``); saving is atomic (a temporary file in the
+destination's folder renamed over it, see `bayes_fdi.atomic`), so an interrupted or failed save
+never leaves a partial file. `make_dataset` copies the arrays it is given: the dataset never shares
+memory with the caller's arrays.
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 import xarray as xr
+
+from bayes_fdi.atomic import atomic_path, check_output_path
 
 __all__ = [
     "CHANNELS",
@@ -38,6 +43,8 @@ CHANNELS: tuple[str, ...] = INPUT_CHANNELS + OUTPUT_CHANNELS
 STATES: tuple[str, ...] = ("fn", *(f"f{i}" for i in range(1, 20)))
 PROFILES: tuple[str, ...] = ("abrupt", "incipient")
 RUN_COORDS: tuple[str, ...] = ("state", "strength", "onset", "profile", "ramp")
+#: File-name endings :func:`save_dataset` accepts (netCDF).
+NETCDF_SUFFIXES: tuple[str, ...] = (".nc", ".nc4")
 
 
 def _version() -> str:
@@ -85,7 +92,7 @@ def make_dataset(
         raise ValueError(f"unknown channel(s) {sorted(unknown)}; known channels are {CHANNELS}")
     arrays = {}
     for name, values in channels.items():
-        arr = np.asarray(values, dtype=np.float64)
+        arr = _channel_array(name, values)
         if arr.ndim == 1:
             arr = arr[None, :]
         if arr.ndim != 2:
@@ -98,11 +105,20 @@ def make_dataset(
     n_runs, n_times = shapes.pop()
 
     def per_run(value, name, dtype):
+        if dtype is np.float64:
+            value = _label_numbers(value, name)
+        elif not isinstance(value, str) and np.ndim(value) > 0:
+            value = [_label_text(v, name) for v in np.asarray(value, dtype=object).ravel()]
+        else:
+            value = _label_text(value, name)
         if isinstance(value, str) or np.ndim(value) == 0:
             return np.full(n_runs, value, dtype=dtype)
-        out = np.asarray(value, dtype=dtype)
+        out = np.array(value, dtype=dtype)
         if out.shape != (n_runs,):
-            raise ValueError(f"{name} must be a scalar or have one entry per run ({n_runs})")
+            raise ValueError(
+                f"{name} must be a scalar or have one entry per run ({n_runs}), "
+                f"got shape {np.shape(value)}"
+            )
         return out
 
     coords = {
@@ -125,7 +141,51 @@ def make_dataset(
         },
     )
     validate_dataset(ds, require=(), allow_nan=allow_nan)
+    late = np.flatnonzero((ds["state"].values != "fn") & (ds["onset"].values >= n_times))
+    if late.size:
+        r = int(late[0])
+        raise ValueError(
+            f"run {r}: fault onset {float(ds['onset'].values[r]):g} s is at or after the run's "
+            f"end ({n_times} samples of 1 s); the fault would be labelled but never present"
+        )
     return ds
+
+
+def _channel_array(name: str, values) -> np.ndarray:
+    """A float64 copy of a channel's values; complex, text and boolean data are refused."""
+    raw = np.asarray(values)
+    if np.iscomplexobj(raw):
+        raise ValueError(
+            f"channel {name!r} is complex; channels are real (pass .real or abs() explicitly)"
+        )
+    if raw.dtype.kind not in "iuf":
+        if raw.dtype.kind == "O":
+            try:
+                return _channel_array(name, np.array(raw.tolist(), dtype=np.float64))
+            except (TypeError, ValueError):
+                pass
+        raise ValueError(f"channel {name!r} must hold numbers, got dtype {raw.dtype}")
+    return np.array(raw, dtype=np.float64, copy=True)
+
+
+def _label_numbers(value, name: str):
+    try:
+        out = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, got {value!r}") from None
+    if np.iscomplexobj(np.asarray(value)):
+        raise ValueError(f"{name} must be real numbers, got {value!r}")
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if name in ("onset", "ramp") and np.any(out < 0):
+        raise ValueError(f"{name} must be >= 0 s, got {value!r}")
+    return out if out.ndim else float(out)
+
+
+def _label_text(value, name: str) -> str:
+    if not isinstance(value, str | np.str_):
+        raise ValueError(f"{name} must be text (e.g. 'fn', 'f1'), got {value!r}")
+    return str(value)
 
 
 def validate_dataset(
@@ -164,12 +224,21 @@ def validate_dataset(
         values = ds[name].values
         if not np.issubdtype(values.dtype, np.number):
             raise ValueError(f"channel {name!r} is not numeric (dtype {values.dtype})")
+        if np.iscomplexobj(values):
+            raise ValueError(f"channel {name!r} is complex; channels are real")
         if np.isinf(values).any():
             raise ValueError(f"channel {name!r} contains inf")
         if not allow_nan and np.isnan(values).any():
             raise ValueError(
                 f"channel {name!r} contains {int(np.isnan(values).sum())} NaN value(s)"
             )
+    for name in ("strength", "onset", "ramp"):
+        if name in ds.coords:
+            values = ds[name].values
+            if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
+                raise ValueError(f"coordinate {name!r} must be real numbers (dtype {values.dtype})")
+            if not np.all(np.isfinite(values)):
+                raise ValueError(f"coordinate {name!r} contains NaN or inf")
     if "state" in ds.coords:
         bad = sorted(set(map(str, ds["state"].values)) - set(STATES))
         if bad:
@@ -182,14 +251,42 @@ def validate_dataset(
 
 
 def save_dataset(ds: xr.Dataset, path: str | os.PathLike) -> None:
-    """Save a dataset to netCDF (``.nc``); :func:`load_dataset` reads it back exactly."""
+    """Save a dataset to netCDF atomically; :func:`load_dataset` reads it back exactly.
+
+    The dataset is written to a temporary file in the destination's folder, flushed to disk and
+    renamed over ``path``: the file appears whole or not at all. Ctrl-C (``SIGINT``) or
+    ``SIGTERM`` during the write let it finish, remove the temporary file and are then re-raised.
+
+    Raises
+    ------
+    ValueError
+        If ``ds`` is not a valid dataset, or ``path`` does not end in ``.nc`` / ``.nc4``, is a
+        folder, or its folder does not exist or is not writable (checked before writing).
+    """
     validate_dataset(ds, require=(), allow_nan=True)
+    check_output_path(path, suffixes=NETCDF_SUFFIXES, what="dataset file")
     encoding = {name: {"zlib": True, "complevel": 4} for name in ds.data_vars}
-    ds.to_netcdf(path, engine="netcdf4", encoding=encoding)
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
 
 
 def load_dataset(path: str | os.PathLike) -> xr.Dataset:
-    """Load a dataset saved by :func:`save_dataset` (fully into memory) and validate it."""
+    """Load a dataset saved by :func:`save_dataset` (fully into memory) and validate it.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    IsADirectoryError
+        If ``path`` is a folder.
+    ValueError
+        If the file is not a readable netCDF dataset in the project's format.
+    """
+    text = os.fspath(path)
+    if not os.path.exists(text):
+        raise FileNotFoundError(2, "dataset file does not exist", text)
+    if os.path.isdir(text):
+        raise IsADirectoryError(21, "dataset path is a folder, not a file", text)
     try:
         with xr.open_dataset(path, engine="netcdf4") as opened:
             ds = opened.load()

@@ -17,7 +17,9 @@ distribution and the residuals with their predictive standard deviations.
 
 from __future__ import annotations
 
+import os
 import time
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -32,7 +34,14 @@ from bayes_fdi.diagnosis.normal_models import NormalModels
 from bayes_fdi.diagnosis.seva import NoveltyReference, SevaRecord, seva_records
 from bayes_fdi.diagnosis.tree import HierarchicalClassifier
 
-__all__ = ["FaultDiagnoser"]
+__all__ = ["FaultDiagnoser", "ShortRunWarning"]
+
+#: Runs shorter than this fraction of the training runs get a :class:`ShortRunWarning`.
+SHORT_RUN_FRACTION = 0.5
+
+
+class ShortRunWarning(UserWarning):
+    """Runs diagnosed with per-run features are much shorter than the training runs."""
 
 
 def _default_classifier(random_state: int | None) -> HierarchicalClassifier:
@@ -100,6 +109,9 @@ class FaultDiagnoser(BaseEstimator):
         used by :meth:`seva` to flag inputs unlike anything seen in training.
     fit_seconds_ : dict
         Wall-clock seconds: ``normal_models``, ``residuals``, ``classifier``, ``total``.
+    training_run_seconds_ : int
+        Length (samples) of the labelled training runs; with per-run features (``window=None``)
+        :meth:`diagnose` warns (:class:`ShortRunWarning`) on runs shorter than half of it.
     """
 
     def __init__(
@@ -167,7 +179,7 @@ class FaultDiagnoser(BaseEstimator):
         states = np.asarray(labelled_runs["state"].values).astype(str)
         if np.unique(states).size < 2:
             raise ValueError(
-                f"labelled_runs holds one class only ({states[0]!r}); need at least two states"
+                f"labelled_runs holds one class only ({str(states[0])!r}); need at least two states"
             )
         self.fit_seconds_: dict[str, float] = {}
         t0 = time.perf_counter()
@@ -229,6 +241,7 @@ class FaultDiagnoser(BaseEstimator):
                 join="override",
             )
         )
+        self.training_run_seconds_ = int(labelled_runs.sizes["time"])
         self.fit_seconds_["total"] = time.perf_counter() - t_start
         return self
 
@@ -269,6 +282,15 @@ class FaultDiagnoser(BaseEstimator):
             ``window_end`` coordinates (seconds, end exclusive).
         """
         self._check_fitted()
+        trained = getattr(self, "training_run_seconds_", None)
+        if self.window is None and trained and runs.sizes["time"] < SHORT_RUN_FRACTION * trained:
+            warnings.warn(
+                f"diagnosing runs of {runs.sizes['time']} s with a diagnoser trained on runs of "
+                f"{trained} s: per-run features average fewer residuals, so they are noisier "
+                "than in training and the diagnosis is less reliable",
+                ShortRunWarning,
+                stacklevel=2,
+            )
         res = self.normal_models_.residuals(runs)
         feats = self._feature_rows(res, "runs")
         proba = self.predict_features(self._flat(feats))
@@ -305,6 +327,33 @@ class FaultDiagnoser(BaseEstimator):
             }
         )
         return out
+
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike[str]) -> str:
+        """Write the fitted diagnoser to ``path`` (no pickle; see
+        `bayes_fdi.diagnosis.persistence` for the format); returns the path.
+
+        Everything fitted is saved: the normal models with their regressors and interval
+        scalers, the feature scaler, the classifier (tree of RVCs or SVMs), the novelty
+        reference. `load` gives a diagnoser whose `diagnose`, `predict_features` and `seva`
+        outputs equal this one's exactly.
+        """
+        from bayes_fdi.diagnosis import persistence
+
+        self._check_fitted()
+        return persistence.save(self, path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str], **kwargs: Any) -> FaultDiagnoser:
+        """Read a diagnoser written by `save`.
+
+        Keyword arguments (``max_bytes``, ``device``) go to
+        `bayes_fdi.diagnosis.persistence.load`. Raises ``ValueError`` for a corrupt, foreign or
+        newer file, or one holding something other than a ``FaultDiagnoser``.
+        """
+        from bayes_fdi.diagnosis import persistence
+
+        return persistence.load(path, expected=cls, **kwargs)
 
     def seva(self, runs: xr.Dataset, **kwargs: Any) -> list[SevaRecord]:
         """The self-validating output: one immutable `bayes_fdi.diagnosis.seva.SevaRecord` per

@@ -45,6 +45,7 @@ from bayes_fdi.diagnosis.width_search import (
     evidence_grid_search,
     genetic_width_search,
 )
+from bayes_fdi.rvm.threads import limit_fit_threads
 
 __all__ = ["NormalModels"]
 
@@ -274,6 +275,7 @@ class NormalModels(BaseEstimator):
     def _base(self) -> Any:
         return _default_regressor() if self.regressor is None else self.regressor
 
+    @limit_fit_threads
     def fit(self, normal_runs: xr.Dataset) -> NormalModels:
         """Fit ``g1`` and ``g2`` on fault-free runs.
 

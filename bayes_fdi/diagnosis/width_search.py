@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 __all__ = [
+    "EVIDENCE_TIE_NATS",
     "WIDTH_GRID",
     "EvidenceGridResult",
     "GAResult",
@@ -25,6 +26,11 @@ __all__ = [
 #: grid as `bayes_fdi.experiments.reproduce.REGRESSION_WIDTHS`; the inputs are normalised to [0,
 #: 1]).
 WIDTH_GRID: tuple[float, ...] = (0.05, 0.1, 0.2, 0.4, 0.8)
+#: Summed log evidences within this many nats of the largest are a tie, won by the first such
+#: width in grid order. A difference of 1e-6 nats is a Bayes factor of 1.000001 (no preference),
+#: and far above the rounding of a log evidence of order 1e3 to 1e4 (about 1e-12 relative) on
+#: any BLAS code path, so near-ties are resolved the same way on every machine.
+EVIDENCE_TIE_NATS: float = 1e-6
 
 
 class GAResult(NamedTuple):
@@ -151,7 +157,8 @@ class EvidenceGridResult(NamedTuple):
     Attributes
     ----------
     width : float
-        The grid width of largest summed log evidence (the first such in grid order on ties).
+        The grid width of largest summed log evidence (the first in grid order of those within
+        `EVIDENCE_TIE_NATS` of the largest).
     log_evidence : dict
         Width -> log evidence summed over the outputs.
     log_evidence_by_output : dict
@@ -181,7 +188,8 @@ def evidence_grid_search(
     samples (a seeded random subset of ``max_samples`` of them when there are more: row
     indices ``np.sort(rng.choice(n, max_samples, replace=False))``); the width whose log
     marginal likelihoods (the fitted models' ``log_evidence_``), summed over the outputs, is
-    largest wins. This is the width search of `NormalModels` (``width_search="evidence-grid"``)
+    largest wins (widths within `EVIDENCE_TIE_NATS` of it tie; the first in grid order wins).
+    This is the width search of `NormalModels` (``width_search="evidence-grid"``)
     and of `bayes_fdi.experiments.reproduce.select_regression_width`.
 
     Parameters
@@ -227,8 +235,9 @@ def evidence_grid_search(
                 )
             by_output[name][w] = float(est.log_evidence_)
     total = {w: float(sum(by_output[name][w] for name in targets)) for w in widths}
+    best = max(total.values())
     return EvidenceGridResult(
-        width=max(total, key=total.__getitem__),
+        width=next(w for w in widths if total[w] >= best - EVIDENCE_TIE_NATS),
         log_evidence=total,
         log_evidence_by_output=by_output,
         n_samples=int(rows.size),

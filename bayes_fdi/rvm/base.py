@@ -2,6 +2,17 @@
 
 Input validation (numpy via scikit-learn, torch natively), kernel resolution, the
 candidate basis, fitted-state bookkeeping and the design matrix of new inputs.
+
+Scale invariance. The fit is computed on rescaled data whenever the data lie far from unit
+scale, in a way that is exact in real arithmetic: with an RBF kernel the inputs are divided by a
+power of two ``x_scale`` and the width with them (``k(x/c, z/c; sigma/c) = k(x, z; sigma)``, so
+the design matrix is unchanged); for regression the targets are divided by a power of two
+``t_scale`` (the sparse Bayesian model is scale-equivariant: weights scale with ``t``,
+precisions with ``t^-2``, the log evidence shifts by ``-N log t_scale``). Dividing by a power of
+two loses nothing, so any finite data from ``1e-300`` to ``1e300`` fit; data within
+``[2^-32, 2^32]`` are not rescaled at all (``x_scale = t_scale = 1``). The fitted state is kept
+in the scaled units (``_mu_``, ``_Sigma_``, ``_X_fit_``, ``_kernel_``; the scales in
+``_x_scale_`` and ``_t_scale_``) and the public attributes are given in the caller's units.
 """
 
 from __future__ import annotations
@@ -27,6 +38,29 @@ __all__ = ["RVMBase"]
 
 _DTYPES = {"float64": torch.float64, "float32": torch.float32}
 _METHODS = ("fast", "em")
+#: data whose largest magnitude lies in [2^-_SCALE_EXPONENT, 2^_SCALE_EXPONENT] are not rescaled
+_SCALE_EXPONENT = 32
+#: RBF widths are clamped to [2^-500, 2^500]: the square stays a normal float64, and outside
+#: that range the kernel of (rescaled, hence at most ~2^33 apart) rows is the same in float64
+#: (below: 0 between distinct rows, 1 between equal ones; above: 1 everywhere)
+_MIN_SCALED_WIDTH = 2.0**-500
+_MAX_SCALED_WIDTH = 2.0**500
+
+
+def power_of_two_scale(values: Tensor) -> float:
+    """A power of two near ``max|values|`` when that lies outside ``[2^-32, 2^32]``, else 1.0.
+
+    Dividing by it is exact (no rounding), so rescaled data hold the same information.
+    """
+    if values.numel() == 0:
+        return 1.0
+    top = float(values.detach().abs().max())
+    if not (math.isfinite(top) and top > 0):
+        return 1.0
+    exponent = math.floor(math.log2(top))
+    if abs(exponent) <= _SCALE_EXPONENT:
+        return 1.0
+    return math.ldexp(1.0, exponent)
 
 
 def _is_torch(X: Any) -> bool:
@@ -119,10 +153,10 @@ class RVMBase(BaseEstimator):
         """The kernel object for ``width`` (``None`` for ``'precomputed'``)."""
         if self.kernel == "precomputed":
             return None
+        if self._scales_inputs():  # an RBF at the (rescaled) width of the fit
+            return RBF(width)
         if isinstance(self.kernel, Kernel):
             return self.kernel
-        if self.kernel == "rbf":
-            return RBF(width)
         if self.kernel == "linear":
             return Linear()
         if self.kernel == "poly":
@@ -214,8 +248,39 @@ class RVMBase(BaseEstimator):
         else:
             dtype, dev = self._dtype_, self._device_
         if _is_torch(X):
-            return X.detach().to(dtype=dtype, device=dev)
-        return torch.tensor(np.asarray(X), dtype=dtype, device=dev)
+            # a copy: the model must not share memory with (and change with) the caller's tensor
+            return X.detach().to(dtype=dtype, device=dev, copy=True)
+        out = torch.tensor(np.asarray(X), dtype=dtype, device=dev)
+        if fitting and not bool(torch.isfinite(out).all()):
+            raise ValueError(
+                f"X does not fit in {self.dtype}: its magnitudes overflow to infinity (largest "
+                f"{float(np.abs(np.asarray(X, dtype=np.float64)).max()):.3g}); use dtype='float64'"
+            )
+        return out
+
+    def _scales_inputs(self) -> bool:
+        """Whether the kernel lets the inputs be rescaled exactly (a plain RBF kernel)."""
+        return self.kernel == "rbf" or type(self.kernel) is RBF
+
+    def _fit_inputs(self, X: Any) -> tuple[Tensor, float]:
+        """Training inputs as a (copied) tensor, divided by their power-of-two scale."""
+        Xt = self._to_tensor(X, fitting=True)
+        x_scale = power_of_two_scale(Xt) if self._scales_inputs() else 1.0
+        if x_scale != 1.0:
+            Xt = Xt / x_scale
+        return Xt, x_scale
+
+    def _inputs(self, X: Any) -> Tensor:
+        """Validated new inputs as a tensor in the model's (rescaled) input units."""
+        Xt = self._to_tensor(self._validate_predict(X))
+        scale = getattr(self, "_x_scale_", 1.0)
+        return Xt / scale if scale != 1.0 else Xt
+
+    def _scaled_width(self, width: float | None, x_scale: float) -> float | None:
+        """The RBF width in rescaled input units (``None`` stays ``None``)."""
+        if width is None:
+            return width
+        return min(max(width / x_scale, _MIN_SCALED_WIDTH), _MAX_SCALED_WIDTH)
 
     @staticmethod
     def _output(value: Tensor, like: Any) -> Any:
@@ -242,8 +307,26 @@ class RVMBase(BaseEstimator):
         width: float | None,
         *,
         warn: bool = True,
+        x_scale: float = 1.0,
+        t_scale: float = 1.0,
     ) -> None:
-        """Store a solver result as the fitted state (torch internals, numpy attributes)."""
+        """Store a solver result as the fitted state (torch internals, numpy attributes).
+
+        ``result``, ``X`` and ``kern`` are in rescaled units (inputs / ``x_scale``, targets /
+        ``t_scale``); ``width`` is the RBF width in the caller's units. The public attributes
+        are converted to the caller's units.
+        """
+        mean_t, cov_t, alpha_t = result.mean, result.covariance, result.alpha
+        if not (
+            bool(torch.isfinite(mean_t).all())
+            and bool(torch.isfinite(cov_t).all())
+            and bool(torch.isfinite(alpha_t).all())
+            and bool((alpha_t > 0).all())
+        ):
+            raise ValueError(
+                f"{type(self).__name__}: the fit produced non-finite weights or precisions; "
+                "the problem is numerically degenerate for this kernel and width"
+            )
         if warn and not result.converged:
             warnings.warn(
                 f"{type(self).__name__} (method={self.method!r}) did not converge in "
@@ -259,6 +342,8 @@ class RVMBase(BaseEstimator):
         self._device_ = X.device
         self._kernel_ = kern
         self._X_fit_ = X
+        self._x_scale_ = float(x_scale)
+        self._t_scale_ = float(t_scale)
         self._active_ = active
         self._feat_ = feat
         self._has_bias_ = has_bias
@@ -268,16 +353,20 @@ class RVMBase(BaseEstimator):
         self._result_ = result
         self.relevance_indices_ = feat.cpu().numpy()
         self.relevance_vectors_ = (
-            self._rv_.cpu().numpy() if self._rv_ is not None else np.empty((feat.numel(), 0))
+            (self._rv_ * x_scale).cpu().numpy()
+            if self._rv_ is not None
+            else np.empty((feat.numel(), 0))
         )
-        mean = result.mean.cpu().numpy()
+        with np.errstate(over="ignore", under="ignore"):
+            mean = result.mean.cpu().numpy() * t_scale
+            self.covariance_ = result.covariance.cpu().numpy() * (t_scale * t_scale)
+            self.alpha_ = result.alpha.cpu().numpy() / (t_scale * t_scale)
+        shift = X.shape[0] * math.log(t_scale)
         self.mean_ = mean
         self.coef_ = mean[1:] if has_bias else mean
         self.intercept_ = float(mean[0]) if has_bias else 0.0
-        self.covariance_ = result.covariance.cpu().numpy()
-        self.alpha_ = result.alpha.cpu().numpy()
-        self.evidence_trace_ = result.evidence_trace.cpu().numpy()
-        self.log_evidence_ = float(result.log_evidence)
+        self.evidence_trace_ = result.evidence_trace.cpu().numpy() - shift
+        self.log_evidence_ = float(result.log_evidence) - shift
         self.n_iter_ = int(result.n_iter)
         self.converged_ = bool(result.converged)
         self.width_ = width
@@ -321,8 +410,7 @@ class RVMBase(BaseEstimator):
                 "a one-vs-rest model has one active basis per class: use "
                 "estimators_[k].design_matrix(X) or basis='all'"
             )
-        Xv = self._validate_predict(X)
-        Xt = self._to_tensor(Xv)
+        Xt = self._inputs(X)
         if basis == "active":
             return self._phi(Xt)
         parts = []

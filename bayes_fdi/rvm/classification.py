@@ -30,9 +30,15 @@ from bayes_fdi.rvm.base import RVMBase, _is_torch
 from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES
 from bayes_fdi.rvm.kernels import RBF, Kernel
 from bayes_fdi.rvm.sparse_bayes import SBLResult, em_bernoulli, fast_bernoulli
+from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.rvm.width import search_width, width_bounds
 
 __all__ = ["RVC"]
+
+
+def _plain(value: Any) -> Any:
+    """A numpy scalar as the Python value it holds (messages show 'f1', not np.str_('f1'))."""
+    return value.item() if isinstance(value, np.generic) else value
 
 
 class RVC(ClassifierMixin, RVMBase):
@@ -119,6 +125,7 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         columns = [1] if n_classes == 2 else range(n_classes)
         return [torch.tensor(y_idx == c, dtype=X.dtype, device=X.device) for c in columns]
 
+    @limit_fit_threads
     def fit(self, X: Any, y: Any) -> RVC:
         """Fit the classifier by (Laplace) type-II maximum likelihood.
 
@@ -143,10 +150,10 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         if len(classes) < 2:
             raise ValueError(
                 f"RVC needs samples of at least 2 classes in the data, but the data contain "
-                f"only one class: {classes[0]!r}"
+                f"only one class: {_plain(classes[0])!r}"
             )
         self.classes_ = classes
-        Xt = self._to_tensor(X, fitting=True)
+        Xt, x_scale = self._fit_inputs(X)
         targets = self._targets(y_idx, Xt)
 
         search = None
@@ -156,32 +163,48 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
                 1.0,
                 bounds=width_bounds(Xt),
             )
-            width: float | None = search.width
-        elif self.kernel == "rbf":
-            width = float(self.width)
-        elif isinstance(self.kernel, RBF):
-            width = self.kernel.width
+            width: float | None = search.width * x_scale
+            width_s = search.width
         else:
-            width = None
+            if self.kernel == "rbf":
+                width = float(self.width)
+            elif isinstance(self.kernel, RBF):
+                width = self.kernel.width
+            else:
+                width = None
+            width_s = self._scaled_width(width, x_scale)
 
         if len(targets) == 1:
-            result, kern = self._solve(Xt, targets[0], width)
-            self._set_state(result, Xt, kern, width)
+            result, kern = self._solve(Xt, targets[0], width_s)
+            self._set_state(result, Xt, kern, width, x_scale=x_scale)
             self.estimators_ = None
         else:
-            self._fit_one_vs_rest(Xt, targets, width)
+            self._fit_one_vs_rest(Xt, targets, width, width_s, x_scale)
         if search is not None:
-            self.width_search_ = search
+            self.width_search_ = search._replace(
+                width=search.width * x_scale,
+                widths=search.widths * x_scale,
+                bounds=None
+                if search.bounds is None
+                else (search.bounds[0] * x_scale, search.bounds[1] * x_scale),
+            )
         return self
 
-    def _fit_one_vs_rest(self, Xt: Tensor, targets: list[Tensor], width: float | None) -> None:
+    def _fit_one_vs_rest(
+        self,
+        Xt: Tensor,
+        targets: list[Tensor],
+        width: float | None,
+        width_s: float | None,
+        x_scale: float,
+    ) -> None:
         subs = []
         for t in targets:
             sub = type(self)(**self.get_params())
             sub.classes_ = np.array([0, 1])
             sub.n_features_in_ = self.n_features_in_
-            result, kern = sub._solve(Xt, t, width)
-            sub._set_state(result, Xt, kern, width)
+            result, kern = sub._solve(Xt, t, width_s)
+            sub._set_state(result, Xt, kern, width, x_scale=x_scale)
             sub.estimators_ = None
             subs.append(sub)
         self._adopt_one_vs_rest(subs, Xt, width)
@@ -199,7 +222,9 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
                 for s in subs
                 for i, v in zip(s.relevance_indices_, s.relevance_vectors_, strict=True)
             }
-            self.relevance_vectors_ = np.array([rv[int(i)] for i in idx]).reshape(len(idx), -1)
+            self.relevance_vectors_ = np.array([rv[int(i)] for i in idx]).reshape(
+                len(idx), self.n_features_in_
+            )
         self.mean_ = [s.mean_ for s in subs]
         self.covariance_ = [s.covariance_ for s in subs]
         self.alpha_ = [s.alpha_ for s in subs]
@@ -214,6 +239,8 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         self._device_ = subs[0]._device_
         self._kernel_ = subs[0]._kernel_
         self._X_fit_ = subs[0]._X_fit_ if Xt is None else Xt
+        self._x_scale_ = subs[0]._x_scale_
+        self._t_scale_ = 1.0
 
     # ------------------------------------------------------------------ prediction
     def _latent_tensor(self, Xt: Tensor) -> tuple[Tensor, Tensor]:
@@ -240,7 +267,7 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         mean, std : ndarray or Tensor of shape (n,)
             With more than two classes: shape ``(n, n_classes)`` (one-vs-rest latents).
         """
-        Xt = self._to_tensor(self._validate_predict(X))
+        Xt = self._inputs(X)
         models = [self] if self.estimators_ is None else self.estimators_
         pairs = [m._latent_tensor(Xt) for m in models]
         if self.estimators_ is None:
@@ -259,7 +286,7 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
             Shape ``(n,)`` for two classes (positive: ``classes_[1]``), else
             ``(n, n_classes)`` one-vs-rest log-odds.
         """
-        Xt = self._to_tensor(self._validate_predict(X))
+        Xt = self._inputs(X)
         return self._output(self._logits(Xt), X)
 
     def _proba_tensor(self, Xt: Tensor) -> Tensor:
@@ -267,8 +294,9 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         if self.estimators_ is None:
             p1 = torch.sigmoid(z)
             return torch.stack([1.0 - p1, p1], dim=1)
-        p = torch.sigmoid(z)
-        return p / p.sum(1, keepdim=True)
+        # p_k proportional to sigmoid(z_k), normalised in log space: identical in exact
+        # arithmetic, and no 0/0 when every sigmoid underflows (all z_k << 0)
+        return torch.softmax(torch.nn.functional.logsigmoid(z), dim=1)
 
     def predict_proba(self, X: Any) -> Any:
         """Class probabilities, columns in the order of ``classes_``.
@@ -277,7 +305,7 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         -------
         ndarray or Tensor of shape (n, n_classes)
         """
-        Xt = self._to_tensor(self._validate_predict(X))
+        Xt = self._inputs(X)
         return self._output(self._proba_tensor(Xt), X)
 
     def predict(self, X: Any) -> Any:
@@ -289,7 +317,7 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
             Labels from ``classes_`` (a tensor of class indices mapped to labels when the
             input is a tensor and the labels are numeric).
         """
-        Xt = self._to_tensor(self._validate_predict(X))
+        Xt = self._inputs(X)
         idx = self._proba_tensor(Xt).argmax(1).cpu().numpy()
         labels = self.classes_[idx]
         if _is_torch(X) and np.issubdtype(labels.dtype, np.number):

@@ -9,11 +9,14 @@ fit time.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 
 import numpy as np
 
-__all__ = ["configure_parser", "run_from_cli", "sinc_data"]
+from bayes_fdi.cli_arguments import non_negative_float, non_negative_int
+
+__all__ = ["configure_parser", "run_from_cli", "sinc_data", "width_argument"]
 
 
 def sinc_data(
@@ -27,28 +30,60 @@ def sinc_data(
     return X, y, X_test, np.sinc(X_test[:, 0] / np.pi)
 
 
+def width_argument(text: str) -> float | str:
+    """argparse type of an RBF width: a finite number > 0, or ``auto``."""
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number > 0 or 'auto', got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a number > 0 or 'auto', got {text!r}")
+    return value
+
+
+def _training_points(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"must be at least 2, got {value}")
+    if value > 100_000:
+        raise argparse.ArgumentTypeError(
+            f"at most 100000 for a demo (an RVM on n points needs O(n^2) memory), got {value}"
+        )
+    return value
+
+
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     """Add the ``rvm-demo`` options to ``parser``."""
-    parser.add_argument("--n", type=int, default=500, help="training points (default 500)")
-    parser.add_argument("--noise", type=float, default=0.1, help="noise sd (default 0.1)")
-    parser.add_argument("--width", default="2.0", help="RBF width sigma, or 'auto' (default 2.0)")
+    parser.add_argument(
+        "--n", type=_training_points, default=500, help="training points (default 500)"
+    )
+    parser.add_argument(
+        "--noise", type=non_negative_float, default=0.1, help="noise sd (default 0.1)"
+    )
+    parser.add_argument(
+        "--width", type=width_argument, default=2.0, help="RBF width sigma, or 'auto' (default 2.0)"
+    )
     parser.add_argument("--method", choices=("fast", "em"), default="fast")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
+    parser.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
 def run_from_cli(args: argparse.Namespace) -> int:
     """Run the demo; returns the exit status."""
     from bayes_fdi.rvm import RVR
 
-    if args.n < 2:
-        raise SystemExit("rvm-demo: --n must be at least 2")
-    if not args.noise >= 0:
-        raise SystemExit("rvm-demo: --noise must be >= 0")
-    width: float | str = args.width if args.width == "auto" else float(args.width)
     X, y, X_test, f_test = sinc_data(args.n, args.noise, args.seed)
-    model = RVR(width=width, method=args.method)
+    model = RVR(width=args.width, method=args.method)
+    from bayes_fdi.progress import busy
+
     start = time.perf_counter()
-    model.fit(X, y)
+    with busy(f"fitting the RVR ({args.method}, width {args.width})", enabled=not args.quiet):
+        model.fit(X, y)
     elapsed = time.perf_counter() - start
     rmse = float(np.sqrt(np.mean((model.predict(X_test) - f_test) ** 2)))
     mean_train, std_train = model.predict(X, return_std=True)

@@ -22,9 +22,10 @@ from sklearn.base import RegressorMixin
 from sklearn.metrics import r2_score
 from torch import Tensor
 
-from bayes_fdi.rvm.base import RVMBase, _is_torch
+from bayes_fdi.rvm.base import RVMBase, _is_torch, power_of_two_scale
 from bayes_fdi.rvm.kernels import RBF, Kernel
 from bayes_fdi.rvm.sparse_bayes import SBLResult, em_gaussian, fast_gaussian
+from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.rvm.width import search_width, width_bounds
 
 __all__ = ["RVR"]
@@ -113,6 +114,7 @@ class RVR(RegressorMixin, RVMBase):
         solver = fast_gaussian if self.method == "fast" else em_gaussian
         return solver(design, t, max_iter=self._max_iter(), tol=float(self.tol)), kern
 
+    @limit_fit_threads
     def fit(self, X: Any, y: Any) -> RVR:
         """Fit the RVR by type-II maximum likelihood.
 
@@ -130,25 +132,44 @@ class RVR(RegressorMixin, RVMBase):
         """
         self._check_params()
         X, y = self._validate_fit(X, y, classifier=False)
-        Xt = self._to_tensor(X, fitting=True)
+        Xt, x_scale = self._fit_inputs(X)
         t = torch.tensor(np.array(y, dtype=np.float64), dtype=Xt.dtype, device=Xt.device)
+        t_scale = power_of_two_scale(t)
+        if t_scale != 1.0:
+            t = t / t_scale
+        if not bool(torch.isfinite(t).all()):
+            raise ValueError(f"y does not fit in {self.dtype} (its magnitudes overflow)")
         search = None
         if self.width == "auto":
             search = search_width(
                 lambda w: self._solve(Xt, t, w)[0].log_evidence, 1.0, bounds=width_bounds(Xt)
             )
-            width: float | None = search.width
-        elif self.kernel == "rbf":
-            width = float(self.width)
-        elif isinstance(self.kernel, RBF):
-            width = self.kernel.width
+            width: float | None = search.width * x_scale
+            width_s = search.width
         else:
-            width = None
-        result, kern = self._solve(Xt, t, width)
-        self._set_state(result, Xt, kern, width)
-        self.beta_ = float(result.beta)
+            if self.kernel == "rbf":
+                width = float(self.width)
+            elif isinstance(self.kernel, RBF):
+                width = self.kernel.width
+            else:
+                width = None
+            width_s = self._scaled_width(width, x_scale)
+        result, kern = self._solve(Xt, t, width_s)
+        self._set_state(result, Xt, kern, width, x_scale=x_scale, t_scale=t_scale)
+        self._beta_scaled_ = float(result.beta)
+        with np.errstate(under="ignore", over="ignore"):
+            self.beta_ = float(np.float64(result.beta) / np.float64(t_scale) ** 2)
         if search is not None:
-            self.width_search_ = search
+            shift = Xt.shape[0] * math.log(t_scale)
+            self.width_search_ = search._replace(
+                width=search.width * x_scale,
+                log_evidence=search.log_evidence - shift,
+                widths=search.widths * x_scale,
+                evidences=search.evidences - shift,
+                bounds=None
+                if search.bounds is None
+                else (search.bounds[0] * x_scale, search.bounds[1] * x_scale),
+            )
         return self
 
     def predict(self, X: Any, return_std: bool = False) -> Any:
@@ -167,14 +188,22 @@ class RVR(RegressorMixin, RVMBase):
         std : ndarray or Tensor of shape (n,)
             Only when ``return_std``.
         """
-        Xv = self._validate_predict(X)
-        Phi = self._phi(self._to_tensor(Xv))
+        Phi = self._phi(self._inputs(X))
+        scale = getattr(self, "_t_scale_", 1.0)
         mean = Phi @ self._mu_
+        if scale != 1.0:
+            mean = mean * scale
         if not return_std:
             return self._output(mean, X)
-        var = 1.0 / self.beta_ + ((Phi @ self._Sigma_) * Phi).sum(1)
+        var = 1.0 / self._noise_precision() + ((Phi @ self._Sigma_) * Phi).sum(1)
         std = var.clamp_min(0.0).sqrt()
+        if scale != 1.0:
+            std = std * scale
         return self._output(mean, X), self._output(std, X)
+
+    def _noise_precision(self) -> float:
+        """The noise precision in the model's (rescaled) target units."""
+        return getattr(self, "_beta_scaled_", None) or self.beta_
 
     def score(self, X: Any, y: Any, sample_weight: Any = None) -> float:
         """Coefficient of determination R^2 of the predictive mean (torch inputs accepted)."""
@@ -186,5 +215,5 @@ class RVR(RegressorMixin, RVMBase):
 
     @property
     def noise_std_(self) -> float:
-        """Estimated noise standard deviation ``beta_ ** -0.5``."""
-        return math.sqrt(1.0 / self.beta_)
+        """Estimated noise standard deviation ``beta_ ** -0.5`` (computed without overflow)."""
+        return getattr(self, "_t_scale_", 1.0) / math.sqrt(self._noise_precision())

@@ -1,0 +1,631 @@
+"""Readers of actuator recordings: CSV, MATLAB ``.mat``, netCDF and the benchmark's day files.
+
+Every reader returns an *unlabelled* one-run dataset in the project's format: dims ``run`` (one)
+and ``time`` (seconds, 1 Hz), channels ``CV, P1, P2, T1, X, F`` normalised as DABLib does. An
+unlabelled recording has no ``state`` coordinate (nor ``strength``, ``onset``, ``profile``,
+``ramp``): nobody knows its state, and the format's ``"fn"`` would claim it is fault-free.
+
+Units (``units=``): ``"normalised"`` (the default: the values already are), ``"physical"``
+(:data:`PHYSICAL_UNITS`: CV and X in %, P1 and P2 in kPa, T1 in degC, F in t/h) or a mapping
+giving the unit of every channel, e.g. ``{"CV": "%", "X": "%", "P1": "MPa", "P2": "MPa",
+"T1": "K", "F": "kg/s"}`` (known units: :data:`UNITS`). The normalisation is DABLib's:
+``P' = P / 4 MPa``, ``T1' = T1 / 200 degC``, ``F' = F / 40 t/h``, ``CV' = CV / 100 %``,
+``X' = X / 100 %``. Nothing is clipped: a value outside the nominal range stays outside ``[0, 1]``.
+
+Sampling: the model runs at 1 Hz. A recording at another rate is an error unless the caller asks
+for resampling (``resample="mean"``: the mean of the samples in each second, for faster
+recordings, second ``k`` averaging the samples with ``k - 0.5 <= t < k + 0.5`` so that every sample
+counts once; ``resample="linear"``: linear interpolation onto whole seconds between samples at
+most two sampling steps apart, for slower ones). A second whose samples include a NaN, or that
+no sample covers, is NaN. Missing timestamps at 1 Hz become NaN rows: gaps stay gaps (listed in
+the ``gaps`` attribute, warned with :class:`RecordingGapWarning`; the diagnosis marks those
+seconds BLIND). Nothing is filled or dropped; columns a reader does not use are listed in the
+``ignored_columns`` attribute.
+
+Formats
+-------
+CSV (:func:`read_csv`)
+    A header row naming the columns ``time, CV, P1, P2, T1, X, F`` (any order, other columns
+    allowed), or a ``columns`` mapping from the file's names to the channels. ``time`` holds
+    seconds (or date-times, converted to seconds from the first row; the first is kept in the
+    ``time_origin`` attribute); without a time column give ``rate`` (Hz). Empty cells and ``NaN``
+    are gaps; any other non-number is an error naming its line and column.
+MATLAB (:func:`read_mat`)
+    One vector variable per channel (and ``time``), named as the channels or through
+    ``columns``. v4/v5/v7 files are read with scipy, v7.3 (HDF5) files with h5py.
+netCDF (:func:`read_netcdf`)
+    Variables named as the channels (or through ``columns``) along a ``time`` dimension whose
+    coordinate holds seconds or date-times; a dataset already in the project's format (dims
+    ``run``, ``time``) is accepted as is. ``chunks`` keeps it lazy (dask), for recordings that
+    do not fit in memory. A variable's ``units`` attribute must agree with ``units=``.
+Day files (:func:`read_day_file`)
+    ``DDMM2001.txt`` of the Lublin benchmark, via `bayes_fdi.datasets.lublin.load_lublin_day`
+    (its own per-actuator ranges; ``units`` does not apply). Such a recording keeps its
+    ``day``/``actuator`` attributes and the real fault events of that day.
+
+:func:`read_recording` picks the reader from the file name (``.csv``/``.tsv``, ``.mat``,
+``.nc``/``.nc4``/``.cdf``/``.h5``, ``.txt`` = day file).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from bayes_fdi.datasets.format import CHANNELS, validate_dataset
+from bayes_fdi.datasets.units import (
+    _ALIASES,
+    PHYSICAL_UNITS,
+    UNITS,
+    _units_attr,
+    normalise,
+    parse_units,
+    to_physical,
+)
+
+__all__ = [
+    "FORMATS",
+    "PHYSICAL_UNITS",
+    "RESAMPLE_METHODS",
+    "UNITS",
+    "RecordingGapWarning",
+    "normalise",
+    "parse_units",
+    "read_csv",
+    "read_day_file",
+    "read_mat",
+    "read_netcdf",
+    "read_recording",
+    "to_physical",
+]
+
+RESAMPLE_METHODS: tuple[str, ...] = ("mean", "linear")
+FORMATS: dict[str, str] = {
+    ".csv": "csv",
+    ".tsv": "csv",
+    ".mat": "mat",
+    ".nc": "netcdf",
+    ".nc4": "netcdf",
+    ".cdf": "netcdf",
+    ".h5": "netcdf",
+    ".txt": "day",
+}
+#: Timestamps closer than this to the 1-s grid (s) are taken as on it.
+_TIME_TOLERANCE = 1e-6
+
+
+class RecordingGapWarning(UserWarning):
+    """A recording has gaps (NaN or missing seconds); they are kept, and come out BLIND."""
+
+
+# ----------------------------------------------------------------------------------------------
+# the 1-s grid
+# ----------------------------------------------------------------------------------------------
+def _seconds(time: Any, source: str) -> tuple[np.ndarray, str]:
+    """Seconds (float) of a time column or coordinate, and the ISO origin for date-times."""
+    t = np.asarray(time)
+    if np.issubdtype(t.dtype, np.datetime64):
+        origin = t[0]
+        seconds = (t - origin) / np.timedelta64(1, "ns") * 1e-9
+        import pandas as pd
+
+        return seconds.astype(np.float64), pd.Timestamp(origin).isoformat()
+    if np.issubdtype(t.dtype, np.timedelta64):
+        return (t / np.timedelta64(1, "ns") * 1e-9).astype(np.float64), ""
+    if t.dtype.kind in "OUS":
+        import pandas as pd
+
+        try:
+            stamps = pd.to_datetime(pd.Series(t), format="ISO8601").to_numpy()
+        except (ValueError, TypeError) as exc:
+            raise ValueError(
+                f"{source}: the time column is neither seconds nor date-times ({exc})"
+            ) from None
+        return _seconds(stamps.astype("datetime64[ns]"), source)
+    try:
+        return t.astype(np.float64), ""
+    except (TypeError, ValueError):
+        raise ValueError(f"{source}: the time column is not numeric") from None
+
+
+def _grid(
+    time: np.ndarray, channels: dict[str, np.ndarray], resample: str | None, source: str
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
+    """Put the samples on the 1-s grid (see the module docstring); returns time, channels, info."""
+    if resample is not None and resample not in RESAMPLE_METHODS:
+        raise ValueError(f"resample must be None or one of {RESAMPLE_METHODS}, got {resample!r}")
+    n = time.size
+    if n == 0:
+        raise ValueError(f"{source}: the recording has no samples")
+    if not np.all(np.isfinite(time)):
+        row = int(np.flatnonzero(~np.isfinite(time))[0])
+        raise ValueError(f"{source}: time of sample {row + 1} is missing or not finite")
+    if n > 1:
+        step = np.diff(time)
+        if np.any(step <= 0):
+            row = int(np.flatnonzero(step <= 0)[0])
+            raise ValueError(
+                f"{source}: time must increase; sample {row + 2} ({time[row + 1]:g} s) does not "
+                f"come after sample {row + 1} ({time[row]:g} s)"
+            )
+        typical = float(np.median(step))
+    else:
+        typical = 1.0
+    on_grid = n == 1 or (
+        abs(typical - 1.0) <= _TIME_TOLERANCE
+        and np.all(np.abs(np.diff(time) - np.round(np.diff(time))) <= _TIME_TOLERANCE)
+    )
+    info: dict[str, Any] = {"sampling_step": typical, "resampled": "no"}
+    if on_grid:
+        offsets = np.round(time - time[0]).astype(np.int64)
+        grid = time[0] + np.arange(offsets[-1] + 1, dtype=np.float64)
+        out = {}
+        for name, values in channels.items():
+            full = np.full(grid.size, np.nan)
+            full[offsets] = values
+            out[name] = full
+        info["missing_seconds"] = int(grid.size - n)
+        return grid, out, info
+    if resample is None:
+        raise ValueError(
+            f"{source}: sampled every {typical:g} s ({1 / typical:g} Hz); the model runs at 1 Hz. "
+            "Ask for resampling explicitly: resample='mean' (average each second, for faster "
+            "recordings) or 'linear' (interpolate, for slower ones); on the command line "
+            "--resample mean|linear"
+        )
+    if resample == "mean":  # every sample falls in a second: the edge seconds may be partial
+        start, stop = math.floor(time[0] + 0.5), math.floor(time[-1] + 0.5)
+    else:  # interpolation only between samples: never beyond the first and the last
+        start = math.ceil(time[0] - _TIME_TOLERANCE)
+        stop = math.floor(time[-1] + _TIME_TOLERANCE)
+    grid = np.arange(start, stop + 1, dtype=np.float64)
+    out = {}
+    if resample == "mean":
+        # second k holds the samples with k - 0.5 <= t < k + 0.5
+        which = np.floor(time - start + 0.5).astype(np.int64)
+        keep = (which >= 0) & (which < grid.size)
+        counts = np.bincount(which[keep], minlength=grid.size)
+        for name, values in channels.items():
+            v = values[keep]
+            nan = np.bincount(which[keep], weights=np.isnan(v), minlength=grid.size)
+            total = np.bincount(which[keep], weights=np.nan_to_num(v), minlength=grid.size)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                mean = total / counts
+            out[name] = np.where((counts > 0) & (nan == 0), mean, np.nan)
+    else:
+        right = np.searchsorted(time, grid, side="left").clip(1, n - 1)
+        left = right - 1
+        exact = np.isclose(time[right], grid, rtol=0, atol=_TIME_TOLERANCE)
+        left = np.where(exact, right, left)
+        close = (time[right] - time[left]) <= 2 * typical + _TIME_TOLERANCE
+        span = np.where(right > left, time[right] - time[left], 1.0)
+        w = np.where(right > left, (grid - time[left]) / span, 0.0)
+        for name, values in channels.items():
+            value = (1 - w) * values[left] + w * values[right]
+            out[name] = np.where(close, value, np.nan)
+    info["resampled"] = resample
+    return grid, out, info
+
+
+def _gaps(time: np.ndarray, channels: Mapping[str, np.ndarray]) -> dict[str, dict]:
+    summary = {}
+    for name in CHANNELS:
+        isnan = np.isnan(channels[name]).astype(np.int8)
+        edges = np.diff(np.concatenate(([0], isnan, [0])))
+        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        spans = [[float(time[a]), float(time[b - 1])] for a, b in zip(starts, stops, strict=True)]
+        summary[name] = {"n_missing": int(isnan.sum()), "n_gaps": len(spans), "spans": spans}
+    return summary
+
+
+def _build(
+    time: np.ndarray,
+    raw: dict[str, np.ndarray],
+    units: str | Mapping[str, str],
+    resample: str | None,
+    source: str,
+    fmt: str,
+    attrs: Mapping[str, Any] | None = None,
+) -> xr.Dataset:
+    """Normalise, put on the 1-s grid, and wrap into an unlabelled one-run dataset."""
+    unit_of = parse_units(units)
+    for name, values in raw.items():
+        if np.isinf(values).any():
+            row = int(np.flatnonzero(np.isinf(values))[0])
+            raise ValueError(f"{source}: {name} of sample {row + 1} is infinite")
+    normalised = {name: normalise(raw[name], name, unit_of[name]) for name in CHANNELS}
+    grid, channels, info = _grid(time, normalised, resample, source)
+    gaps = _gaps(grid, channels)
+    ds = xr.Dataset(
+        {name: (("run", "time"), channels[name][None, :]) for name in CHANNELS},
+        coords={"run": [0], "time": grid},
+        attrs={
+            "source": source,
+            "format": fmt,
+            "units": _units_attr(unit_of),
+            "sampling_step": info["sampling_step"],
+            "resampled": info["resampled"],
+            "gaps": json.dumps(gaps),
+            **(attrs or {}),
+        },
+    )
+    validate_dataset(ds, require=CHANNELS, allow_nan=True)
+    _warn_gaps(gaps, info.get("missing_seconds", 0), source)
+    return ds
+
+
+def _warn_gaps(gaps: Mapping[str, dict], missing_seconds: int, source: str) -> None:
+    with_gaps = {k: v for k, v in gaps.items() if v["n_missing"]}
+    if with_gaps:
+        detail = ", ".join(
+            f"{k} ({v['n_missing']} s in {v['n_gaps']} gap(s))" for k, v in with_gaps.items()
+        )
+        extra = f"; {missing_seconds} s without any sample" if missing_seconds else ""
+        warnings.warn(
+            f"{source}: gaps kept as NaN (diagnosed BLIND) in {detail}{extra}",
+            RecordingGapWarning,
+            stacklevel=3,
+        )
+
+
+def _pick_columns(
+    available: list[str], columns: Mapping[str, str] | None, source: str, rate: float | None
+) -> tuple[dict[str, str], list[str]]:
+    """channel -> source column, and the source columns left unused."""
+    mapping = {str(k): str(v) for k, v in (columns or {}).items()}
+    bad = sorted(set(mapping.values()) - {*CHANNELS, "time"})
+    if bad:
+        raise ValueError(
+            f"columns maps to unknown channel(s) {bad}; use time, {', '.join(CHANNELS)}"
+        )
+    absent = sorted(set(mapping) - set(available))
+    if absent:
+        raise ValueError(f"{source}: column(s) {absent} named in columns are not in the file")
+    chosen = {v: k for k, v in mapping.items()}
+    for name in ("time", *CHANNELS):
+        if name not in chosen and name in available and name not in mapping:
+            chosen[name] = name
+    needed = ([] if rate is not None else ["time"]) + list(CHANNELS)
+    missing = [c for c in needed if c not in chosen]
+    if missing:
+        hint = " (or give rate= for rows evenly spaced in time)" if missing == ["time"] else ""
+        raise ValueError(
+            f"{source}: no column for {missing}{hint}; the file has {available[:12]}; "
+            "name the columns time, CV, P1, P2, T1, X, F or give a columns mapping"
+        )
+    if rate is not None and "time" in chosen:
+        raise ValueError(f"{source}: has a time column; do not also give rate")
+    ignored = [c for c in available if c not in chosen.values()]
+    return chosen, ignored
+
+
+def _rate_time(n: int, rate: float | None) -> np.ndarray:
+    if rate is None or not (isinstance(rate, int | float) and rate > 0 and math.isfinite(rate)):
+        raise ValueError(f"rate must be a positive number of samples per second, got {rate!r}")
+    return np.arange(n, dtype=np.float64) / float(rate)
+
+
+# ----------------------------------------------------------------------------------------------
+# readers
+# ----------------------------------------------------------------------------------------------
+def read_csv(
+    path: str | os.PathLike,
+    *,
+    columns: Mapping[str, str] | None = None,
+    units: str | Mapping[str, str] = "normalised",
+    resample: str | None = None,
+    rate: float | None = None,
+    delimiter: str | None = None,
+) -> xr.Dataset:
+    """Read a CSV recording (see the module docstring for the rules).
+
+    Parameters
+    ----------
+    path
+        The file; a header row names the columns.
+    columns
+        File column -> channel (``time``, ``CV`` .. ``F``) for files with other names.
+    units
+        ``"normalised"``, ``"physical"`` or a mapping channel -> unit.
+    resample
+        ``None`` (a rate other than 1 Hz is an error), ``"mean"`` or ``"linear"``.
+    rate
+        Samples per second, for a file without a time column.
+    delimiter
+        Column separator; default ``","`` (``"\\t"`` for ``.tsv``).
+
+    Returns
+    -------
+    xarray.Dataset
+        An unlabelled one-run dataset (attrs ``source``, ``format``, ``units``, ``gaps``,
+        ``ignored_columns``, ``resampled``, ``sampling_step``, and ``time_origin`` for
+        date-times).
+    """
+    import pandas as pd
+
+    source = os.fspath(path)
+    sep = delimiter or ("\t" if source.lower().endswith(".tsv") else ",")
+    try:
+        frame = pd.read_csv(
+            source, sep=sep, dtype=str, keep_default_na=False, skipinitialspace=True
+        )
+    except pd.errors.EmptyDataError:
+        raise ValueError(f"{source}: the file is empty") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{source}: not a readable CSV file ({exc})") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    chosen, ignored = _pick_columns(list(frame.columns), columns, source, rate)
+    raw = {name: _numbers(frame[chosen[name]], chosen[name], source) for name in CHANNELS}
+    attrs: dict[str, Any] = {"ignored_columns": json.dumps(ignored)}
+    if "time" in chosen:
+        column = frame[chosen["time"]].str.strip()
+        if (column == "").any():
+            row = int(np.flatnonzero((column == "").to_numpy())[0])
+            raise ValueError(f"{source}: line {row + 2}: the time cell is empty")
+        try:
+            time = column.astype(np.float64).to_numpy()
+            origin = ""
+        except ValueError:
+            time, origin = _seconds(column.to_numpy(dtype=object), source)
+        if origin:
+            attrs["time_origin"] = origin
+    else:
+        time = _rate_time(len(frame), rate)
+    return _build(time, raw, units, resample, source, "csv", attrs)
+
+
+def _numbers(column: Any, name: str, source: str) -> np.ndarray:
+    """Cells as floats: empty or NaN cells are NaN; anything else must be a number."""
+    text = column.str.strip()
+    blank = text.isin(["", "NaN", "nan", "NA", "N/A"]).to_numpy()
+    values = np.full(len(text), np.nan)
+    import pandas as pd
+
+    parsed = pd.to_numeric(text.where(~blank), errors="coerce").to_numpy(dtype=np.float64)
+    bad = np.isnan(parsed) & ~blank
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"{source}: line {row + 2}, column {name!r}: {text.iloc[row]!r} is not a number "
+            "(write gaps as an empty cell or NaN)"
+        )
+    values[~blank] = parsed[~blank]
+    return values
+
+
+def read_mat(
+    path: str | os.PathLike,
+    *,
+    columns: Mapping[str, str] | None = None,
+    units: str | Mapping[str, str] = "normalised",
+    resample: str | None = None,
+    rate: float | None = None,
+) -> xr.Dataset:
+    """Read a MATLAB recording: one vector variable per channel (v5 via scipy, v7.3 via h5py).
+
+    Parameters are those of :func:`read_csv`; ``columns`` maps variable names to channels.
+    """
+    import h5py
+
+    source = os.fspath(path)
+    if not os.path.exists(source):
+        raise FileNotFoundError(2, "no such file", source)
+    variables: dict[str, np.ndarray] = {}
+    if h5py.is_hdf5(source):
+        with h5py.File(source, "r") as handle:
+            for key, item in handle.items():
+                if isinstance(item, h5py.Dataset) and item.dtype.kind in "fiub":
+                    variables[key] = np.asarray(item[()], dtype=np.float64)
+        fmt = "mat-v7.3"
+    else:
+        from scipy.io import loadmat
+        from scipy.io.matlab import MatReadError
+
+        try:
+            content = loadmat(source)
+        except (MatReadError, ValueError, TypeError, OSError) as exc:
+            raise ValueError(f"{source}: not a readable MATLAB file ({exc})") from None
+        for key, value in content.items():
+            if not key.startswith("__") and isinstance(value, np.ndarray):
+                if value.dtype.kind in "fiub":
+                    variables[key] = value.astype(np.float64)
+        fmt = "mat"
+    chosen, ignored = _pick_columns(list(variables), columns, source, rate)
+    vectors = {}
+    for name, var in chosen.items():
+        value = variables[var]
+        if value.ndim > 2 or (value.ndim == 2 and min(value.shape) != 1):
+            raise ValueError(
+                f"{source}: variable {var!r} has shape {value.shape}; expected a vector"
+            )
+        vectors[name] = value.ravel()
+    lengths = {k: v.size for k, v in vectors.items()}
+    if len(set(lengths.values())) != 1:
+        raise ValueError(f"{source}: variables have different lengths {lengths}")
+    n = next(iter(lengths.values()))
+    time = vectors.pop("time") if "time" in vectors else _rate_time(n, rate)
+    attrs = {"ignored_columns": json.dumps(ignored)}
+    return _build(time, vectors, units, resample, source, fmt, attrs)
+
+
+def read_netcdf(
+    path: str | os.PathLike,
+    *,
+    columns: Mapping[str, str] | None = None,
+    units: str | Mapping[str, str] = "normalised",
+    resample: str | None = None,
+    chunks: Mapping[str, int] | None = None,
+) -> xr.Dataset:
+    """Read a netCDF recording (see the module docstring).
+
+    Parameters are those of :func:`read_csv`, plus ``chunks`` (e.g. ``{"time": 86400}``): keep
+    the data lazy in dask chunks (needs dask; the 1-s grid and units are checked, the values are
+    read chunk by chunk by the diagnosis). A lazy recording must already be on the 1-s grid.
+    """
+    source = os.fspath(path)
+    if not os.path.exists(source):
+        raise FileNotFoundError(2, "no such file", source)
+    try:
+        with _bounded_chunk_cache(bool(chunks)):
+            opened = xr.open_dataset(source, chunks=dict(chunks) if chunks else None)
+            if chunks:  # open every variable now, with the bounded cache
+                for name in opened.variables:
+                    _ = opened.variables[name][(0,) * opened.variables[name].ndim].values
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise ValueError(f"{source}: not a readable netCDF file ({exc})") from None
+    if "run" in opened.dims and "time" in opened.dims and columns is None:
+        return _project_dataset(opened, units, source, lazy=bool(chunks))
+    if "time" not in opened.dims:
+        raise ValueError(f"{source}: no 'time' dimension (dims are {tuple(opened.dims)})")
+    names = [str(v) for v in opened.data_vars if opened[v].dims == ("time",)]
+    chosen, ignored = _pick_columns([*names, "time"], columns, source, None)
+    unit_of = parse_units(units)
+    for name in CHANNELS:
+        declared = opened[chosen[name]].attrs.get("units")
+        if declared is not None and _ALIASES.get(str(declared), str(declared)) != unit_of[name]:
+            raise ValueError(
+                f"{source}: variable {chosen[name]!r} declares units {declared!r} but "
+                f"{name} was given as {unit_of[name]!r} ('1' = normalised); pass units= to match"
+            )
+    time, origin = _seconds(opened["time"].values, source)
+    attrs = {"ignored_columns": json.dumps([c for c in ignored if c != "time"])}
+    if origin:
+        attrs["time_origin"] = origin
+    if chunks:
+        return _lazy(opened, chosen, unit_of, time, source, attrs)
+    raw = {name: np.asarray(opened[chosen[name]].values, dtype=np.float64) for name in CHANNELS}
+    opened.close()
+    return _build(time, raw, unit_of, resample, source, "netcdf", attrs)
+
+
+#: Chunk cache (bytes) of each variable of a lazily read netCDF file: netCDF's default of 64 MB
+#: per variable fills up as a long recording is read chunk by chunk (384 MB for six channels).
+LAZY_CHUNK_CACHE = 16 * 2**20
+
+
+@contextlib.contextmanager
+def _bounded_chunk_cache(active: bool):
+    """netCDF's default chunk cache set to :data:`LAZY_CHUNK_CACHE` while files are opened."""
+    if not active:
+        yield
+        return
+    import netCDF4
+
+    previous = netCDF4.get_chunk_cache()
+    netCDF4.set_chunk_cache(LAZY_CHUNK_CACHE, 1009, 0.75)
+    try:
+        yield
+    finally:
+        netCDF4.set_chunk_cache(*previous)
+
+
+def _project_dataset(ds: xr.Dataset, units: Any, source: str, lazy: bool) -> xr.Dataset:
+    """A file already in the project's format: normalised units only, labels kept."""
+    if parse_units(units) != dict.fromkeys(CHANNELS, "1"):
+        raise ValueError(f"{source}: a dataset in the project's format is normalised already")
+    missing = [c for c in CHANNELS if c not in ds.data_vars]
+    if missing:
+        raise ValueError(f"{source}: lacks channel(s) {missing}")
+    ds = ds[list(CHANNELS)]
+    if not lazy:
+        ds = ds.load()
+        for name in ("state", "profile"):
+            if name in ds.coords:
+                ds = ds.assign_coords({name: ("run", ds[name].values.astype(str))})
+        validate_dataset(ds, require=CHANNELS, allow_nan=True)
+    ds.attrs.setdefault("source", source)
+    ds.attrs["format"] = "netcdf"
+    return ds
+
+
+def _lazy(
+    opened: xr.Dataset,
+    chosen: Mapping[str, str],
+    unit_of: Mapping[str, str],
+    time: np.ndarray,
+    source: str,
+    attrs: dict,
+) -> xr.Dataset:
+    steps = np.diff(time)
+    if time.size > 1 and (
+        np.any(np.abs(steps - 1.0) > _TIME_TOLERANCE) or not np.all(np.isfinite(time))
+    ):
+        raise ValueError(
+            f"{source}: a lazily read recording must be sampled every 1 s without missing "
+            "timestamps (write NaN rows for gaps); read it whole to resample"
+        )
+    data = {
+        name: (
+            ("run", "time"),
+            normalise(opened[chosen[name]].data.astype(np.float64), name, unit_of[name])[None, :],
+        )
+        for name in CHANNELS
+    }
+    return xr.Dataset(
+        data,
+        coords={"run": [0], "time": time},
+        attrs={
+            "source": source,
+            "format": "netcdf",
+            "units": _units_attr(unit_of),
+            "sampling_step": 1.0,
+            "resampled": "no",
+            **attrs,
+        },
+    )
+
+
+def read_day_file(path: str | os.PathLike, *, actuator: int = 3) -> xr.Dataset:
+    """Read a Lublin benchmark day file ``DDMM2001.txt`` for one actuator, unlabelled.
+
+    `bayes_fdi.datasets.lublin.load_lublin_day` does the reading (the actuator's own ranges);
+    its ``state`` label is dropped (the real faults of the day are in the ``fault_events``
+    attribute instead, see :data:`~bayes_fdi.datasets.lublin.LUBLIN_FAULT_EVENTS`).
+    """
+    from bayes_fdi.datasets.lublin import load_lublin_day
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # re-warned below in this module's terms
+        ds = load_lublin_day(path, actuator=actuator)
+    ds = ds.drop_vars([c for c in ("state", "strength", "onset", "profile", "ramp") if c in ds])
+    ds.attrs["format"] = "day"
+    gaps = json.loads(ds.attrs["gaps"])
+    _warn_gaps(gaps, 0, os.fspath(path))
+    return ds
+
+
+def read_recording(
+    path: str | os.PathLike, *, format: str | None = None, actuator: int = 3, **kwargs: Any
+) -> xr.Dataset:
+    """Read a recording with the reader its suffix names (:data:`FORMATS`) or ``format``.
+
+    ``format`` is one of ``"csv"``, ``"mat"``, ``"netcdf"``, ``"day"``; ``actuator`` applies to
+    day files; other keyword arguments go to the reader.
+    """
+    source = os.fspath(path)
+    if format is None:
+        suffix = os.path.splitext(source)[1].lower()
+        if suffix not in FORMATS:
+            raise ValueError(
+                f"{source}: cannot tell the format from the suffix {suffix!r}; known suffixes "
+                f"are {sorted(FORMATS)} (or give the format)"
+            )
+        format = FORMATS[suffix]
+    if format == "day":
+        if kwargs.get("units", "normalised") not in ("normalised", None) or kwargs.get("columns"):
+            raise ValueError(f"{source}: a day file has fixed columns and units")
+        if kwargs.get("resample"):
+            raise ValueError(f"{source}: a day file is sampled at 1 Hz already")
+        return read_day_file(source, actuator=actuator)
+    readers = {"csv": read_csv, "mat": read_mat, "netcdf": read_netcdf}
+    if format not in readers:
+        raise ValueError(f"format must be one of {[*readers, 'day']}, got {format!r}")
+    return readers[format](source, **{k: v for k, v in kwargs.items() if v is not None})

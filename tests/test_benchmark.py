@@ -1,0 +1,226 @@
+"""The benchmark harness: decision signals, the runner end to end (with a test double of the
+online diagnoser's contract), the report and the timeline figure."""
+
+import json
+
+import numpy as np
+import pytest
+import xarray as xr
+from online_double import OnlineDouble
+
+from bayes_fdi.actuator import benchmark_inputs, simulate
+from bayes_fdi.experiments import picalc
+from bayes_fdi.experiments.benchmark import decision_signals, rising_edges, run_benchmark
+from bayes_fdi.experiments.scenarios import SCENARIOS, simulate_scenario
+from bayes_fdi.experiments.timeline import plot_timeline
+
+BY_NAME = {s.name: s for s in SCENARIOS}
+
+
+def hand_stream(indicated, dd, groups, undetectable=()):
+    """A one-run decision stream holding what decision_signals reads."""
+    indicated = np.asarray(indicated, dtype=bool)
+    labels = list(groups)
+    return xr.Dataset(
+        {"DD": ("time", np.asarray(dd, dtype=bool)), "indicated": (("time", "group"), indicated)},
+        coords={"time": np.arange(indicated.shape[0], dtype=float), "group": labels},
+        attrs={"groups": json.dumps(groups), "undetectable": json.dumps(list(undetectable))},
+    )
+
+
+GROUPS = {"f1": ["f1"], "f2|f3": ["f2", "f3"], "f7|f8|f9": ["f7", "f8", "f9"]}
+DD = [0, 1, 1, 1, 1]
+IND = [[0, 0, 0], [0, 1, 1], [1, 1, 0], [1, 0, 0], [1, 0, 0]]
+
+
+def test_decision_signals_follow_the_contract():
+    sig = decision_signals(hand_stream(IND, DD, GROUPS, ["f14"]), "f1")
+    np.testing.assert_array_equal(sig.pid, [0, 0, 1, 1, 1])  # column of f1's group
+    np.testing.assert_array_equal(sig.cid, [0, 2, 1, 0, 0])  # the others indicated
+    np.testing.assert_array_equal(sig.group_sizes, [1, 2, 3])
+    assert sig.true_group == 0
+    sig = decision_signals(hand_stream(IND, DD, GROUPS, ["f14"]), "f3")
+    np.testing.assert_array_equal(sig.pid, [0, 1, 1, 0, 0])
+    np.testing.assert_array_equal(sig.cid, [0, 1, 1, 1, 1])
+
+
+def test_a_dgn0_fault_is_isolated_by_not_detecting_it():
+    sig = decision_signals(hand_stream(IND, DD, GROUPS, ["f14", "f5"]), "f14")
+    np.testing.assert_array_equal(sig.pid, [1, 0, 0, 0, 0])  # PID = not DD
+    np.testing.assert_array_equal(sig.cid, [0, 2, 2, 1, 1])  # every stream group is "other"
+    np.testing.assert_array_equal(sig.group_sizes, [1, 2, 3, 3])  # DGN0: f14, f5 and OK
+    np.testing.assert_array_equal(sig.indicated[:, -1], [1, 0, 0, 0, 0])
+    assert sig.true_group is None
+    sig = decision_signals(hand_stream(IND, DD, GROUPS), "f19")  # in no group: never isolated
+    assert not sig.pid.any() and sig.true_group is None
+    with pytest.raises(ValueError, match="one run"):
+        decision_signals(hand_stream(IND, DD, GROUPS).expand_dims(run=[0]), "f1")
+
+
+def test_rising_edges():
+    assert rising_edges([0, 1, 1, 0, 1, 0]) == 2
+    assert rising_edges([1, 1, 0, 1]) == 2  # high at the first sample counts
+    assert rising_edges([]) == 0
+
+
+@pytest.fixture(scope="module")
+def double():
+    normal = simulate(benchmark_inputs(n_runs=3, duration=1200, vary=True, seed=1), seed=1)
+    return OnlineDouble().fit(normal)
+
+
+@pytest.fixture(scope="module")
+def tiny_run(double, tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    scenarios = [BY_NAME["f1 abrupt big"], BY_NAME["f14 abrupt big"]]
+    results = run_benchmark(
+        double, out, n_seeds=1, scenarios=scenarios, hours=0.1, n_bootstrap=20, progress=False
+    )
+    return out, results
+
+
+def test_runner_writes_the_contracts_json_and_the_report(tiny_run):
+    out, _ = tiny_run
+    data = json.loads((out / "benchmark.json").read_text())
+    assert [(r["fault"], r["mode"], r["size"], r["seed"]) for r in data["scenarios"]] == [
+        ("f1", "abrupt", "big", 10_000),
+        ("f14", "abrupt", "big", 10_000),
+    ]
+    for row in data["scenarios"]:
+        assert set(row["indices"]) == {
+            "t_dt",
+            "r_fd",
+            "r_td",
+            "fs_d",
+            "t_it",
+            "r_fi",
+            "r_ti",
+            "r_mi",
+            "fs_i",
+            "dacc",
+        }
+    assert set(data["real_hour"]) >= {"seconds", "alarms", "clear_share"}
+    assert data["real_hour"]["seconds"] == 1800  # the second half of the shipped hour
+    assert data["fault_free"]["seconds"] == 360  # 0.1 h after the warm-up
+    report = (out / "benchmark.md").read_text()
+    assert "Not the benchmark's numbers" in report and "## Targets" in report
+    assert "f14 abrupt big" in report and "Published DAMADICS results" in report
+    for name in ("f1-abrupt-big", "f14-abrupt-big"):
+        assert (out / "timelines" / f"{name}.png").stat().st_size > 10_000
+    assert (out / "reliability.png").exists()
+
+
+def test_runner_indices_equal_picalc_on_the_diagnosers_own_stream(tiny_run, double):
+    # an independent replay: simulate the scenario, run the double, derive PID/CID by hand
+    _, results = tiny_run
+    s = BY_NAME["f1 abrupt big"]
+    stream = double.run(simulate_scenario(s, [10_000])[["CV", "P1", "P2", "T1", "X", "F"]])
+    one = stream.isel(run=0)
+    dd = one.DD.values
+    pid = one.indicated.values[:, 0]  # f1 is in the double's first group
+    cid = one.indicated.values[:, 1].astype(int)
+    t = one.time.values
+    want = picalc(
+        t,
+        dd,
+        pid,
+        cid,
+        t_on=300,
+        t_from=900,
+        t_hor=1500,
+        strength=np.where(t >= 900, 0.75, 0.0),
+        indicated=one.indicated.values,
+        group_sizes=[10, 8],
+    )
+    assert results["scenarios"][0]["indices"] == want
+    assert want["t_dt"] != -1  # f1 big clogs the valve: the double sees it
+
+
+def test_dgn0_scenario_indices_obey_pid_equals_not_dd(tiny_run):
+    _, results = tiny_run
+    ind = results["scenarios"][1]["indices"]  # f14: the double declares it undetectable
+    # PID = not DD, so over the fault-free part r_fi = 1 - r_fd and over the faulty part
+    # r_ti = 1 - r_td (each sample is either detected or "isolated" as DGN0)
+    assert ind["r_fi"] == pytest.approx(1.0 - ind["r_fd"])
+    assert ind["r_ti"] == pytest.approx(1.0 - ind["r_td"])
+
+
+def test_effects_show_f14_leaves_the_measurements_untouched(tiny_run):
+    _, results = tiny_run
+    effects = {e["scenario"]: e for e in results["effects"]}
+    # f14 changes only the positioner's chamber-pressure reading: X, F, P1, P2, T1 bit-identical
+    assert effects["f14 abrupt big"]["deflection"] == 0.0
+    assert effects["f14 abrupt big"]["oracle_time"] is None
+    assert effects["f1 abrupt big"]["deflection"] > 100.0
+
+
+def test_timeline_from_a_stream_alone(double, tmp_path):
+    rec = simulate(benchmark_inputs(n_runs=1, duration=300), seed=3)
+    stream = double.run(rec)
+    fig = plot_timeline(stream, rec)  # no truth: e.g. a user's own recording
+    assert len(fig.axes) >= 7
+    path = plot_timeline(
+        stream, rec, truth={"fault": "f1", "onset": 100.0}, path=tmp_path / "t.png"
+    )
+    assert path.exists() and not list(tmp_path.glob(".*tmp*"))
+    with pytest.raises(ValueError, match="one run"):
+        two = simulate(benchmark_inputs(n_runs=2, duration=300), seed=3)
+        plot_timeline(double.run(two), two)
+    with pytest.raises(ValueError, match="unknown truth key"):
+        plot_timeline(stream, rec, truth={"fualt": "f1"})
+
+
+def test_the_benchmark_command_is_registered(capsys):
+    from bayes_fdi.cli import main
+
+    assert main(["benchmark", "--help"]) == 0  # main returns the exit status
+    out = capsys.readouterr().out
+    for option in ("--out", "--seeds", "--small", "--quiet"):
+        assert option in out
+
+
+def test_results_do_not_depend_on_the_batching(double, tmp_path):
+    scenarios = [BY_NAME["f18 abrupt big"], BY_NAME["f13 incipient"].truncated(1600)]
+    kw = {
+        "n_seeds": 2,
+        "scenarios": scenarios,
+        "hours": 0.05,
+        "real_hour": False,
+        "figures": False,
+        "n_bootstrap": 0,
+        "progress": False,
+    }
+    one_run_each = run_benchmark(double, tmp_path / "a", max_batch_samples=1, **kw)
+    all_at_once = run_benchmark(double, tmp_path / "b", max_batch_samples=10**7, **kw)
+    assert one_run_each["scenarios"] == all_at_once["scenarios"]
+    assert len(all_at_once["scenarios"]) == 4
+
+
+def test_nan_decisions_are_low():
+    dd = np.array([np.nan, 1.0, np.nan, 0.0])  # a float DD with BLIND seconds
+    ind = np.array([[np.nan, 0.0], [1.0, 0.0], [np.nan, np.nan], [0.0, 0.0]])
+    stream = xr.Dataset(
+        {"DD": ("time", dd), "indicated": (("time", "group"), ind)},
+        coords={"time": np.arange(4.0), "group": ["f1", "f2"]},
+        attrs={"groups": json.dumps({"f1": ["f1"], "f2": ["f2"]}), "undetectable": "[]"},
+    )
+    sig = decision_signals(stream, "f1")
+    np.testing.assert_array_equal(sig.dd, [0, 1, 0, 0])
+    np.testing.assert_array_equal(sig.pid, [0, 1, 0, 0])
+
+
+def test_timeline_axes_use_the_recordings_own_ranges(double):
+    """A Lublin Actuator-1 record is drawn in its own ranges, anything else in DABLib's."""
+    from bayes_fdi.datasets.lublin import ACTUATOR_RANGES
+
+    rec = simulate(benchmark_inputs(n_runs=1, duration=120), seed=3)
+    stream = double.run(rec)
+    fig = plot_timeline(stream, rec)
+    assert fig.axes[0].get_ylabel() == "X [%]" and fig.axes[1].get_ylabel() == "F [t/h]"
+    line = fig.axes[1].get_lines()[0]  # the measured flow: F' x 40 t/h
+    np.testing.assert_allclose(line.get_ydata(), rec["F"].values[0] * 40.0)
+    rec1 = rec.assign_attrs(actuator=1)
+    fig1 = plot_timeline(stream, rec1)
+    factor, unit = ACTUATOR_RANGES[1]["F"]
+    assert fig1.axes[1].get_ylabel() == f"F [{unit.replace('m3/h', 'm³/h')}]"
+    np.testing.assert_allclose(fig1.axes[1].get_lines()[0].get_ydata(), rec["F"].values[0] * factor)
