@@ -43,7 +43,7 @@ def test_inputs_are_held_increments_with_nan_propagation():
 
 
 def test_stream_equals_the_regressions_on_the_vectorised_inputs(models):
-    nm, normal = models
+    nm, _normal = models
     test = simulate(benchmark_inputs(1, 200, seed=12, vary=True), seed=12)
     got = nm.predict(test)
     U = dynamic_inputs(test, nm.n_differences)[0]

@@ -3,10 +3,12 @@ equal to run, gaps, detection only."""
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
 import pytest
+import xarray as xr
 from sklearn.base import clone
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
@@ -161,3 +163,68 @@ def test_clone_refits_and_bad_input_is_named(fitted, recording):
         fitted.update({"CV": 0.5, "P1": 0.8})
     with pytest.raises(ValueError, match="detector"):
         OnlineDiagnoser(detector="ewma").fit(recording.isel(run=[0]))
+
+
+def _assert_streams_equal(a, b):
+    # the same compiled kernels continue from the same state: identical, not merely close
+    assert set(a.data_vars) == set(b.data_vars)
+    for name in a.data_vars:
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    assert a.attrs == b.attrs
+
+
+@pytest.mark.parametrize("cuts", [(150,), (1, 99, 100, 155)])
+def test_chunked_run_continues_exactly(fitted, recording, cuts):
+    whole = fitted.run(recording)
+    edges = [0, *cuts, recording.sizes["time"]]
+    parts, state = [], None
+    for a, b in itertools.pairwise(edges):
+        part, state = fitted.run(recording.isel(time=slice(a, b)), state=state,
+                                 return_state=True)  # fmt: skip
+        parts.append(part)
+    _assert_streams_equal(whole, xr.concat(parts, dim="time"))
+    assert state.n_runs == recording.sizes["run"]
+    np.testing.assert_array_equal(state.seconds, recording.sizes["time"])
+    with pytest.raises(ValueError, match="read-only"):
+        state.features[0, 0] = 1.0  # the state is immutable
+
+
+def test_update_continues_a_runs_state(fitted, recording):
+    one = recording.isel(run=[2])
+    whole = fitted.run(one)
+    _, state = fitted.run(one.isel(time=slice(0, 130)), return_state=True)
+    fitted.reset(state)
+    recs = [fitted.update({c: float(one[c].values[0, t]) for c in CHANNELS})
+            for t in range(130, one.sizes["time"])]  # fmt: skip
+    np.testing.assert_array_equal([r.state for r in recs], whole["state"].values[0, 130:])
+    np.testing.assert_array_equal([r.probability for r in recs],
+                                  whole["probability"].values[0, 130:])  # fmt: skip
+    assert recs[0].t_start == 130.0  # seconds count on from the state
+    after = fitted.stream_state()
+    _, want = fitted.run(one, return_state=True)
+    for a, b in zip(after, want, strict=True):
+        np.testing.assert_array_equal(np.asarray(a, dtype=object) if isinstance(a, tuple)
+                                      else a, np.asarray(b, dtype=object) if isinstance(b, tuple)
+                                      else b)  # fmt: skip
+
+
+def test_state_of_another_shape_is_refused(fitted, recording):
+    _, state = fitted.run(recording.isel(run=[0]), return_state=True)
+    with pytest.raises(ValueError, match="1 run"):
+        fitted.run(recording, state=state)
+    with pytest.raises(ValueError, match="StreamState"):
+        fitted.run(recording, state={"dd": 1})
+
+
+def test_save_load_round_trip_is_exact(fitted, recording, tmp_path):
+    path = tmp_path / "online.npz"
+    fitted.reset()
+    fitted.save(path)
+    loaded = OnlineDiagnoser.load(path)
+    assert type(loaded) is OnlineDiagnoser
+    assert loaded.get_params().keys() == fitted.get_params().keys()
+    assert loaded.groups_ == fitted.groups_ and loaded.threshold_ == fitted.threshold_
+    _assert_streams_equal(fitted.run(recording), loaded.run(recording))
+    sample = {c: float(recording[c].values[1, 120]) for c in CHANNELS}
+    # repr: exact float reprs, and NaN fields compare equal (a dataclass's == would not)
+    assert repr(loaded.update(sample)) == repr(fitted.reset().update(sample))

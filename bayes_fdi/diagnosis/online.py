@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -39,6 +40,7 @@ from scipy import stats as sps
 from sklearn.base import BaseEstimator
 
 from bayes_fdi.datasets import CHANNELS, validate_dataset
+from bayes_fdi.diagnosis import persistence
 from bayes_fdi.diagnosis.detection import detection_decision
 from bayes_fdi.diagnosis.dynamic_models import signed_root, standardised_residuals
 from bayes_fdi.diagnosis.isolation import (
@@ -47,11 +49,17 @@ from bayes_fdi.diagnosis.isolation import (
     novelty_score_row,
 )
 from bayes_fdi.diagnosis.lean_predictors import tree_proba
-from bayes_fdi.diagnosis.online_fit import fit_online, new_stream_state
+from bayes_fdi.diagnosis.online_fit import fit_online
+from bayes_fdi.diagnosis.online_state import (
+    StreamState,
+    check_state,
+    pack_states,
+    run_state,
+)
 from bayes_fdi.diagnosis.seva_record import ClassDistribution, SevaRecord, SevaStatus
 from bayes_fdi.diagnosis.seva_rules import entropy
 
-__all__ = ["FAULTS", "OnlineDiagnoser"]
+__all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
 
 #: The fault names of the stream's ``fault`` coordinate.
 FAULTS: tuple[str, ...] = tuple(f"f{i}" for i in range(1, 20))
@@ -265,6 +273,25 @@ class OnlineDiagnoser(BaseEstimator):
         self._check_fitted()
         return self.isolator_.groups_ if self.isolator_ is not None else ()
 
+    # ------------------------------------------------------------------ persistence
+    def save(self, path: str | os.PathLike[str]) -> str:
+        """Write the fitted diagnoser to ``path`` (`bayes_fdi.diagnosis.persistence`: a
+        versioned ``.npz`` of JSON and arrays, no pickle; written atomically).
+
+        Everything fitted is saved (normal models, whitening filters, detector, isolator,
+        groups), and the `update` stream's state, so a loaded diagnoser gives exactly the same
+        stream and continues `update` where this one stopped. Returns the path written.
+        """
+        self._check_fitted()
+        return persistence.save(self, path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str], **kwargs: Any) -> OnlineDiagnoser:
+        """Read a diagnoser written by `save` (``kwargs``: those of
+        `bayes_fdi.diagnosis.persistence.load`); a ``ValueError`` names a corrupt, foreign or
+        newer file, or one that holds another class."""
+        return persistence.load(path, expected=cls, **kwargs)
+
     # ------------------------------------------------------------------ the per-second core
     def _process(self, arrays: Mapping[str, np.ndarray], st: dict[str, Any]) -> dict[str, Any]:
         """Every per-second quantity of consecutive samples of one run (updates ``st``)."""
@@ -289,6 +316,7 @@ class OnlineDiagnoser(BaseEstimator):
                                    arrays["P2"], arrays["T1"], state=st["features"])  # fmt: skip
         out["features"] = feats
         out.update(self._isolate(feats))
+        st["seconds"] += n
         return out
 
     def _isolate(self, feats: np.ndarray) -> dict[str, np.ndarray]:
@@ -364,12 +392,27 @@ class OnlineDiagnoser(BaseEstimator):
         }  # fmt: skip
 
     # ------------------------------------------------------------------ streaming
-    def reset(self) -> OnlineDiagnoser:
-        """Start a new stream: forget the past seconds (``update`` restarts at second 0)."""
+    def reset(self, state: StreamState | None = None) -> OnlineDiagnoser:
+        """Start a new stream for `update` (second 0), or continue from ``state``.
+
+        Parameters
+        ----------
+        state
+            A one-run `StreamState` (from `stream_state` or ``run(..., return_state=True)``):
+            `update` continues that stream exactly. None: a fresh stream.
+        """
         self._check_fitted()
-        self._stream = new_stream_state(self)
-        self._seconds = 0
+        if state is not None:
+            check_state(self, state, 1)
+        self._stream = run_state(self, state, 0)
         return self
+
+    def stream_state(self) -> StreamState:
+        """The state of the `update` stream after its last second (a read-only copy)."""
+        self._check_fitted()
+        if not hasattr(self, "_stream"):
+            self.reset()
+        return pack_states([self._stream])
 
     def update(self, sample: Mapping[str, Any]) -> SevaRecord:
         """Process one second of one actuator; returns its SEVA record (O(1) time, memory).
@@ -394,8 +437,7 @@ class OnlineDiagnoser(BaseEstimator):
         if missing:
             raise ValueError(f"sample lacks channel(s) {missing}")
         arrays = {c: np.array([float(sample[c])], dtype=np.float64) for c in CHANNELS}
-        t = float(sample.get("time", self._seconds))
-        self._seconds += 1
+        t = float(sample.get("time", self._stream["seconds"]))
         out = self._process(arrays, self._stream)
         dec = self._decide(arrays, out)
         self.last_ = {
@@ -450,12 +492,33 @@ class OnlineDiagnoser(BaseEstimator):
                 f"{self.p_fault}",)  # fmt: skip
 
     # ------------------------------------------------------------------ batch
-    def run(self, recording: xr.Dataset) -> xr.Dataset:
+    def run(
+        self,
+        recording: xr.Dataset,
+        *,
+        state: StreamState | None = None,
+        return_state: bool = False,
+    ) -> xr.Dataset | tuple[xr.Dataset, StreamState]:
         """The 1 Hz decision stream of a recording (dims ``run``, ``time`` or just ``time``).
 
-        Every run starts from a fresh stream state (as after `reset`); the result equals
-        feeding each run through `update` second by second. See ``ONLINE_CONTRACT.md`` for the
-        variables.
+        Each run starts from a fresh stream state (as after `reset`) unless ``state`` is given;
+        the result equals feeding each run through `update` second by second. See
+        ``ONLINE_CONTRACT.md`` for the variables.
+
+        Parameters
+        ----------
+        recording
+            Channels CV, P1, P2, T1, X, F (normalised; NaN = missing).
+        state
+            The `StreamState` returned by an earlier call with ``return_state=True`` on the
+            preceding part of the same runs (same number of runs): the stream continues
+            exactly, so ``run(a ++ b)`` equals ``run(a)`` followed by ``run(b, state=...)``.
+        return_state
+            Also return the state after the last second.
+
+        Returns
+        -------
+        xarray.Dataset, or (xarray.Dataset, StreamState) with ``return_state``
         """
         self._check_fitted()
         single = "run" not in recording.dims
@@ -465,14 +528,21 @@ class OnlineDiagnoser(BaseEstimator):
         channels = ds[[c for c in CHANNELS if c in ds.data_vars]].reset_coords(drop=True)
         validate_dataset(channels, require=CHANNELS, allow_nan=True)
         n_runs, n_t = ds.sizes["run"], ds.sizes["time"]
+        if state is not None:
+            check_state(self, state, n_runs)
         data = {c: np.asarray(ds[c].transpose("run", "time").values, dtype=np.float64)
                 for c in CHANNELS}  # fmt: skip
-        per_run = []
+        per_run, states = [], []
         for i in range(n_runs):
             arrays = {c: np.ascontiguousarray(v[i]) for c, v in data.items()}
-            out = self._process(arrays, new_stream_state(self))
+            st = run_state(self, state, i)
+            out = self._process(arrays, st)
             per_run.append((out, self._decide(arrays, out)))
-        return self._assemble(ds, per_run, n_t, single)
+            states.append(st)
+        stream = self._assemble(ds, per_run, n_t, single)
+        if return_state:
+            return stream, pack_states(states) if states else state
+        return stream
 
     def _assemble(self, ds, per_run, n_t: int, single: bool) -> xr.Dataset:
         def stack(key: str, src: int) -> np.ndarray:

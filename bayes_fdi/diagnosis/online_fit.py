@@ -37,13 +37,10 @@ from bayes_fdi.diagnosis.detection import (
     cusum_threshold,
 )
 from bayes_fdi.diagnosis.dynamic_models import DynamicNormalModels
-from bayes_fdi.diagnosis.isolation import (
-    ISOLATION_FEATURES,
-    FaultIsolator,
-    new_feature_state,
-)
+from bayes_fdi.diagnosis.isolation import ISOLATION_FEATURES, FaultIsolator
+from bayes_fdi.diagnosis.online_state import new_run_state
 
-__all__ = ["SIGNATURE_AGES", "fit_online", "new_stream_state", "split_fault_runs"]
+__all__ = ["SIGNATURE_AGES", "fit_online", "split_fault_runs"]
 
 #: Seconds after a detection at which a training run contributes its isolation signature.
 SIGNATURE_AGES: tuple[int, ...] = (
@@ -55,18 +52,6 @@ SIGNATURE_AGES: tuple[int, ...] = (
 GROUP_MIN_AGE = 20
 #: White Gaussian samples per channel behind the GLR's theoretical threshold floor.
 WHITE_SAMPLES = 200_000
-
-
-def new_stream_state(diag: Any) -> dict[str, Any]:
-    """A fresh per-stream state of a fitted `OnlineDiagnoser` (one per run being processed)."""
-    return {
-        "models": diag.normal_models_.new_state(),
-        "whiten": {c: diag.whiteners_[c].new_state() for c in ("X", "F")},
-        "detect": {c: diag.detector_.new_state() for c in ("X", "F")},
-        "dd": np.zeros(1),
-        "held": np.zeros(2),
-        "features": new_feature_state(),
-    }
 
 
 def split_fault_runs(runs: xr.Dataset) -> tuple[xr.Dataset, xr.Dataset, xr.Dataset]:
@@ -164,7 +149,7 @@ def _signatures(diag: Any, runs: xr.Dataset) -> tuple[np.ndarray, np.ndarray, np
         if state == "fn":
             continue
         arrays = {c: np.ascontiguousarray(v[i]) for c, v in data.items()}
-        out = diag._process(arrays, new_stream_state(diag))
+        out = diag._process(arrays, new_run_state(diag))
         dd = out["DD"]
         rise = np.flatnonzero(dd & ~np.concatenate([[False], dd[:-1]]))
         rise = rise[times[rise] >= onset[i]]
