@@ -1,4 +1,5 @@
-"""Sequential detectors, whitening and thresholds (bayes_fdi.diagnosis.detection)."""
+"""Sequential detectors, whitening and thresholds (bayes_fdi.diagnosis: detection, whitening,
+thresholds)."""
 
 from __future__ import annotations
 
@@ -8,17 +9,14 @@ import numpy as np
 import pytest
 from scipy.linalg import solve_toeplitz
 
-from bayes_fdi.diagnosis.detection import (
-    CUSUM,
-    GLR,
-    ARWhitener,
+from bayes_fdi.diagnosis.detection import CUSUM, GLR, detection_decision
+from bayes_fdi.diagnosis.thresholds import (
     calibrate_threshold,
     cusum_arl,
     cusum_threshold,
-    detection_decision,
     empirical_arl,
-    levinson_durbin,
 )
+from bayes_fdi.diagnosis.whitening import ARWhitener, levinson_durbin
 
 
 def _hand_cusum(e, k, cap):

@@ -6,7 +6,7 @@ X and F.
 1. the dynamic normal models (`~bayes_fdi.diagnosis.dynamic_models.DynamicNormalModels`):
    predicted X and F with calibrated predictive standard deviations;
 2. standardised residuals ``z = (y - y_hat) / std``, whitened by an AR filter fitted on
-   fault-free out-of-fold residuals (`~bayes_fdi.diagnosis.detection.ARWhitener`);
+   fault-free out-of-fold residuals (`~bayes_fdi.diagnosis.whitening.ARWhitener`);
 3. a sequential test per output (`~bayes_fdi.diagnosis.detection.CUSUM` by default, or
    `~bayes_fdi.diagnosis.detection.GLR`) whose threshold meets a false-alarm budget
    (default: on average at most one alarm per 8 h of fault-free data), and the detection
@@ -140,7 +140,7 @@ class OnlineDiagnoser(BaseEstimator):
         False-alarm budget: the mean time between false alarms on fault-free data must be at
         least this many hours (default 8). The threshold is the larger of the one that meets
         it on white Gaussian innovations and the one measured on the fault-free training
-        runs' out-of-fold innovations (see `bayes_fdi.diagnosis.detection.calibrate_threshold`).
+        runs' out-of-fold innovations (see `bayes_fdi.diagnosis.thresholds.calibrate_threshold`).
     clear_level
         DD turns off when every statistic is at or below this (default: 0 for the CUSUM, i.e.
         the evidence is fully gone; 2 for the GLR, about the 95 % point of its in-control

@@ -8,7 +8,7 @@
 3. the detector threshold for the false-alarm budget: the larger of the threshold that meets
    it on white Gaussian innovations (Siegmund's approximation for the CUSUM, a simulation for
    the GLR) and the one measured on the out-of-fold innovations
-   (`~bayes_fdi.diagnosis.detection.calibrate_threshold`);
+   (`~bayes_fdi.diagnosis.thresholds.calibrate_threshold`);
 4. the input envelope (training range of CV, P1, P2, T1 widened by ``input_margin``);
 5. with fault runs: the detector runs over every fault run as it will online, and the
    isolation signatures at chosen ages after each detection that follows the fault's onset
@@ -29,16 +29,12 @@ import xarray as xr
 from sklearn.base import clone
 
 from bayes_fdi.datasets import CHANNELS, validate_dataset
-from bayes_fdi.diagnosis.detection import (
-    CUSUM,
-    GLR,
-    ARWhitener,
-    calibrate_threshold,
-    cusum_threshold,
-)
+from bayes_fdi.diagnosis.detection import CUSUM, GLR
 from bayes_fdi.diagnosis.dynamic_models import DynamicNormalModels
 from bayes_fdi.diagnosis.isolation import ISOLATION_FEATURES, FaultIsolator
 from bayes_fdi.diagnosis.online_state import new_run_state
+from bayes_fdi.diagnosis.thresholds import calibrate_threshold, cusum_threshold
+from bayes_fdi.diagnosis.whitening import ARWhitener
 
 __all__ = ["SIGNATURE_AGES", "fit_online", "split_fault_runs"]
 
