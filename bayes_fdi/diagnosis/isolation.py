@@ -189,6 +189,13 @@ def isolation_features(
 # ----------------------------------------------------------------------------------------------
 # groups
 # ----------------------------------------------------------------------------------------------
+def _natural(name: str) -> tuple[str, int]:
+    """Sort key of a state name: ``f4`` before ``f12`` (letters, then the number)."""
+    head = name.rstrip("0123456789")
+    tail = name[len(head) :]
+    return head, int(tail) if tail else -1
+
+
 def isolability_groups(
     states: Sequence[str], error: Any, *, threshold: float = 0.15
 ) -> list[list[str]]:
@@ -423,11 +430,14 @@ class FaultIsolator:
             known = np.isin(yv, faults)
             pred = self.faults_[np.argmax(self.fault_proba(Xv[known]), axis=1)]
             self.validation_confusion_ = pairwise_confusion(yv[known], pred, faults)
-            groups = isolability_groups(faults, self.validation_confusion_,
+            # in the faults' natural order (f4 before f12), so groups read "f4|f12"
+            order = sorted(range(len(faults)), key=lambda i: _natural(faults[i]))
+            groups = isolability_groups([faults[i] for i in order],
+                                        self.validation_confusion_[np.ix_(order, order)],
                                         threshold=self.group_threshold)  # fmt: skip
         else:
             self.validation_confusion_ = np.zeros((len(faults), len(faults)))
-            groups = [[f] for f in faults]
+            groups = [[f] for f in sorted(faults, key=_natural)]
         self.groups_ = tuple(tuple(g) for g in groups)
         self.group_labels_ = tuple("|".join(g) for g in self.groups_)
         self.membership_ = np.zeros((len(faults), len(groups)))
