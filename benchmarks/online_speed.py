@@ -38,7 +38,7 @@ CHANNELS = ("CV", "P1", "P2", "T1", "X", "F")
 def _recording(hours: float) -> xr.Dataset:
     from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 
-    n = max(2, int(round(hours)))
+    n = max(2, round(hours))
     faults = ["f1", "f7", "f13", "f17", "f18", "f19"]
     specs = [None if i % 2 == 0 else Fault(faults[i // 2 % len(faults)], 0.75, 900.0)
              for i in range(n)]  # fmt: skip
@@ -71,7 +71,7 @@ def main() -> None:
         from bayes_fdi.experiments.online_training import fit_online_diagnoser
 
         model = fit_online_diagnoser(small=args.small, progress=False)
-        source = "fit_online_diagnoser(small=%s)" % args.small
+        source = f"fit_online_diagnoser(small={args.small})"
     rec = _recording(args.hours)
     n = rec.sizes["run"] * rec.sizes["time"]
     model.run(rec.isel(run=[0, 1], time=slice(0, 100)))  # compile (numba cache) before timing

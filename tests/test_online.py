@@ -228,3 +228,21 @@ def test_save_load_round_trip_is_exact(fitted, recording, tmp_path):
     sample = {c: float(recording[c].values[1, 120]) for c in CHANNELS}
     # repr: exact float reprs, and NaN fields compare equal (a dataclass's == would not)
     assert repr(loaded.update(sample)) == repr(fitted.reset().update(sample))
+
+
+def test_normal_runs_as_a_list_of_datasets_of_different_durations(recording):
+    a = simulate(benchmark_inputs(2, 400, seed=1, vary=True), seed=1)
+    b = simulate(benchmark_inputs(2, 300, seed=4, vary=True), seed=4)
+    from_list = OnlineDiagnoser(_tiny_models()).fit([a, b])
+    # by hand: the shorter runs padded with NaN (no measurement) to one 4-run dataset
+    padded = {c: np.full((4, 400), np.nan) for c in CHANNELS}
+    for c in CHANNELS:
+        padded[c][:2] = a[c].values
+        padded[c][2:, :300] = b[c].values
+    by_hand = xr.Dataset({c: (("run", "time"), v) for c, v in padded.items()},
+                         coords={"run": np.arange(4), "time": a["time"].values})  # fmt: skip
+    from_one = OnlineDiagnoser(_tiny_models()).fit(by_hand)
+    assert from_list.threshold_ == from_one.threshold_
+    _assert_streams_equal(from_list.run(recording), from_one.run(recording))
+    with pytest.raises(ValueError, match="not a dataset"):
+        OnlineDiagnoser(_tiny_models()).fit([a, "b.csv"])

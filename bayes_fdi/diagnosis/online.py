@@ -237,7 +237,7 @@ class OnlineDiagnoser(BaseEstimator):
     # ------------------------------------------------------------------ fitting
     def fit(
         self,
-        normal_runs: xr.Dataset,
+        normal_runs: xr.Dataset | Sequence[xr.Dataset],
         fault_runs: xr.Dataset | Sequence[xr.Dataset] | None = None,
         *,
         validation_runs: xr.Dataset | Sequence[xr.Dataset] | None = None,
@@ -248,7 +248,8 @@ class OnlineDiagnoser(BaseEstimator):
         Parameters
         ----------
         normal_runs
-            Fault-free runs (channels CV, P1, P2, T1, X, F; NaN gaps allowed).
+            Fault-free runs (channels CV, P1, P2, T1, X, F; NaN gaps allowed): a dataset, or a
+            list of them (runs of different durations are padded with NaN, never fitted on).
         fault_runs
             Runs with a fault (coordinates ``state``, ``onset``; ``strength`` optional) to
             train the isolation classifier on (a dataset, or a list of datasets such as campaigns

@@ -36,7 +36,7 @@ from bayes_fdi.diagnosis.online_state import new_run_state
 from bayes_fdi.diagnosis.thresholds import calibrate_threshold, cusum_threshold
 from bayes_fdi.diagnosis.whitening import ARWhitener
 
-__all__ = ["SIGNATURE_AGES", "fit_online", "split_fault_runs"]
+__all__ = ["SIGNATURE_AGES", "fit_online", "split_fault_runs", "stack_runs"]
 
 #: Seconds after a detection at which a training run contributes its isolation signature.
 SIGNATURE_AGES: tuple[int, ...] = (
@@ -186,6 +186,26 @@ def _signatures_of(
     )
 
 
+def stack_runs(runs: xr.Dataset | Sequence[xr.Dataset]) -> xr.Dataset:
+    """One dataset of the runs of a dataset or of a list of them (e.g. recordings or campaigns
+    of different durations): runs numbered 0, 1, ... in order; a shorter run ends in NaN (no
+    measurement: never fitted on, a gap to the detector)."""
+    parts = _as_list(runs)
+    if not parts:
+        raise ValueError("no runs given (an empty list)")
+    for k, ds in enumerate(parts):
+        if not isinstance(ds, xr.Dataset):
+            raise ValueError(f"item {k} of the runs is a {type(ds).__name__}, not a dataset")
+        if "run" not in ds.dims:
+            parts[k] = ds.drop_vars([c for c in ds.coords if ds[c].ndim == 0]).expand_dims("run")
+    if len(parts) == 1:
+        return parts[0]
+    parts = [ds.drop_vars("run", errors="ignore") for ds in parts]
+    out = xr.concat(parts, dim="run", join="outer", combine_attrs="drop_conflicts",
+                    coords="minimal", compat="override")  # fmt: skip
+    return out.assign_coords(run=np.arange(out.sizes["run"]))
+
+
 def _cap_rows(y: np.ndarray, cap: int, rng: np.random.Generator) -> np.ndarray:
     keep = []
     for f in np.unique(y):
@@ -198,7 +218,7 @@ def _cap_rows(y: np.ndarray, cap: int, rng: np.random.Generator) -> np.ndarray:
 
 def fit_online(
     diag: Any,
-    normal_runs: xr.Dataset,
+    normal_runs: xr.Dataset | Sequence[xr.Dataset],
     fault_runs: xr.Dataset | Sequence[xr.Dataset] | None,
     validation_runs: xr.Dataset | Sequence[xr.Dataset] | None,
     calibration_runs: xr.Dataset | Sequence[xr.Dataset] | None,
@@ -210,6 +230,7 @@ def fit_online(
     t0 = time.perf_counter()
     nm = (DynamicNormalModels(random_state=diag.random_state) if diag.normal_models is None
           else clone(diag.normal_models))  # fmt: skip
+    normal_runs = stack_runs(normal_runs)
     diag.normal_models_ = nm.fit(normal_runs)
     seconds["normal_models"] = time.perf_counter() - t0
     t0 = time.perf_counter()
