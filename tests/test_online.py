@@ -246,3 +246,39 @@ def test_normal_runs_as_a_list_of_datasets_of_different_durations(recording):
     _assert_streams_equal(from_list.run(recording), from_one.run(recording))
     with pytest.raises(ValueError, match="not a dataset"):
         OnlineDiagnoser(_tiny_models()).fit([a, "b.csv"])
+
+
+def test_onset_inputs_novel_holds_the_envelope_check_of_the_pre_detection_average():
+    from bayes_fdi.diagnosis.online_state import onset_inputs_novel
+
+    low, high = np.zeros(4), np.full(4, 0.4)
+    dd = np.array([0, 0, 0, 1, 1, 1, 0, 0, 1, 1], dtype=bool)
+    inside = np.full((10, 4), 0.2)
+    inside[3:6, 3] = 0.9  # the fault itself moves T1 far out at the detection: not novel
+    state = np.zeros(7)
+    np.testing.assert_array_equal(onset_inputs_novel(dd, inside, low, high, state), False)
+    outside = np.full((10, 4), 0.2)
+    outside[:, 3] = 0.5  # T1 outside the envelope from the start: every detection is novel
+    got = onset_inputs_novel(dd, outside, low, high, np.zeros(7))
+    np.testing.assert_array_equal(got, dd)
+    # continued in two chunks from the state: the same
+    st = np.zeros(7)
+    halves = np.concatenate([onset_inputs_novel(dd[:4], outside[:4], low, high, st),
+                             onset_inputs_novel(dd[4:], outside[4:], low, high, st)])  # fmt: skip
+    np.testing.assert_array_equal(halves, got)
+
+
+def test_a_detection_outside_the_training_envelope_is_dazzled(fitted, recording):
+    shifted = recording.isel(run=[1]).copy()
+    shifted["T1"] = shifted["T1"] + 0.3  # another plant temperature than in every training run
+    s = fitted.run(shifted)
+    dd = s["DD"].values[0]
+    status = s["status"].values[0].astype(str)
+    ok = np.isfinite(shifted["X"].values[0])
+    assert dd.any()
+    assert set(status[ok]) == {"DAZZLED"}  # never BLURRED: the normal models extrapolate
+    fitted.reset()
+    records = [fitted.update({c: float(shifted[c].values[0, t]) for c in CHANNELS})
+               for t in range(shifted.sizes["time"])]  # fmt: skip
+    first = int(np.flatnonzero(dd)[0])
+    assert "outside the training envelope" in records[first].reasons[0]

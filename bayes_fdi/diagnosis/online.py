@@ -53,6 +53,7 @@ from bayes_fdi.diagnosis.online_fit import fit_online
 from bayes_fdi.diagnosis.online_state import (
     StreamState,
     check_state,
+    onset_inputs_novel,
     pack_states,
     run_state,
 )
@@ -316,6 +317,9 @@ class OnlineDiagnoser(BaseEstimator):
         feats = isolation_features(dd, r_x, r_f, pred[:, 0], pred[:, 2], s, arrays["P1"],
                                    arrays["P2"], arrays["T1"], state=st["features"])  # fmt: skip
         out["features"] = feats
+        inputs = np.column_stack([arrays[c] for c in ("CV", "P1", "P2", "T1")])
+        out["novel_onset"] = onset_inputs_novel(dd, inputs, self.input_low_, self.input_high_,
+                                                st["reference"])  # fmt: skip
         out.update(self._isolate(feats))
         st["seconds"] += n
         return out
@@ -373,13 +377,14 @@ class OnlineDiagnoser(BaseEstimator):
         prob = np.where(isolated, gq[np.arange(n), top] if gq.shape[1] else np.nan, np.nan)
         novel_sig = isolated & (out["novelty"] > self.novelty_ratio)
         known = isolated & ~novel_sig
+        novel_onset = out["novel_onset"]
         code = np.where(~dd, len(labels) - 1, np.where(known, top, len(labels) - 2))
         state = labels[code].astype(str)
         prob = np.where(known, prob, np.nan)
         status = np.where(
             blind, SevaStatus.BLIND.value,
-            np.where(dd, np.where(known & (prob >= self.p_fault), SevaStatus.BLURRED.value,
-                                  SevaStatus.DAZZLED.value),
+            np.where(dd, np.where(known & (prob >= self.p_fault) & ~novel_onset,
+                                  SevaStatus.BLURRED.value, SevaStatus.DAZZLED.value),
                      np.where(novel_in, SevaStatus.DAZZLED.value, SevaStatus.CLEAR.value)),
         )  # fmt: skip
         indicated = np.zeros((n, len(self._group_labels)), dtype=bool)
@@ -389,7 +394,8 @@ class OnlineDiagnoser(BaseEstimator):
         return {
             "state": state, "probability": prob, "status": status.astype(str),
             "indicated": indicated, "FFID": ~dd & ~blind, "blind": blind,
-            "novel_inputs": novel_in, "novel_signature": novel_sig, "z": z,
+            "novel_inputs": novel_in, "novel_signature": novel_sig, "novel_onset": novel_onset,
+            "z": z,
         }  # fmt: skip
 
     # ------------------------------------------------------------------ streaming
@@ -488,6 +494,10 @@ class OnlineDiagnoser(BaseEstimator):
             return (f"fault detected; signature unlike every known fault (novelty "
                     f"{out['novelty'][0]:.3g} > {self.novelty_ratio})",)  # fmt: skip
         p = dec["probability"][0]
+        if dec["novel_onset"][0]:
+            return (f"fault detected while the inputs were outside the training envelope: the "
+                    f"normal models extrapolate, P({dec['state'][0]}) = {p:.3f} is not "
+                    f"trusted",)  # fmt: skip
         need = ">=" if p >= self.p_fault else "<"
         return (f"fault detected; P({dec['state'][0]}) = {p:.3f} {need} p_fault = "
                 f"{self.p_fault}",)  # fmt: skip

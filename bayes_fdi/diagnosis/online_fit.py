@@ -9,7 +9,8 @@
    it on white Gaussian innovations (Siegmund's approximation for the CUSUM, a simulation for
    the GLR) and the one measured on the out-of-fold innovations
    (`~bayes_fdi.diagnosis.thresholds.calibrate_threshold`);
-4. the input envelope (training range of CV, P1, P2, T1 widened by ``input_margin``);
+4. the input envelope (training range of CV, P1, P2, T1 widened by ``input_margin`` of its
+   span, at least `INPUT_MARGIN_FLOOR`);
 5. with fault runs: the detector runs over every fault run as it will online, and the
    isolation signatures at chosen ages after each detection that follows the fault's onset
    (`SIGNATURE_AGES`) become the training, validation and calibration rows of the
@@ -46,6 +47,10 @@ SIGNATURE_AGES: tuple[int, ...] = (
 #: what the sensors cannot split once the signature has settled; the calibrated
 #: probabilities carry the uncertainty of the first seconds.
 GROUP_MIN_AGE = 20
+#: Smallest widening of the input envelope (normalised full scale, about 14 sensor-noise
+#: standard deviations): an input held constant in training (T1 under the DGen sines) would
+#: otherwise have an envelope as narrow as its noise.
+INPUT_MARGIN_FLOOR = 0.02
 #: White Gaussian samples per channel behind the GLR's theoretical threshold floor.
 WHITE_SAMPLES = 200_000
 
@@ -121,8 +126,9 @@ def _fit_detection(diag: Any, normal_runs: xr.Dataset) -> None:
         v = np.asarray(normal_runs[c].values, dtype=np.float64)
         lo, hi = float(np.nanmin(v)), float(np.nanmax(v))
         span = hi - lo
-        lows.append(lo - diag.input_margin * span)
-        highs.append(hi + diag.input_margin * span)
+        margin = max(diag.input_margin * span, INPUT_MARGIN_FLOOR)
+        lows.append(lo - margin)
+        highs.append(hi + margin)
     diag.input_low_, diag.input_high_ = np.array(lows), np.array(highs)
 
 

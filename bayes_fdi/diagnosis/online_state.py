@@ -22,10 +22,18 @@ from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
+from numba import njit
 
-from bayes_fdi.diagnosis.isolation import new_feature_state
+from bayes_fdi.diagnosis.isolation import INPUT_REFERENCE_SECONDS, new_feature_state
 
-__all__ = ["StreamState", "check_state", "new_run_state", "pack_states", "run_state"]
+__all__ = [
+    "StreamState",
+    "check_state",
+    "new_run_state",
+    "onset_inputs_novel",
+    "pack_states",
+    "run_state",
+]
 
 #: The fields of `StreamState` that hold one array per run (each with a leading run axis).
 _ARRAY_FIELDS = (
@@ -38,6 +46,7 @@ _ARRAY_FIELDS = (
     "decision",
     "held",
     "features",
+    "input_reference",
     "seconds",
 )
 
@@ -60,6 +69,9 @@ class StreamState(NamedTuple):
     decision: np.ndarray  #: ``(runs, 1)`` 1.0 while the detection decision DD is on
     held: np.ndarray  #: ``(runs, 2)`` last finite detector statistic of X and F
     features: np.ndarray  #: ``(runs, 22)`` isolation window sums and input reference
+    #: ``(runs, 7)`` average of CV, P1, P2, T1 before the detection, whether it is set, whether
+    #: the current detection began outside the input envelope, DD of the last second
+    input_reference: np.ndarray
     seconds: np.ndarray  #: ``(runs,)`` seconds processed so far (int64)
 
     @property
@@ -77,6 +89,7 @@ def new_run_state(diag: Any) -> dict[str, Any]:
         "dd": np.zeros(1),
         "held": np.zeros(2),
         "features": new_feature_state(),
+        "reference": np.zeros(7),
         "seconds": 0,
     }
 
@@ -98,6 +111,7 @@ def run_state(diag: Any, state: StreamState | None, i: int) -> dict[str, Any]:
         "dd": state.decision[i].copy(),
         "held": state.held[i].copy(),
         "features": state.features[i].copy(),
+        "reference": state.input_reference[i].copy(),
         "seconds": int(state.seconds[i]),
     }
 
@@ -125,6 +139,7 @@ def pack_states(states: Sequence[dict[str, Any]]) -> StreamState:
         decision=_frozen([s["dd"] for s in states]),
         held=_frozen([s["held"] for s in states]),
         features=_frozen([s["features"] for s in states]),
+        input_reference=_frozen([s["reference"] for s in states]),
         seconds=_frozen([np.int64(s["seconds"]) for s in states]),
     )
 
@@ -149,3 +164,55 @@ def check_state(diag: Any, state: StreamState, n_runs: int) -> None:
             ok = want.shape[1:] == np.shape(got)[1:]
         if not ok:
             raise ValueError(f"state does not fit this diagnoser ({name}: another model's state?)")
+
+
+@njit(cache=True, error_model="numpy")
+def _onset_kernel(dd, inputs, low, high, alpha, st, out):  # pragma: no cover - compiled
+    """st: [average of the 4 inputs, set, novel at onset, DD before]."""
+    for t in range(dd.size):
+        if not dd[t]:
+            ok = True
+            for j in range(4):
+                if not np.isfinite(inputs[t, j]):
+                    ok = False
+            if ok:
+                for j in range(4):
+                    if st[4] < 0.5:
+                        st[j] = inputs[t, j]
+                    else:
+                        st[j] += alpha * (inputs[t, j] - st[j])
+                st[4] = 1.0
+            st[5] = 0.0
+            st[6] = 0.0
+            out[t] = False
+            continue
+        if st[6] < 0.5:  # a new detection: were the inputs before it inside the envelope?
+            novel = False
+            if st[4] > 0.5:
+                for j in range(4):
+                    if st[j] < low[j] or st[j] > high[j]:
+                        novel = True
+            st[5] = 1.0 if novel else 0.0
+        st[6] = 1.0
+        out[t] = st[5] > 0.5
+
+
+def onset_inputs_novel(
+    dd: np.ndarray, inputs: np.ndarray, low: np.ndarray, high: np.ndarray, state: np.ndarray
+) -> np.ndarray:
+    """Per second: whether the current detection began while the inputs were outside the
+    training envelope ``[low, high]`` (False while DD is off).
+
+    The inputs (``(n, 4)``: CV, P1, P2, T1) are averaged over the seconds without detection
+    (exponential average, time constant `INPUT_REFERENCE_SECONDS`, as the isolation features'
+    input reference); at each rising edge of DD that average is checked against the envelope
+    and the answer held until DD falls. The average of the seconds *before* the detection is
+    what counts: a fault that itself moves an input (f7 makes T1 jump) is detected within
+    seconds, before the average has moved, while a plant running outside the training range
+    (another temperature, another pressure) is caught. ``state`` (7,) is updated in place.
+    """
+    out = np.zeros(dd.size, dtype=np.bool_)
+    _onset_kernel(np.ascontiguousarray(dd, dtype=np.bool_), np.ascontiguousarray(inputs),
+                  np.ascontiguousarray(low), np.ascontiguousarray(high),
+                  1.0 / INPUT_REFERENCE_SECONDS, state, out)  # fmt: skip
+    return out
