@@ -40,6 +40,7 @@ from bayes_fdi.diagnosis.model_inputs import (
 )
 from bayes_fdi.diagnosis.normal_models import NormalModels
 from bayes_fdi.diagnosis.online import OnlineDiagnoser
+from bayes_fdi.diagnosis.online_state import StreamState
 from bayes_fdi.diagnosis.seva import (
     ClassDistribution,
     NoveltyReference,
@@ -78,6 +79,7 @@ __all__ = [
     "SevaStatus",
     "SevaThresholds",
     "StdScaler",
+    "StreamState",
     "TreeNode",
     "design_tree",
     "evidence_grid_search",
