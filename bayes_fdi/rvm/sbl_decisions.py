@@ -252,37 +252,43 @@ def verified_action(
     """
     drift = 0.0
 
-    def refresh(idx: Tensor) -> None:
+    def refresh(idx: Tensor, *, measure: bool) -> None:
         nonlocal drift
         S_new, Q_new = exact(idx)
-        x_old = Q[idx] * Q[idx] / S[idx]
-        x_new = Q_new * Q_new / S_new
-        rel = ((x_old - x_new).abs() / x_new.abs().clamp_min(1e-300)).nan_to_num(0.0)
-        drift = max(drift, float(rel.max()) if rel.numel() else 0.0)
+        if measure:  # how far screening underestimated Q^2/S of the candidates it let through
+            x_old = Q[idx] * Q[idx] / S[idx]
+            x_new = Q_new * Q_new / S_new
+            rel = ((x_new - x_old) / x_old).nan_to_num(0.0, 0.0, 0.0)
+            drift = max(drift, float(rel.max()))
         S[idx], Q[idx] = S_new, Q_new
 
-    refresh(act)
+    refresh(act, measure=False)
     verified = torch.zeros_like(addable)
     verified[act] = True
     n_verified = 0
+    cleared = (math.inf, 0.0)  # (gain, margin) that no unverified candidate could reach
     while True:
         best = best_action(S, Q, act, alpha, addable)
         if best.kind == 2:  # deletions pre-empt: additions cannot change the choice
             return best, n_verified
         margin = max(DRIFT_MARGIN, 4.0 * drift)
+        if best.gain >= cleared[0] and margin <= cleared[1]:
+            return best, n_verified  # the verified best still beats every unverified one
         Q2 = Q * Q
         open_ = addable & ~verified & (Q2 - S > ZERO_FACTOR) & (S > 0)
         x = torch.where(open_, Q2 / S, 0.0) * (1.0 + margin)
-        # optimistic gain above the best verified one (or above nothing when none applies)
+        # optimistic gain above the best verified one (or above nothing when none applies);
+        # the factor 1 - 1e-8 keeps candidates in the tie band of the best
         g = best.gain if best.kind >= 0 else NEGLIGIBLE_GAIN
-        x_min = _ratio_of_gain(g)
-        cand = (x >= x_min).nonzero().squeeze(1)
+        cand = (x >= _ratio_of_gain(g) * (1.0 - 1e-8)).nonzero().squeeze(1)
         if cand.numel() == 0:
             return best, n_verified
+        cleared = (g, margin)
         if cand.numel() > SHORTLIST_MAX:
             cand = cand[torch.topk(x[cand], SHORTLIST_MAX).indices]
+            cleared = (math.inf, 0.0)  # candidates above the cut remain unverified
         cand = cand.sort().values
-        refresh(cand)
+        refresh(cand, measure=True)
         verified[cand] = True
         n_verified += cand.numel()
 
