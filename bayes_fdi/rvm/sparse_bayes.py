@@ -30,6 +30,8 @@ import torch
 from torch import Tensor
 
 from bayes_fdi.rvm.design import Design
+from bayes_fdi.rvm.sbl_decisions import best_action as _best_action
+from bayes_fdi.rvm.sbl_decisions import exact_factors, verified_action
 
 __all__ = [
     "NumericalWarning",
@@ -43,7 +45,7 @@ __all__ = [
 ]
 
 # SparseBayes v2 constants
-_ZERO_FACTOR = 1e-12  # theta <= this counts as zero
+
 _ALIGNMENT_MAX = 1.0 - 1e-3
 _BETA_MAX_FACTOR = 1e6
 _BETA_UPDATE_START = 10
@@ -64,8 +66,6 @@ _STALL_ITERATIONS = 50
 # evidence creeps by 1e-5 per iteration (SparseBayes runs to its iteration limit there).
 _GAUSS_STALL_GAIN = 1e-3
 _GAUSS_STALL_WINDOW = 200
-# fast Gaussian solver with a float32 screening copy: exact re-checks of a chosen addition
-_MAX_RECHECKS = 100
 # initial number of columns of the fast Gaussian solver's Phi / B^T Phi buffers
 _INITIAL_CAPACITY = 64
 
@@ -153,6 +153,10 @@ class _Factor(NamedTuple):
         """``H^-1 b`` for a vector ``b``."""
         return self.d * torch.cholesky_solve((self.d * b)[:, None], self.L)[:, 0]
 
+    def solve_matrix(self, B: Tensor) -> Tensor:
+        """``H^-1 B`` for a matrix ``B`` (``(M, K)``)."""
+        return self.d[:, None] * torch.cholesky_solve(self.d[:, None] * B, self.L)
+
     def covariance(self) -> Tensor:
         """``Sigma = H^-1`` (needed explicitly by the rank-one updates)."""
         return self.d[:, None] * torch.cholesky_inverse(self.L) * self.d[None, :]
@@ -217,71 +221,6 @@ def _result(
     )
 
 
-class _Action(NamedTuple):
-    """The best action of one fast-solver iteration (see :func:`_best_action`)."""
-
-    index: int  # candidate column (-1: none)
-    gain: float  # Delta L (-inf: no action applies)
-    kind: int  # 0 add, 1 re-estimate, 2 delete, -1 none
-    new_alpha: float  # the candidate's new precision (inf for a deletion)
-    position: int  # position in the active set (re-estimate / delete), else -1
-    any_delete: bool  # a deletion with positive gain was pending
-
-
-def _best_action(S: Tensor, Q: Tensor, act: Tensor, alpha: Tensor, addable: Tensor) -> _Action:
-    """Exact evidence gains ``Delta L`` of every possible action; the best one.
-
-    Re-estimates and deletions are evaluated on the ``M`` active columns only, additions
-    on all candidates, so an iteration costs a handful of length-``N_B`` operations.
-
-    Parameters
-    ----------
-    S, Q : Tensor
-        ``(N_B,)`` candidate factors.
-    act : Tensor
-        ``(M,)`` indices of the active columns, ``alpha`` ``(M,)`` their precisions.
-    addable : Tensor
-        ``(N_B,)`` mask of candidates that may be added (not active, usable, aligned-free).
-    """
-    M = act.numel()
-    Sa, Qa = S[act], Q[act]
-    denom = alpha - Sa
-    s = alpha * Sa / denom
-    q = alpha * Qa / denom
-    theta_a = q * q - s
-    useful_a = theta_a > _ZERO_FACTOR
-    new_alpha_a = torch.where(useful_a, s * s / torch.where(useful_a, theta_a, 1.0), math.inf)
-    if M > 1:
-        de = ~useful_a
-        de_gain = -0.5 * (q * q / (s + alpha) - torch.log1p(s / alpha))
-        de_gain = torch.where(de, de_gain, -math.inf)
-        k = int(de_gain.argmax())
-        if bool(de[k]) and float(de_gain[k]) > 0:  # deletions pre-empt (PriorityDeletion)
-            return _Action(int(act[k]), float(de_gain[k]), 2, math.inf, k, True)
-    # re-estimate: with delta = 1/new - 1/old
-    delta = 1.0 / new_alpha_a - 1.0 / alpha
-    re_gain = 0.5 * (delta * Qa * Qa / (Sa * delta + 1.0) - torch.log1p(Sa * delta))
-    re_gain = torch.where(useful_a, re_gain, -math.inf)
-    # add (not in the model: s = S, q = Q): 2 Delta L = x - 1 - log x with x = Q^2 / S,
-    # increasing in x > 1, so the best addition is the admissible candidate of largest x
-    Q2 = Q * Q
-    ad = addable & (Q2 - S > _ZERO_FACTOR) & (S > 0)
-    x = torch.where(ad, Q2 / S, 0.0)
-    ka = int(re_gain.argmax())
-    kn = int(x.argmax())
-    g_re, x_n = (float(v) for v in torch.stack([re_gain[ka], x[kn]]).tolist())
-    g_add = 0.5 * (x_n - 1.0 - math.log(x_n)) if x_n > 0 else -math.inf
-    i_re = int(act[ka])
-    if g_re > g_add or (g_re == g_add and i_re < kn):
-        if g_re == -math.inf:
-            return _Action(-1, -math.inf, -1, math.inf, -1, False)
-        return _Action(i_re, g_re, 1, float(new_alpha_a[ka]), ka, False)
-    if g_add == -math.inf:
-        return _Action(-1, -math.inf, -1, math.inf, -1, False)
-    s_n, q_n = (float(v) for v in torch.stack([S[kn], Q[kn]]).tolist())
-    return _Action(kn, g_add, 0, s_n * s_n / (q_n * q_n - s_n), -1, False)
-
-
 class _Alignment:
     """Alignment test of SparseBayes: refuse candidates nearly parallel to an active column."""
 
@@ -297,6 +236,46 @@ class _Alignment:
     @property
     def free(self) -> Tensor:
         return self.count == 0
+
+
+class _ExactColumns:
+    """``idx -> (S_idx, Q_idx)`` in residual form (`sbl_decisions.exact_factors`) for the fast
+    Gaussian solver's current state; keeps the fetched columns and their Gram entries with the
+    active columns (an addition reuses them)."""
+
+    def __init__(
+        self,
+        design: Design,
+        norms: Tensor,
+        fac: _Factor,
+        Phi: Tensor,
+        G: Tensor,
+        act: Tensor,
+        alpha: Tensor,
+        beta: float,
+        mu: Tensor,
+        resid: Tensor,
+    ) -> None:
+        self.design, self.norms, self.fac, self.Phi, self.G, self.act = (
+            design,
+            norms,
+            fac,
+            Phi,
+            G,
+            act,
+        )
+        self.alpha, self.beta, self.mu, self.resid = alpha, beta, mu, resid
+        self.fetched: dict[int, tuple[Tensor, Tensor]] = {}
+
+    def __call__(self, idx: Tensor) -> tuple[Tensor, Tensor]:
+        if idx is self.act:
+            Bc, Z = self.Phi, self.G.T  # exact Gram entries among the active columns
+        else:
+            Bc = self.design.columns(idx) / self.norms[idx]
+            Z = self.Phi.T @ Bc
+            for k, i in enumerate(idx.tolist()):
+                self.fetched[i] = (Bc[:, k], Z[:, k])
+        return exact_factors(self.fac, self.Phi, self.alpha, self.beta, self.mu, self.resid, Bc, Z)
 
 
 def fast_gaussian(
@@ -365,7 +344,6 @@ def fast_gaussian(
         return valid & align.free & ~in_model
 
     addable = addable_mask()
-    screened = design.F_screen is not None
 
     def full_statistics(beta: float, alpha: Tensor, Phi: Tensor, BtPhi: Tensor):
         fac = _factor(alpha, beta * BtPhi[act_t])
@@ -387,31 +365,14 @@ def fast_gaussian(
     last_structural = 0  # iteration of the last addition or deletion
     for it in range(1, max_iter + 1):
         Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
-        best = _best_action(S, Q, act_t, alpha, addable)
-        exact_col = None
-        if screened:
-            # An addition chosen on screening-precision factors is checked first: the
-            # candidate's S and Q are recomputed exactly (cheap: one kernel column and its
-            # Gram entries, not the O(N N_B) product of an addition) and the choice is
-            # repeated.  Rounding in S of candidates nearly in the span of the active
-            # columns otherwise produces spurious additions that are deleted again later.
-            for _ in range(_MAX_RECHECKS):
-                if best.kind != 0:
-                    break
-                nu = best.index
-                b_i = design.columns([nu])[:, 0] / norms[nu]
-                gram = Phi.T @ b_i
-                S[nu] = beta * float(b_i @ b_i) - beta * beta * float(gram @ (Sigma @ gram))
-                Q[nu] = beta * (float(Bt_t[nu]) - float(gram @ mu))
-                again = _best_action(S, Q, act_t, alpha, addable)
-                exact_col = (nu, b_i, gram)
-                if again.kind == 0 and again.index == nu:
-                    best = again
-                    break
-                best = again
-            else:
-                if best.kind == 0:  # never add on unverified factors: best active-set action
-                    best = _best_action(S, Q, act_t, alpha, torch.zeros_like(addable))
+        # a fresh factorisation each iteration (the rank-one updated Sigma and mu drift)
+        fac = _factor(alpha, beta * BtPhi[act_t])
+        mu = beta * fac.solve(Bt_t[act_t])
+        Sigma = fac.covariance()
+        resid = t - Phi @ mu
+        exact = _ExactColumns(design, norms, fac, Phi, BtPhi[act_t], act_t, alpha, beta, mu, resid)
+        best, _ = verified_action(S, Q, act_t, alpha, addable, exact)
+        exact_col = (best.index, *exact.fetched[best.index]) if best.kind == 0 else None
         nu, gain, action, jj = best.index, best.gain, best.kind, best.position
         last = not gain > 0
         if not last and action == 1:
