@@ -29,7 +29,9 @@ held-out confusion on a validation set (`isolability_groups`, the complete-linka
 recalibrator fitted on a separate calibration set (any object with ``fit(proba, y)`` and
 ``transform(proba)``, e.g. `bayes_fdi.calibration.TemperatureScaler`), and scores novelty per
 class (`ClassNovelty`): a signature far from every class's training signatures is an
-"unknown" fault.
+"unknown" fault. `isolate_rows` is the compiled per-second form the online diagnoser runs:
+the compiled tree's probabilities, their group sums with temperature scaling shared back to
+the faults, and the novelty score, row by row.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ import numpy as np
 from numba import njit
 from sklearn.base import clone
 
-from bayes_fdi.diagnosis.lean_predictors import lean_tree_or_none
+from bayes_fdi.diagnosis.lean_predictors import lean_tree_or_none, tree_proba
 
 __all__ = [
     "ISOLATION_FEATURES",
@@ -50,6 +52,7 @@ __all__ = [
     "ClassNovelty",
     "FaultIsolator",
     "isolability_groups",
+    "isolate_rows",
     "isolation_features",
     "new_feature_state",
     "novelty_score_row",
@@ -474,3 +477,62 @@ class FaultIsolator:
             return None
         t = getattr(cal, "temperature_", None)
         return float(t) if t is not None and not hasattr(cal, "weights_") else None
+
+
+# ----------------------------------------------------------------------------------------------
+# the compiled per-second isolation of the online diagnoser
+# ----------------------------------------------------------------------------------------------
+@njit(cache=True, error_model="numpy")
+def _posterior_row(p, group_of, n_groups, temperature, floor, gp, gq, fq):  # pragma: no cover
+    """Group sums of fault probabilities ``p``, temperature-scaled, shared back to faults."""
+    for g in range(n_groups):
+        gp[g] = 0.0
+    for f in range(p.size):
+        gp[group_of[f]] += p[f]
+    if temperature > 0.0:
+        top = -np.inf
+        for g in range(n_groups):
+            gq[g] = math.log(max(gp[g], floor)) / temperature
+            if gq[g] > top:
+                top = gq[g]
+        total = 0.0
+        for g in range(n_groups):
+            gq[g] = math.exp(gq[g] - top)
+            total += gq[g]
+        for g in range(n_groups):
+            gq[g] /= total
+    else:
+        for g in range(n_groups):
+            gq[g] = gp[g]
+    for f in range(p.size):
+        g = group_of[f]
+        fq[f] = gq[g] * p[f] / gp[g] if gp[g] > 0.0 else gq[g]
+
+
+@njit(cache=True, error_model="numpy")
+def isolate_rows(
+    feats, tree_args_c, tree_args_o, tree_args_w, tree_args_wo, tree_args_cov, tree_args_co,
+    tree_args_b, tree_args_i, tree_args_sm, tree_args_ss, moderated, paths,
+    group_of, n_groups, temperature, floor, nov_c, nov_s, nov_p, nov_o, nov_r,
+    phi, right, z, p, gp, out_fault, out_group, out_nov,
+):  # pragma: no cover - compiled  # fmt: skip
+    """Per row: tree probabilities, calibrated group/fault probabilities and novelty."""
+    for t in range(feats.shape[0]):
+        row = feats[t]
+        ok = True
+        for j in range(row.size):
+            if not np.isfinite(row[j]):
+                ok = False
+        if not ok:
+            for f in range(out_fault.shape[1]):
+                out_fault[t, f] = np.nan
+            for g in range(out_group.shape[1]):
+                out_group[t, g] = np.nan
+            out_nov[t] = np.nan
+            continue
+        tree_proba(row, tree_args_c, tree_args_o, tree_args_w, tree_args_wo, tree_args_cov,
+                   tree_args_co, tree_args_b, tree_args_i, tree_args_sm, tree_args_ss,
+                   moderated, paths, phi, right, z, p)  # fmt: skip
+        _posterior_row(p, group_of, n_groups, temperature, floor, gp, out_group[t],
+                       out_fault[t])  # fmt: skip
+        out_nov[t] = novelty_score_row(row, nov_c, nov_s, nov_p, nov_o, nov_r)

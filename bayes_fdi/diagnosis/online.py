@@ -35,7 +35,6 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
-from numba import njit
 from scipy import stats as sps
 from sklearn.base import BaseEstimator
 
@@ -43,12 +42,7 @@ from bayes_fdi.datasets import CHANNELS, validate_dataset
 from bayes_fdi.diagnosis import persistence
 from bayes_fdi.diagnosis.detection import detection_decision
 from bayes_fdi.diagnosis.dynamic_models import signed_root, standardised_residuals
-from bayes_fdi.diagnosis.isolation import (
-    ISOLATION_FEATURES,
-    isolation_features,
-    novelty_score_row,
-)
-from bayes_fdi.diagnosis.lean_predictors import tree_proba
+from bayes_fdi.diagnosis.isolation import ISOLATION_FEATURES, isolate_rows, isolation_features
 from bayes_fdi.diagnosis.online_fit import fit_online
 from bayes_fdi.diagnosis.online_state import (
     StreamState,
@@ -65,62 +59,6 @@ __all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
 #: The fault names of the stream's ``fault`` coordinate.
 FAULTS: tuple[str, ...] = tuple(f"f{i}" for i in range(1, 20))
 _OUTPUTS = ("X_hat", "X_hat_std", "F_hat", "F_hat_std")
-
-
-@njit(cache=True, error_model="numpy")
-def _posterior_row(p, group_of, n_groups, temperature, floor, gp, gq, fq):  # pragma: no cover
-    """Group sums of fault probabilities ``p``, temperature-scaled, shared back to faults."""
-    for g in range(n_groups):
-        gp[g] = 0.0
-    for f in range(p.size):
-        gp[group_of[f]] += p[f]
-    if temperature > 0.0:
-        top = -np.inf
-        for g in range(n_groups):
-            gq[g] = math.log(max(gp[g], floor)) / temperature
-            if gq[g] > top:
-                top = gq[g]
-        total = 0.0
-        for g in range(n_groups):
-            gq[g] = math.exp(gq[g] - top)
-            total += gq[g]
-        for g in range(n_groups):
-            gq[g] /= total
-    else:
-        for g in range(n_groups):
-            gq[g] = gp[g]
-    for f in range(p.size):
-        g = group_of[f]
-        fq[f] = gq[g] * p[f] / gp[g] if gp[g] > 0.0 else gq[g]
-
-
-@njit(cache=True, error_model="numpy")
-def _isolate_kernel(
-    feats, tree_args_c, tree_args_o, tree_args_w, tree_args_wo, tree_args_cov, tree_args_co,
-    tree_args_b, tree_args_i, tree_args_sm, tree_args_ss, moderated, paths,
-    group_of, n_groups, temperature, floor, nov_c, nov_s, nov_p, nov_o, nov_r,
-    phi, right, z, p, gp, out_fault, out_group, out_nov,
-):  # pragma: no cover - compiled  # fmt: skip
-    """Per row: tree probabilities, calibrated group/fault probabilities and novelty."""
-    for t in range(feats.shape[0]):
-        row = feats[t]
-        ok = True
-        for j in range(row.size):
-            if not np.isfinite(row[j]):
-                ok = False
-        if not ok:
-            for f in range(out_fault.shape[1]):
-                out_fault[t, f] = np.nan
-            for g in range(out_group.shape[1]):
-                out_group[t, g] = np.nan
-            out_nov[t] = np.nan
-            continue
-        tree_proba(row, tree_args_c, tree_args_o, tree_args_w, tree_args_wo, tree_args_cov,
-                   tree_args_co, tree_args_b, tree_args_i, tree_args_sm, tree_args_ss,
-                   moderated, paths, phi, right, z, p)  # fmt: skip
-        _posterior_row(p, group_of, n_groups, temperature, floor, gp, out_group[t],
-                       out_fault[t])  # fmt: skip
-        out_nov[t] = novelty_score_row(row, nov_c, nov_s, nov_p, nov_o, nov_r)
 
 
 class OnlineDiagnoser(BaseEstimator):
@@ -337,7 +275,7 @@ class OnlineDiagnoser(BaseEstimator):
         if iso.lean_ is not None and (iso.calibrator_ is None or T is not None):
             tree = iso.lean_
             scratch = np.empty(max(1, int(np.diff(tree.woffsets).max(initial=1))))
-            _isolate_kernel(
+            isolate_rows(
                 np.ascontiguousarray(feats), *tree.args(), self._group_of, n_g,
                 0.0 if T is None else T, float(getattr(iso.calibrator_, "floor", 1e-12)),
                 *iso.novelty_.args(), scratch, np.empty(tree.offsets.size - 1),
