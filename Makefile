@@ -24,6 +24,7 @@ install: $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/bayes-fdi reproduce --out results
+	$(VENV)/bin/bayes-fdi benchmark --small --out results/benchmark-small
 
 # Every stage runs even when an earlier one fails; `make test` fails at the end if any did and
 # ends with one summary line per stage.

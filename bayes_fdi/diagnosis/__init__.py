@@ -39,6 +39,8 @@ from bayes_fdi.diagnosis.model_inputs import (
     model_inputs,
 )
 from bayes_fdi.diagnosis.normal_models import NormalModels
+from bayes_fdi.diagnosis.online import OnlineDiagnoser
+from bayes_fdi.diagnosis.online_state import StreamState
 from bayes_fdi.diagnosis.seva import (
     ClassDistribution,
     NoveltyReference,
@@ -71,11 +73,13 @@ __all__ = [
     "NegativePressureDropWarning",
     "NormalModels",
     "NoveltyReference",
+    "OnlineDiagnoser",
     "SVMClassifier",
     "SevaRecord",
     "SevaStatus",
     "SevaThresholds",
     "StdScaler",
+    "StreamState",
     "TreeNode",
     "design_tree",
     "evidence_grid_search",

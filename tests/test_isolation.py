@@ -1,0 +1,148 @@
+"""Isolation features, groups, novelty and the fault isolator (bayes_fdi.diagnosis.isolation),
+and the compiled predictors they use (bayes_fdi.diagnosis.lean_predictors)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayes_fdi.diagnosis.isolation import (
+    INPUT_REFERENCE_SECONDS,
+    ISOLATION_FEATURES,
+    SLOPE_RIDGE,
+    ClassNovelty,
+    FaultIsolator,
+    isolability_groups,
+    isolation_features,
+    pairwise_confusion,
+)
+from bayes_fdi.diagnosis.lean_predictors import LeanRVR, LeanTree
+from bayes_fdi.diagnosis.tree import HierarchicalClassifier
+from bayes_fdi.rvm import RVC, RVR
+
+
+def _reference_features(t, start, cols, ref):
+    """The features at second t of a window opened at `start`, by direct numpy."""
+    rx, rf, xh, fh, s, p1, p2, t1 = (c[start : t + 1] for c in cols)
+
+    def slope(x, y):
+        return np.mean((x - x.mean()) * (y - y.mean())) / (np.var(x) + SLOPE_RIDGE)
+
+    return np.array([
+        rx.mean(), rf.mean(), rx.std(), rf.std(), slope(xh, rx), slope(fh, rf), slope(s, rf),
+        p1.mean() - ref[0], p2.mean() - ref[1], t1.mean() - ref[2],
+    ])  # fmt: skip
+
+
+def test_features_equal_direct_window_statistics(rng):
+    n = 400
+    cols = [rng.normal(size=n) * 0.01 for _ in range(2)] + [
+        rng.uniform(0.2, 0.8, n), rng.uniform(0.2, 1.0, n), rng.uniform(0.4, 0.5, n),
+        0.87 + 0.01 * rng.normal(size=n), 0.65 + 0.01 * rng.normal(size=n),
+        0.22 + 0.001 * rng.normal(size=n),
+    ]  # fmt: skip
+    dd = np.zeros(n, dtype=bool)
+    dd[150:260] = True
+    dd[300:330] = True
+    feats = isolation_features(dd, *cols)
+    assert feats.shape == (n, len(ISOLATION_FEATURES))
+    assert np.isnan(feats[~dd]).all() and np.isfinite(feats[dd]).all()
+    # the input reference: an exponential average over the seconds without detection
+    alpha = 1.0 / INPUT_REFERENCE_SECONDS
+    ref = np.array([cols[5][0], cols[6][0], cols[7][0]])
+    for t in range(1, 150):
+        ref += alpha * (np.array([cols[5][t], cols[6][t], cols[7][t]]) - ref)
+    for t in (150, 151, 200, 259):
+        # running sums against two-pass statistics: rounding of ~100-term sums of O(1) values
+        np.testing.assert_allclose(feats[t], _reference_features(t, 150, cols, ref),
+                                   rtol=1e-9, atol=1e-12)  # fmt: skip
+    # a new detection opens a new window (the reference moved on between the two)
+    for t in range(260, 300):
+        ref += alpha * (np.array([cols[5][t], cols[6][t], cols[7][t]]) - ref)
+    np.testing.assert_allclose(feats[320], _reference_features(320, 300, cols, ref),
+                               rtol=1e-9, atol=1e-12)  # fmt: skip
+    # continuing from a carried state equals processing the whole run
+    from bayes_fdi.diagnosis.isolation import new_feature_state
+
+    st = new_feature_state()
+    first = isolation_features(dd[:200], *(c[:200] for c in cols), state=st)
+    halves = np.vstack([first, isolation_features(dd[200:], *(c[200:] for c in cols), state=st)])
+    np.testing.assert_array_equal(halves, feats)
+
+
+def test_groups_equal_the_paper_pipelines_find_groups(rng):
+    from bayes_fdi.experiments.reproduce import find_groups
+
+    states = [f"f{i}" for i in range(1, 9)]
+    for _ in range(20):
+        a = rng.uniform(0, 0.3, (8, 8))
+        err = (a + a.T) / 2
+        np.fill_diagonal(err, 0.0)
+        assert isolability_groups(states, err, threshold=0.15) == find_groups(
+            states, err, threshold=0.15
+        )
+
+
+def test_pairwise_confusion_is_balanced():
+    y = np.array(["a"] * 4 + ["b"] * 2)
+    p = np.array(["a", "a", "b", "b", "b", "a"])
+    err = pairwise_confusion(y, p, ["a", "b"])
+    # P(b | a) = 2/4, P(a | b) = 1/2 -> (0.5 + 0.5) / 2
+    np.testing.assert_allclose(err, [[0.0, 0.5], [0.5, 0.0]])
+
+
+def test_class_novelty_flags_a_far_signature(rng):
+    X = np.vstack([rng.normal(0, 1, (150, 3)), rng.normal(6, 1, (150, 3))])
+    y = np.repeat(["f1", "f2"], 150)
+    nov = ClassNovelty().fit(X, y)
+    inside = nov.score(np.vstack([rng.normal(0, 1, (300, 3)), rng.normal(6, 1, (300, 3))]))
+    # the radius is the 99 % quantile of within-class nearest-neighbour distances among the
+    # kept prototypes; new draws from the classes mostly fall inside it
+    assert np.mean(inside > 1.5) < 0.05
+    far = nov.score(np.array([[30.0, -30.0, 30.0], [np.inf, 0.0, 0.0], [np.nan, 0.0, 0.0]]))
+    assert far[0] > 10 and np.isinf(far[1]) and np.isnan(far[2])
+
+
+def test_lean_predictors_equal_the_estimators(rng):
+    X = rng.uniform(-2, 2, (250, 3))
+    y = np.sin(X[:, 0]) + 0.3 * X[:, 1] + 0.05 * rng.standard_normal(250)
+    rvr = RVR(width=1.0).fit(X, y)
+    Xt = rng.uniform(-3, 3, (60, 3))
+    mean, std = rvr.predict(Xt, return_std=True)
+    lean_mean, lean_std = LeanRVR.from_estimator(rvr).predict(Xt)
+    # the same sums in another order (torch matrix products against sequential loops)
+    np.testing.assert_allclose(lean_mean, mean, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(lean_std, std, rtol=1e-12, atol=1e-12)
+    Xc = np.vstack([rng.normal(c, 1, (40, 2)) for c in [(0, 0), (3, 0), (0, 3), (3, 3)]])
+    yc = np.repeat(["a", "b", "c", "d"], 40)
+    tree = HierarchicalClassifier(RVC(width=2.0)).fit(Xc, yc)
+    np.testing.assert_allclose(
+        LeanTree.from_classifier(tree).predict_proba(Xc), tree.predict_proba(Xc),
+        rtol=1e-12, atol=1e-12,
+    )  # fmt: skip
+    with pytest.raises(ValueError, match="RBF"):
+        LeanRVR.from_estimator(RVR(kernel="linear").fit(X, y))
+
+
+def _blobs(rng, centres, n):
+    X = np.vstack([rng.normal(c, 0.5, (n, 2)) for c in centres])
+    y = np.repeat([f"f{i + 1}" for i in range(len(centres))], n)
+    return X, y
+
+
+def test_isolator_groups_and_probabilities(rng):
+    from bayes_fdi.calibration import TemperatureScaler
+
+    # f1 and f2 overlap completely, f3 stands apart
+    centres = [(0, 0), (0, 0), (5, 5)]
+    X, y = _blobs(rng, centres, 40)
+    iso = FaultIsolator(calibrator=TemperatureScaler()).fit(
+        X, y, validation=_blobs(rng, centres, 40), calibration=_blobs(rng, centres, 40)
+    )
+    assert iso.groups_ == (("f1", "f2"), ("f3",))
+    assert iso.group_labels_ == ("f1|f2", "f3")
+    p = iso.fault_proba(_blobs(rng, centres, 10)[0])
+    np.testing.assert_allclose(p.sum(axis=1), 1.0, rtol=1e-12)
+    gp = p @ iso.membership_
+    np.testing.assert_allclose(gp[:, 0], p[:, 0] + p[:, 1], rtol=1e-12)
+    assert iso.temperature() is not None and iso.temperature() > 0

@@ -1,0 +1,284 @@
+"""The online diagnoser (bayes_fdi.diagnosis.online): the decision stream's contract, update
+equal to run, gaps, detection only."""
+
+from __future__ import annotations
+
+import itertools
+import json
+
+import numpy as np
+import pytest
+import xarray as xr
+from sklearn.base import clone
+
+from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
+from bayes_fdi.diagnosis import OnlineDiagnoser
+from bayes_fdi.diagnosis.dynamic_models import DynamicNormalModels
+from bayes_fdi.diagnosis.seva import SevaRecord, SevaStatus
+
+CHANNELS = ("CV", "P1", "P2", "T1", "X", "F")
+
+
+def _tiny_models():
+    # small fits keep the test fast; the method is the same as the default's
+    return DynamicNormalModels(
+        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
+        calibration_folds=2, random_state=0,
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    from bayes_fdi.calibration import TemperatureScaler
+
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    specs = [Fault(f, s, 100.0) for f in ("f1", "f7", "f18") for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
+    faults = simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
+    diag = OnlineDiagnoser(
+        _tiny_models(), calibrator=TemperatureScaler(), max_signatures_per_fault=20
+    ).fit(normal, faults)
+    return diag
+
+
+@pytest.fixture(scope="module")
+def recording():
+    specs = [None, Fault("f1", 0.6, 100.0), Fault("f18", 0.7, 120.0)]
+    rec = simulate(benchmark_inputs(3, 300, seed=3, vary=True), specs, seed=3)
+    x = rec["X"].values.copy()
+    x[1, 150:160] = np.nan  # a gap while the fault is on
+    return rec.assign(X=(("run", "time"), x))
+
+
+def test_stream_has_the_contract_variables(fitted, recording):
+    s = fitted.run(recording)
+    for name in ("DD", "FFID", "state", "probability", "status", "X_hat", "X_hat_std", "F_hat",
+                 "F_hat_std", "r_X", "r_F", "stat_X", "stat_F", "VMV_X", "VU_X", "VMV_F",
+                 "VU_F"):  # fmt: skip
+        assert s[name].dims == ("run", "time"), name
+    assert s["indicated"].dims == ("run", "time", "group")
+    assert s["group_proba"].dims == ("run", "time", "group")
+    assert s["fault_proba"].dims == ("run", "time", "fault")
+    assert list(s["fault"].values) == [f"f{i}" for i in range(1, 20)]
+    groups = json.loads(s.attrs["groups"])
+    assert list(groups) == list(s["group"].values)
+    assert sorted(f for g in fitted.groups_ for f in g) == sorted(
+        f for members in groups.values() for f in members
+    )
+    assert isinstance(json.loads(s.attrs["undetectable"]), list)
+    np.testing.assert_array_equal(s["run"].values, recording["run"].values)
+    np.testing.assert_array_equal(s["time"].values, recording["time"].values)
+    assert s["true_state"].values.tolist() == ["fn", "f1", "f18"]  # the labels, renamed
+
+
+def test_stream_semantics(fitted, recording):
+    s = fitted.run(recording)
+    dd, status = s["DD"].values, s["status"].values.astype(str)
+    assert set(np.unique(status)) <= {m.value for m in SevaStatus}
+    blind = ~np.isfinite(recording["X"].values)
+    np.testing.assert_array_equal(status == "BLIND", blind)
+    np.testing.assert_array_equal(s["FFID"].values, ~dd & ~blind)
+    assert not s["indicated"].values[~dd].any()
+    assert (s["indicated"].values.sum(axis=-1) <= 1).all()
+    gp, fp = s["group_proba"].values, s["fault_proba"].values
+    defined = np.isfinite(gp).all(axis=-1)
+    assert not defined[~dd].any()  # NaN while not detected
+    np.testing.assert_allclose(gp[defined].sum(axis=-1), 1.0, rtol=1e-12)
+    groups = json.loads(s.attrs["groups"])
+    faults = list(s["fault"].values)
+    for j, members in enumerate(groups.values()):
+        cols = [faults.index(f) for f in members]
+        # the fault probabilities share out their group's (calibrated) probability
+        np.testing.assert_allclose(fp[defined][:, cols].sum(axis=-1), gp[defined][:, j],
+                                   rtol=1e-12, atol=1e-15)  # fmt: skip
+    st = s["state"].values.astype(str)
+    assert (st[~dd] == "fn").all()
+    assert np.isnan(s["probability"].values[~dd]).all()
+    # the gap stays a gap: no residual, no statistic, and no exception for the recording
+    assert np.isnan(s["r_X"].values[1, 150:160]).all()
+    assert np.isnan(s["stat_X"].values[1, 150:160]).all()
+    # the faulty runs are detected within seconds of their onsets and stay detected (the
+    # false-alarm rate of fault-free data is measured by the benchmark, not by this tiny fit)
+    assert dd[1, 100:110].any() and dd[1, 110:].mean() > 0.9
+    assert dd[2, 120:130].any() and dd[2, 130:].mean() > 0.9
+
+
+def test_update_equals_run(fitted, recording):
+    s = fitted.run(recording)
+    for r in (1, 2):
+        fitted.reset()
+        recs, last = [], []
+        for t in range(recording.sizes["time"]):
+            sample = {c: float(recording[c].values[r, t]) for c in CHANNELS}
+            recs.append(fitted.update({**sample, "time": float(t)}))
+            last.append(dict(fitted.last_))
+        assert all(isinstance(x, SevaRecord) for x in recs)
+        one = s.isel(run=r)
+        # the same compiled kernels on the same state, one second at a time: identical
+        np.testing.assert_array_equal([x.state for x in recs], one["state"].values.astype(str))
+        np.testing.assert_array_equal([x.status.value for x in recs], one["status"].values)
+        np.testing.assert_array_equal([x.probability for x in recs], one["probability"].values)
+        np.testing.assert_array_equal([x.x_vmv for x in recs], one["VMV_X"].values)
+        np.testing.assert_array_equal([x.x_vu for x in recs], one["VU_X"].values)
+        np.testing.assert_array_equal([x.f_vmv for x in recs], one["VMV_F"].values)
+        np.testing.assert_array_equal([x.f_vu for x in recs], one["VU_F"].values)
+        np.testing.assert_array_equal([x.feature_novelty for x in recs], one["novelty"].values)
+        for key in ("DD", "FFID", "stat_X", "stat_F", "r_X", "r_F"):
+            np.testing.assert_array_equal([d[key] for d in last], one[key].values)
+        np.testing.assert_array_equal(np.array([d["indicated"] for d in last]),
+                                      one["indicated"].values)  # fmt: skip
+        np.testing.assert_array_equal(np.array([d["group_proba"] for d in last]),
+                                      one["group_proba"].values)  # fmt: skip
+        detected = [x for x in recs if len(x.distribution)]
+        assert detected and all(list(x.distribution) == list(s["group"].values) for x in detected)
+
+
+def test_one_run_without_a_run_dimension(fitted, recording):
+    one = recording.isel(run=1)
+    s = fitted.run(one)
+    assert "run" not in s.dims and s["DD"].dims == ("time",)
+    np.testing.assert_array_equal(s["DD"].values, fitted.run(recording)["DD"].values[1])
+
+
+def test_detection_only_without_fault_runs(recording):
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    diag = OnlineDiagnoser(_tiny_models()).fit(normal)
+    assert diag.isolator_ is None and diag.groups_ == ()
+    s = diag.run(recording)
+    dd = s["DD"].values
+    assert dd[1].any()
+    assert set(s["state"].values[dd].astype(str)) == {"unknown"}
+    assert set(s["status"].values[dd & np.isfinite(recording["X"].values)]) == {"DAZZLED"}
+    assert s.sizes["group"] == 0
+    assert json.loads(s.attrs["undetectable"]) == []
+
+
+def test_clone_refits_and_bad_input_is_named(fitted, recording):
+    params = fitted.get_params()
+    assert params["max_signatures_per_fault"] == 20
+    fresh = clone(fitted)
+    assert not hasattr(fresh, "normal_models_")
+    with pytest.raises(ValueError, match="not fitted"):
+        fresh.run(recording)
+    with pytest.raises(ValueError, match="lacks channel"):
+        fitted.update({"CV": 0.5, "P1": 0.8})
+    with pytest.raises(ValueError, match="detector"):
+        OnlineDiagnoser(detector="ewma").fit(recording.isel(run=[0]))
+
+
+def _assert_streams_equal(a, b):
+    # the same compiled kernels continue from the same state: identical, not merely close
+    assert set(a.data_vars) == set(b.data_vars)
+    for name in a.data_vars:
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    assert a.attrs == b.attrs
+
+
+@pytest.mark.parametrize("cuts", [(150,), (1, 99, 100, 155)])
+def test_chunked_run_continues_exactly(fitted, recording, cuts):
+    whole = fitted.run(recording)
+    edges = [0, *cuts, recording.sizes["time"]]
+    parts, state = [], None
+    for a, b in itertools.pairwise(edges):
+        part, state = fitted.run(recording.isel(time=slice(a, b)), state=state,
+                                 return_state=True)  # fmt: skip
+        parts.append(part)
+    _assert_streams_equal(whole, xr.concat(parts, dim="time"))
+    assert state.n_runs == recording.sizes["run"]
+    np.testing.assert_array_equal(state.seconds, recording.sizes["time"])
+    with pytest.raises(ValueError, match="read-only"):
+        state.features[0, 0] = 1.0  # the state is immutable
+
+
+def test_update_continues_a_runs_state(fitted, recording):
+    one = recording.isel(run=[2])
+    whole = fitted.run(one)
+    _, state = fitted.run(one.isel(time=slice(0, 130)), return_state=True)
+    fitted.reset(state)
+    recs = [fitted.update({c: float(one[c].values[0, t]) for c in CHANNELS})
+            for t in range(130, one.sizes["time"])]  # fmt: skip
+    np.testing.assert_array_equal([r.state for r in recs], whole["state"].values[0, 130:])
+    np.testing.assert_array_equal([r.probability for r in recs],
+                                  whole["probability"].values[0, 130:])  # fmt: skip
+    assert recs[0].t_start == 130.0  # seconds count on from the state
+    after = fitted.stream_state()
+    _, want = fitted.run(one, return_state=True)
+    for a, b in zip(after, want, strict=True):
+        np.testing.assert_array_equal(np.asarray(a, dtype=object) if isinstance(a, tuple)
+                                      else a, np.asarray(b, dtype=object) if isinstance(b, tuple)
+                                      else b)  # fmt: skip
+
+
+def test_state_of_another_shape_is_refused(fitted, recording):
+    _, state = fitted.run(recording.isel(run=[0]), return_state=True)
+    with pytest.raises(ValueError, match="1 run"):
+        fitted.run(recording, state=state)
+    with pytest.raises(ValueError, match="StreamState"):
+        fitted.run(recording, state={"dd": 1})
+
+
+def test_save_load_round_trip_is_exact(fitted, recording, tmp_path):
+    path = tmp_path / "online.npz"
+    fitted.reset()
+    fitted.save(path)
+    loaded = OnlineDiagnoser.load(path)
+    assert type(loaded) is OnlineDiagnoser
+    assert loaded.get_params().keys() == fitted.get_params().keys()
+    assert loaded.groups_ == fitted.groups_ and loaded.threshold_ == fitted.threshold_
+    _assert_streams_equal(fitted.run(recording), loaded.run(recording))
+    sample = {c: float(recording[c].values[1, 120]) for c in CHANNELS}
+    # repr: exact float reprs, and NaN fields compare equal (a dataclass's == would not)
+    assert repr(loaded.update(sample)) == repr(fitted.reset().update(sample))
+
+
+def test_normal_runs_as_a_list_of_datasets_of_different_durations(recording):
+    a = simulate(benchmark_inputs(2, 400, seed=1, vary=True), seed=1)
+    b = simulate(benchmark_inputs(2, 300, seed=4, vary=True), seed=4)
+    from_list = OnlineDiagnoser(_tiny_models()).fit([a, b])
+    # by hand: the shorter runs padded with NaN (no measurement) to one 4-run dataset
+    padded = {c: np.full((4, 400), np.nan) for c in CHANNELS}
+    for c in CHANNELS:
+        padded[c][:2] = a[c].values
+        padded[c][2:, :300] = b[c].values
+    by_hand = xr.Dataset({c: (("run", "time"), v) for c, v in padded.items()},
+                         coords={"run": np.arange(4), "time": a["time"].values})  # fmt: skip
+    from_one = OnlineDiagnoser(_tiny_models()).fit(by_hand)
+    assert from_list.threshold_ == from_one.threshold_
+    _assert_streams_equal(from_list.run(recording), from_one.run(recording))
+    with pytest.raises(ValueError, match="not a dataset"):
+        OnlineDiagnoser(_tiny_models()).fit([a, "b.csv"])
+
+
+def test_onset_inputs_novel_holds_the_envelope_check_of_the_pre_detection_average():
+    from bayes_fdi.diagnosis.online_state import onset_inputs_novel
+
+    low, high = np.zeros(4), np.full(4, 0.4)
+    dd = np.array([0, 0, 0, 1, 1, 1, 0, 0, 1, 1], dtype=bool)
+    inside = np.full((10, 4), 0.2)
+    inside[3:6, 3] = 0.9  # the fault itself moves T1 far out at the detection: not novel
+    state = np.zeros(7)
+    np.testing.assert_array_equal(onset_inputs_novel(dd, inside, low, high, state), False)
+    outside = np.full((10, 4), 0.2)
+    outside[:, 3] = 0.5  # T1 outside the envelope from the start: every detection is novel
+    got = onset_inputs_novel(dd, outside, low, high, np.zeros(7))
+    np.testing.assert_array_equal(got, dd)
+    # continued in two chunks from the state: the same
+    st = np.zeros(7)
+    halves = np.concatenate([onset_inputs_novel(dd[:4], outside[:4], low, high, st),
+                             onset_inputs_novel(dd[4:], outside[4:], low, high, st)])  # fmt: skip
+    np.testing.assert_array_equal(halves, got)
+
+
+def test_a_detection_outside_the_training_envelope_is_dazzled(fitted, recording):
+    shifted = recording.isel(run=[1]).copy()
+    shifted["T1"] = shifted["T1"] + 0.3  # another plant temperature than in every training run
+    s = fitted.run(shifted)
+    dd = s["DD"].values[0]
+    status = s["status"].values[0].astype(str)
+    ok = np.isfinite(shifted["X"].values[0])
+    assert dd.any()
+    assert set(status[ok]) == {"DAZZLED"}  # never BLURRED: the normal models extrapolate
+    fitted.reset()
+    records = [fitted.update({c: float(shifted[c].values[0, t]) for c in CHANNELS})
+               for t in range(shifted.sizes["time"])]  # fmt: skip
+    first = int(np.flatnonzero(dd)[0])
+    assert "outside the training envelope" in records[first].reasons[0]
