@@ -62,3 +62,51 @@ def test_algebra_dtype_and_round_trip(points):
 def test_invalid(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+# ---------------------------------------------------------------- extreme widths and inputs
+def _rbf_closed_form(x: np.ndarray, z: np.ndarray, width: float) -> np.ndarray:
+    """exp(-||x - z||^2 / (2 width^2)) by direct differences, the distance scaled by the
+    width before squaring (so that neither width^2 nor ||x - z||^2 is ever formed)."""
+    d = np.sqrt(((x[:, None, :] - z[None, :, :]) ** 2).sum(-1))
+    with np.errstate(over="ignore"):  # (d / width)^2 = inf: the kernel is 0
+        return np.exp(-0.5 * (d / width) ** 2)
+
+
+@pytest.mark.parametrize("width", [1e-160, 1e-300, 5e291, 1e300])
+def test_rbf_extreme_widths_are_finite_and_exact(width):
+    # 1e-160 and 5e291 square to below / above the float64 range: a zero distance must
+    # still give exactly 1, a positive one exp(-d^2 / (2 w^2)) (0 or 1 at these widths)
+    Z = torch.tensor([[0.0], [1.0]], dtype=torch.float64)
+    X = torch.tensor([[0.0], [1.0], [3.0]] + [[float(k)] for k in range(20)], dtype=torch.float64)
+    for A, B in ((Z, Z), (X, X), (X, Z)):
+        K = RBF(width)(A, B).numpy()
+        assert np.isfinite(K).all()
+        np.testing.assert_array_equal(K, _rbf_closed_form(A.numpy(), B.numpy(), width))
+
+
+def test_rbf_far_from_the_mean_does_not_cancel():
+    # |x|^2 + |z|^2 - 2 x.z cancels catastrophically for points 1e8 away from the data's
+    # mean; k(0, 1) = exp(-1/2) in closed form (direct differences are exact here: the
+    # inputs and their differences are integers)
+    X = torch.tensor([[0.0], [1e8], [2e8]], dtype=torch.float64)
+    Z = torch.tensor([[0.0], [1.0]], dtype=torch.float64)
+    K = RBF(1.0)(X, Z).numpy()
+    assert K[0, 1] == pytest.approx(np.exp(-0.5), rel=1e-15)
+    # the same in a set large enough for the expansion path (> 16 entries of Z), as a Gram
+    # matrix and across sets, integer inputs up to 2e8 with unit differences among the small
+    big = np.concatenate([[0.0, 1e8, 2e8], np.arange(1.0, 30.0)])[:, None]
+    Bt = torch.tensor(big)
+    expect = _rbf_closed_form(big, big, 1.0)
+    np.testing.assert_allclose(RBF(1.0)(Bt).numpy(), expect, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(RBF(1.0)(Bt, Bt[3:].clone()).numpy(), expect[:, 3:], rtol=1e-14)
+    # 3 features, points offset by +-1e7 with distances ~1: every near pair lies below the
+    # cancellation bound and is recomputed by direct differences (exact for points within a
+    # factor 2 of each other), the far pairs' kernel underflows to 0: the result is the
+    # closed form up to the last bits of exp and sqrt
+    rng = np.random.default_rng(4)
+    P = rng.normal(size=(40, 3)) + 1e7
+    P[20:] -= 2e7  # the mean lies far from every point
+    np.testing.assert_allclose(
+        RBF(2.0)(torch.tensor(P)).numpy(), _rbf_closed_form(P, P, 2.0), rtol=1e-13, atol=0
+    )

@@ -72,17 +72,57 @@ class Kernel:
         return hash(repr(self.to_dict()))
 
 
-def _squared_distances(X: Tensor, Z: Tensor) -> Tensor:
-    """Pairwise squared Euclidean distances, clamped at zero.
+#: at most this many ``Z`` entries: squared distances by direct differences
+_DIRECT_MAX = 16
+#: direct differences are computed for at most this many (pair x feature) entries at a time
+_DIRECT_CHUNK = 1 << 22
 
-    Computed in place as ``|x|^2 + |z|^2 - 2 x.z`` on inputs centred at the mean of ``X``
-    (for accuracy), allocating a single ``(n, m)`` result.
+
+def _direct_squared_distances(X: Tensor, Z: Tensor) -> Tensor:
+    """``sum_k (x_k - z_k)^2`` for all pairs, in row blocks of bounded memory (exact)."""
+    out = torch.empty(X.shape[0], Z.shape[0], dtype=X.dtype, device=X.device)
+    rows = max(1, _DIRECT_CHUNK // max(1, Z.shape[0] * X.shape[1]))
+    for start in range(0, X.shape[0], rows):
+        block = X[start : start + rows, None, :] - Z[None, :, :]
+        out[start : start + rows] = block.square_().sum(-1)
+    return out
+
+
+def _squared_distances(X: Tensor, Z: Tensor) -> Tensor:
+    """Pairwise squared Euclidean distances, accurate to ~``sqrt(eps)`` relative or better.
+
+    Computed as ``|x|^2 + |z|^2 - 2 x.z`` on inputs centred at the mean of ``X``, allocating a
+    single ``(n, m)`` result. That expansion has an absolute rounding error of at most
+    ``~(d + 3) eps (max|x| + max|z|)^2`` (centred norms, ``d`` features); every entry
+    smaller than that bound over ``sqrt(eps)`` -- where the expansion cancels (near pairs,
+    data far from its mean) -- is recomputed by direct differences ``sum_k (x_k - z_k)^2``,
+    which carry only relative rounding. A few columns ``Z`` are computed directly throughout.
     """
+    if Z.shape[0] * Z.shape[1] <= _DIRECT_MAX:
+        return (X[:, None, :] - Z[None, :, :]).square_().sum(-1)
     centre = X.mean(dim=0, keepdim=True) if X.shape[0] else 0.0
     Xc = X - centre
     Zc = Z - centre
-    d2 = (Xc * Xc).sum(1)[:, None] + (Zc * Zc).sum(1)[None, :]
+    nx = (Xc * Xc).sum(1)
+    nz = (Zc * Zc).sum(1)
+    d2 = nx[:, None] + nz[None, :]
     d2.addmm_(Xc, Zc.T, alpha=-2.0)
+    if d2.numel() == 0:
+        return d2
+    eps = torch.finfo(X.dtype).eps
+    reach = float(nx.max().sqrt() + nz.max().sqrt())
+    bound = (X.shape[1] + 3.0) * eps * reach * reach / math.sqrt(eps)
+    if not math.isfinite(bound):  # (inputs near the float range) everything directly
+        return _direct_squared_distances(X, Z)
+    if not float(d2.min()) <= bound:  # (one reduction; NaN inputs propagate as they are)
+        return d2.clamp_min_(0.0)
+    ij = (d2 <= bound).nonzero()
+    if ij.shape[0] > d2.numel() // 8:  # widespread cancellation: all pairs directly
+        return _direct_squared_distances(X, Z)
+    step = max(1, _DIRECT_CHUNK // max(1, X.shape[1]))
+    for start in range(0, ij.shape[0], step):
+        i, j = ij[start : start + step].unbind(1)
+        d2[i, j] = (X[i] - Z[j]).square_().sum(1)
     return d2.clamp_min_(0.0)
 
 
@@ -105,7 +145,17 @@ class RBF(Kernel):
         d2 = _squared_distances(X, Z)
         if Z is X:  # exact zeros on the diagonal of a Gram matrix
             d2.fill_diagonal_(0.0)
-        return torch.exp_(d2.mul_(-0.5 / self.width**2))
+        # -d2 / (2 width^2); for widths whose square leaves the float range (beyond ~1e+-154)
+        # as two factors, never width^2 (which over- or underflows, and 0 * inf = NaN): a
+        # zero distance stays exactly zero for every width
+        w2 = self.width * self.width
+        if 1e-300 < w2 < 1e300:
+            d2.mul_(-0.5 / w2)
+        elif math.isfinite(1.0 / self.width):
+            d2.mul_(-0.5 / self.width).mul_(1.0 / self.width)
+        else:  # (subnormal width)
+            d2.div_(self.width).div_(self.width).mul_(-0.5)
+        return torch.exp_(d2)
 
     def to_dict(self) -> dict[str, Any]:
         return {"type": "rbf", "width": self.width}
