@@ -32,7 +32,11 @@ decision from factors accurate to ~1e-13 (relative) whatever the code path:
    (relative) of the best are a tie, won by the lowest basis index; a re-estimate and an
    addition tie the same way. Duplicated columns therefore give the same choice whatever
    their order or the last bits of their gains.
-4. **Stopping margin**. An action with gain below :data:`NEGLIGIBLE_GAIN` nats counts as no
+4. **Exact thresholds and arg-maxima** (:func:`exact_near_threshold`,
+   :func:`verified_argmax`). Screened (float32) products that decide a threshold test (the
+   alignment test) or an arg-max (the first basis column) are recomputed exactly where the
+   screened value is too close to call.
+5. **Stopping margin**. An action with gain below :data:`NEGLIGIBLE_GAIN` nats counts as no
    action (a gain of 1e-9 nats is a Bayes factor of 1.000000001): the stop rule does not hinge
    on the sign of a gain at rounding level.
 """
@@ -56,6 +60,7 @@ __all__ = [
     "Action",
     "best_action",
     "exact_factors",
+    "exact_near_threshold",
     "lowest_index_in_band",
     "verified_action",
     "verified_argmax",
@@ -291,6 +296,24 @@ def verified_argmax(
     near = (usable & (mag >= top * (1.0 - 2.0 * relative))).nonzero().squeeze(1)
     exact_mag = exact(near).abs()
     return int(near[lowest_index_in_band(exact_mag, near)])
+
+
+def exact_near_threshold(
+    screened: Tensor,
+    threshold: float,
+    exact: Callable[[Tensor], Tensor],
+    *,
+    relative: float,
+) -> Tensor:
+    """Recompute (in place) the entries of ``screened`` whose magnitude is within ``relative``
+    (relative) of ``threshold`` by ``exact`` (``idx -> values``), so that a test
+    ``|value| > threshold`` (the alignment test) is decided on exact values. Returns
+    ``screened``.
+    """
+    near = ((screened.abs() - threshold).abs() <= relative * threshold).nonzero().squeeze(1)
+    if near.numel():
+        screened[near] = exact(near)
+    return screened
 
 
 def verified_action(

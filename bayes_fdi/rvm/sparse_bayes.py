@@ -32,6 +32,8 @@ from torch import Tensor
 from bayes_fdi.rvm.design import Design
 from bayes_fdi.rvm.sbl_decisions import (
     exact_factors,
+    exact_near_threshold,
+    lowest_index_in_band,
     verified_action,
     verified_argmax,
     weighted_exact_factors,
@@ -247,6 +249,17 @@ class _Alignment:
         return self.count == 0
 
 
+def _exact_alignment(BtBi: Tensor, design: Design, norms: Tensor, b_i: Tensor) -> None:
+    """Recompute exactly (in place) the screened cosines ``B^T b_i`` too close to the alignment
+    threshold to call (``sbl_decisions.exact_near_threshold``)."""
+    exact_near_threshold(
+        BtBi,
+        _ALIGNMENT_MAX,
+        lambda idx: (design.columns(idx) / norms[idx]).T @ b_i,
+        relative=_SCREEN_RELATIVE,
+    )
+
+
 class _ExactColumns:
     """``idx -> (S_idx, Q_idx)`` in residual form (`sbl_decisions.exact_factors`) for the fast
     Gaussian solver's current state; keeps the fetched columns and their Gram entries with the
@@ -329,7 +342,8 @@ def fast_gaussian(
     beta_tol = max(_MIN_DELTA_LOG_BETA, N * torch.finfo(dtype).eps)
 
     # initial basis: largest |b^T t| among usable columns
-    j = int(torch.where(valid, Bt_t.abs(), -1.0).argmax())
+    # (B^T t is exact: near-ties, e.g. duplicated columns, go to the lowest index)
+    j = lowest_index_in_band(torch.where(valid, Bt_t.abs(), -1.0), torch.arange(P, device=device))
     phi = design.columns([j])[:, 0] / norms[j]
     p, q = beta, beta * float(Bt_t[j])
     a0 = p * p / (q * q - p) if q * q > p else -1.0
@@ -417,6 +431,7 @@ def fast_gaussian(
                 BtBi.div_(norms)
                 BtBi[act_t] = gram
                 BtBi[nu] = b_i @ b_i
+                _exact_alignment(BtBi, design, norms, b_i)
                 BtPhi[nu] = gram
                 u = beta * (Sigma @ gram)
                 a_new = best.new_alpha
@@ -802,6 +817,7 @@ def fast_bernoulli(
         elif action == 0:
             b_i = exact.fetched[nu][:, None]  # the exact column its factors were computed from
             BtBi = design.rmatmul(b_i, exact=False)[:, 0] / norms
+            _exact_alignment(BtBi, design, norms, b_i[:, 0])
             a_new = choice.new_alpha
             mu_i = float(Q[nu]) / (a_new + float(S[nu]))
             Phi = torch.cat([Phi, b_i], dim=1)
