@@ -62,8 +62,6 @@ _POSTERIOR_MODE_ITS = 50
 # (quadratic regime), and below which (relative to 1 + |log posterior|) it stops
 _MODE_QUADRATIC = 1e-8
 _MODE_FLOOR = 1e-24
-# largest N x N_B x M for which every candidate's factors are recomputed exactly each iteration
-_EXACT_SCREEN_FLOPS = 4e7
 # relative accuracy assumed for float32-screened products B^T v (a sum of N float32 terms)
 _SCREEN_RELATIVE = 1e-4
 _LINE_SEARCH_MIN_STEP = 2.0**-8
@@ -251,27 +249,18 @@ class _Alignment:
         return self.count == 0
 
 
-def _screen_exactly_if_cheap(
-    design: Design, S: Tensor, Q: Tensor, addable: Tensor, M: int, exact
-) -> None:
-    """Overwrite the screened ``S, Q`` of every addable candidate with exact (residual-form)
-    values when the design is a float64 matrix in memory and that costs at most
-    :data:`_EXACT_SCREEN_FLOPS` (``N x N_B x M``).
+def _screening_S(fac: _Factor, WBtPhi: Tensor, diag: Tensor) -> Tensor:
+    """Screening ``S = diag - z^T H^-1 z`` for the rows ``z`` of ``WBtPhi`` (``(N_B, M)``)
+    from the Cholesky factor: ``z^T H^-1 z = ||L^-1 D z||^2``, no explicit inverse.
 
-    The screening margin of ``sbl_decisions.verified_action`` is not a bound: for candidates
-    nearly in the span of the active columns the screened ``S`` (a difference of numbers 1e5
-    times larger, rank-one updated) was measured 3% off, so whether such a candidate was
-    verified -- and won -- changed with the BLAS code path (width-0.4 normal model, N = 600).
-    Small problems (the width grid's subsamples, the tree's nodes) thus decide on exact factors
-    of every candidate; larger ones rely on the margin.
+    Through the explicit ``Sigma`` and its rank-one updates, ``S`` of candidates nearly in the
+    span of the active columns was measured 3% off (a difference of numbers 1e5 times larger):
+    more than the screening margin of ``sbl_decisions.verified_action``, so whether such a
+    candidate was verified -- and won -- changed with the BLAS code path. Here the error is
+    that of the subtraction alone (~1e-16 of ``diag``). Cost ``O(M^2 N_B)``.
     """
-    if design.F is None or design.dtype != torch.float64:
-        return
-    if design.n_samples * design.n_basis * max(M, 1) > _EXACT_SCREEN_FLOPS:
-        return
-    idx = addable.nonzero().squeeze(1)
-    if idx.numel():
-        S[idx], Q[idx] = exact(idx)
+    V = torch.linalg.solve_triangular(fac.L, fac.d[:, None] * WBtPhi.T, upper=False)
+    return diag - (V * V).sum(0)
 
 
 def _exact_alignment(BtBi: Tensor, design: Design, norms: Tensor, b_i: Tensor) -> None:
@@ -356,6 +345,7 @@ def fast_gaussian(
     N, P = design.n_samples, design.n_basis
     dtype, device = design.dtype, design.device
     norms, valid = _unit_columns(design)
+    unit = valid.to(dtype)  # b^T b of the normalised columns
     Bt_t = design.rhs_product(t) / norms
     t_var = float(t.var(unbiased=False))
     t_sq = float(t @ t)
@@ -419,7 +409,11 @@ def fast_gaussian(
         Sigma = fac.covariance()
         resid = t - Phi @ mu
         exact = _ExactColumns(design, norms, fac, Phi, BtPhi[act_t], act_t, alpha, beta, mu, resid)
-        _screen_exactly_if_cheap(design, S, Q, addable, M, exact)
+        if design.F is not None:
+            # B^T Phi is a product of the stored matrix (not float32 screening): screen from
+            # the fresh factor each iteration instead of the drifting rank-one updates
+            S = _screening_S(fac, beta * BtPhi, beta * unit)
+            Q = beta * (Bt_t - BtPhi @ mu)
         best, _ = verified_action(S, Q, act_t, alpha, addable, exact)
         exact_col = (best.index, *exact.fetched[best.index]) if best.kind == 0 else None
         nu, gain, action, jj = best.index, best.gain, best.kind, best.position
@@ -822,8 +816,7 @@ def fast_bernoulli(
         V = torch.cat([mode.w[:, None] * Phi, (t - mode.y)[:, None]], dim=1)
         BtV = design.rmatmul(V, exact=False) / norms[:, None]
         BtWPhi, Q = BtV[:, :-1], BtV[:, -1]
-        S = design.sq_rmatmul(mode.w, exact=False) / (norms * norms)
-        S = S - ((BtWPhi @ mode.Sigma) * BtWPhi).sum(1)
+        S = _screening_S(mode.fac, BtWPhi, design.sq_rmatmul(mode.w, exact=False) / norms**2)
         return mode, S, Q
 
     mode, S, Q = full_statistics(Phi, alpha, mu)
@@ -834,9 +827,7 @@ def fast_bernoulli(
     for it in range(1, max_iter + 1):
         act_t = torch.tensor(active, dtype=torch.long, device=device)
         exact = _LaplaceColumns(design, norms, mode, Phi, act_t, alpha, t)
-        addable = valid & align.free & ~in_model
-        _screen_exactly_if_cheap(design, S, Q, addable, len(active), exact)
-        choice, _ = verified_action(S, Q, act_t, alpha, addable, exact)
+        choice, _ = verified_action(S, Q, act_t, alpha, valid & align.free & ~in_model, exact)
         nu, gain, action, jj = choice.index, choice.gain, choice.kind, choice.position
         if not gain > 0:
             converged = True
