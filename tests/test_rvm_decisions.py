@@ -1,12 +1,15 @@
-"""The fast Gaussian solver's decision rules (bayes_fdi.rvm.sbl_decisions) against independent
+"""The fast solvers' decision rules (bayes_fdi.rvm.sbl_decisions) against independent
 references: the textbook factors in 50-digit arithmetic (mpmath), a design with duplicated
-columns in permuted order, a perturbed design, and the closed-form marginal likelihood."""
+columns in permuted order, a perturbed design, and the closed-form marginal likelihood
+(Gaussian) or an independently computed Laplace approximation (Bernoulli)."""
 
 from __future__ import annotations
 
 import mpmath
 import numpy as np
 import pytest
+import scipy.optimize
+import scipy.special
 import torch
 
 from bayes_fdi.rvm.design import Design
@@ -15,8 +18,19 @@ from bayes_fdi.rvm.sbl_decisions import (
     best_action,
     exact_factors,
     lowest_index_in_band,
+    verified_argmax,
+    weighted_exact_factors,
 )
-from bayes_fdi.rvm.sparse_bayes import _factor, fast_gaussian
+from bayes_fdi.rvm.sparse_bayes import _factor, fast_bernoulli, fast_gaussian, posterior_mode
+from bayes_fdi.rvm.threads import fit_threads
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    """The solvers are called directly here: run them as the estimators' fits do (one thread;
+    a second one only adds synchronisation on these small problems)."""
+    with fit_threads():
+        yield
 
 
 def _smooth_problem(n=120, seed=0, width=0.4):
@@ -132,3 +146,151 @@ def test_reported_evidence_is_the_exact_marginal_likelihood(seed):
     ref = torch.distributions.MultivariateNormal(torch.zeros_like(t), C).log_prob(t)
     # an O(N) sum of terms of size ~1e2 in float64: agreement to ~1e-12 relative (1e-9 allowed)
     assert res.log_evidence == pytest.approx(float(ref), rel=1e-9)
+
+
+# ---------------------------------------------------------------- Bernoulli (Laplace) model
+
+
+def _classes(seed, n=300, sep=3.0):
+    """Two Gaussian classes in 3-d; labels 0/1."""
+    rng = np.random.default_rng(100 + seed)
+    X = np.vstack([rng.normal(0, 1, (n // 2, 3)), rng.normal(sep, 1, (n // 2, 3))])
+    return torch.tensor(X), torch.tensor(np.repeat([0.0, 1.0], n // 2))
+
+
+def test_weighted_exact_factors_match_high_precision_textbook_form():
+    K, _ = _smooth_problem(n=70)  # (a 50-digit LU costs O(N^3): N = 70 keeps it to seconds)
+    B = K / torch.linalg.vector_norm(K, dim=0)
+    act = torch.tensor([3, 40, 57, 66])
+    Phi = B[:, act]
+    alpha = torch.tensor([2e-5, 3e-4, 1e-6, 5e-3], dtype=torch.float64)
+    rng = np.random.default_rng(5)
+    t = torch.tensor((rng.random(B.shape[0]) < 0.5).astype(float))
+    mu = torch.tensor([1.5, -2.0, 0.7, 3.0], dtype=torch.float64)  # any point, not only a mode
+    y = torch.sigmoid(Phi @ mu)
+    w = y * (1 - y)
+    G = (Phi.T * w) @ Phi
+    fac = _factor(alpha, G)
+    cand = torch.tensor([5, 50, 60, 3, 57])
+    Bc = B[:, cand]
+    S, Q = weighted_exact_factors(fac, Phi, alpha, w, mu, t - y, Bc, Phi.T @ (w[:, None] * Bc))
+    # independent reference (SparseBayes' Gaussian approximation at mu): S = b^T C^-1 b and
+    # Q = b^T C^-1 t_hat with C = W^-1 + Phi A^-1 Phi^T, t_hat = Phi mu + W^-1 (t - y), formed
+    # and solved with 50 significant digits from the same float64 inputs
+    mpmath.mp.dps = 50
+    Pm = mpmath.matrix(Phi.tolist())
+    C = Pm * mpmath.diag([1 / mpmath.mpf(float(a)) for a in alpha]) * Pm.T
+    wm = [mpmath.mpf(float(v)) for v in w]
+    for i in range(C.rows):
+        C[i, i] += 1 / wm[i]
+    a_m = Pm * mpmath.matrix(mu.tolist())
+    th = mpmath.matrix([a_m[i] + (float(t[i]) - float(y[i])) / wm[i] for i in range(C.rows)])
+    Ct = mpmath.lu_solve(C, th)
+    tCt = (th.T * Ct)[0]
+    for k, c in enumerate(cand.tolist()):
+        bm = mpmath.matrix(B[:, c].tolist())
+        S_ref = (bm.T * mpmath.lu_solve(C, bm))[0]
+        Q_ref = (bm.T * Ct)[0]
+        # as in the Gaussian test: S relative to itself, Q relative to its Cauchy-Schwarz
+        # bound sqrt(S t_hat^T C^-1 t_hat) (the residuals' rounding grows with |c|: 1e-12)
+        assert abs(float(S[k]) - S_ref) <= 1e-13 * abs(S_ref)
+        assert abs(float(Q[k]) - Q_ref) <= 1e-12 * mpmath.sqrt(S_ref * tCt)
+
+
+def test_verified_argmax_decides_on_exact_values():
+    exact_vals = torch.tensor([0.5, -3.0, 3.0 * (1 + 1e-13), 2.0], dtype=torch.float64)
+    screened = exact_vals * torch.tensor([1.0, 1.0 + 1e-6, 1.0 - 1e-6, 1.0], dtype=torch.float64)
+    usable = torch.ones(4, dtype=torch.bool)
+    got = verified_argmax(screened, usable, lambda idx: exact_vals[idx], relative=1e-5)
+    assert got == 1  # |-3| and 3(1 + 1e-13) tie: the lower index, though screening preferred 2
+    usable[1] = False
+    assert verified_argmax(screened, usable, lambda idx: exact_vals[idx], relative=1e-5) == 2
+
+
+def test_posterior_mode_is_found_to_rounding_level_from_any_start():
+    X, t = _classes(11)
+    B = RBF(0.5)(X, X)
+    act = torch.tensor([3, 40, 160, 201, 290])
+    Phi = B[:, act] / torch.linalg.vector_norm(B[:, act], dim=0)
+    alpha = torch.tensor([1e-3, 1e-1, 1e-4, 1.0, 1e-2], dtype=torch.float64)
+    a = posterior_mode(Phi, t, alpha, torch.zeros(5, dtype=torch.float64))
+    b = posterior_mode(Phi, t, alpha, torch.tensor([5.0, -5, 5, -5, 5], dtype=torch.float64))
+    # the gradient at the mode is zero to rounding (|g| ~ 1e-16 sqrt(N) |t - y|); through the
+    # Hessian (eigenvalues >= min alpha = 1e-4) that moves mu by ~1e-11 at most (1e-9 allowed)
+    assert torch.allclose(a.mu, b.mu, rtol=0, atol=1e-9 * float(a.mu.abs().max()))
+    assert a.log_ml == pytest.approx(b.log_ml, rel=1e-12)
+
+
+def _bernoulli_relevance_set(K, t, order):
+    res = fast_bernoulli(Design(matrix=K[:, order], bias=True), t)
+    cols = [-1 if i == 0 else int(order[i - 1]) for i in res.active.tolist()]
+    return sorted(cols), res.log_evidence
+
+
+def test_bernoulli_duplicated_columns_give_the_same_fit_in_any_order():
+    X, t = _classes(1, n=150, sep=1.5)
+    K = RBF(0.5)(X, X)
+    n = K.shape[1]
+    Kd = torch.cat([K, K], dim=1)
+    ref_set, ref_ev = _bernoulli_relevance_set(Kd, t, np.arange(2 * n))
+    swap = np.random.default_rng(2).random(n) < 0.5
+    order = np.arange(2 * n)
+    order[:n][swap], order[n:][swap] = np.arange(n, 2 * n)[swap], np.arange(n)[swap]
+    got_set, got_ev = _bernoulli_relevance_set(Kd, t, order)
+    assert len(ref_set) > 3
+    assert sorted({c % n if c >= 0 else -1 for c in got_set}) == sorted(
+        {c % n if c >= 0 else -1 for c in ref_set}
+    )
+    # same model up to rounding: a Laplace evidence of ~1e2 agrees to ~1e-12 relative
+    assert got_ev == pytest.approx(ref_ev, rel=1e-9)
+
+
+@pytest.mark.parametrize("perturbation_seed", [0, 2])
+def test_bernoulli_fit_is_unchanged_by_a_perturbation_of_rounding_size(perturbation_seed):
+    # a problem whose relevance set used to change with a 1e-13 perturbation of the design
+    X, t = _classes(11)
+    K = RBF(0.5)(X, X)
+    a = fast_bernoulli(Design(matrix=K, bias=True), t)
+    rng = np.random.default_rng(perturbation_seed)
+    Kp = K * (1 + 1e-13 * torch.tensor(rng.standard_normal(K.shape)))
+    b = fast_bernoulli(Design(matrix=Kp, bias=True), t)
+    assert a.active.tolist() == b.active.tolist()
+    # a 1e-13 relative change of the data moves a log evidence of ~1e2 by ~1e-11 (1e-8 allowed)
+    assert abs(a.log_evidence - b.log_evidence) <= 1e-8 * abs(a.log_evidence)
+
+
+@pytest.mark.parametrize("sep", [0.5, 1.5])
+def test_bernoulli_evidence_is_the_laplace_approximation_at_the_mode(sep):
+    # overlapping classes (a separable problem has weights -> infinity and no finite mode)
+    X, t = _classes(3, n=200, sep=sep)
+    K = RBF(0.5)(X, X)
+    res = fast_bernoulli(Design(matrix=K, bias=True), t)
+    # independent Laplace approximation from the returned (active, alpha), in the caller's
+    # basis: the mode by scipy's trust-region Newton, the log-determinants by numpy
+    B = np.hstack([np.ones((K.shape[0], 1)), K.numpy()])
+    Phi, alpha, tn = B[:, res.active.numpy()], res.alpha.numpy(), t.numpy()
+
+    def neg_log_post(m):
+        a = Phi @ m
+        return float(np.sum(np.logaddexp(0, a) - tn * a) + 0.5 * np.sum(alpha * m * m))
+
+    def grad(m):
+        return Phi.T @ (scipy.special.expit(Phi @ m) - tn) + alpha * m
+
+    def hess(m):
+        y = scipy.special.expit(Phi @ m)
+        return (Phi.T * (y * (1 - y))) @ Phi + np.diag(alpha)
+
+    opt = scipy.optimize.minimize(
+        neg_log_post,
+        np.zeros(len(alpha)),
+        jac=grad,
+        hess=hess,
+        method="trust-exact",
+        options={"gtol": 1e-12},
+    )
+    ref = -opt.fun + 0.5 * np.sum(np.log(alpha)) - 0.5 * np.linalg.slogdet(hess(opt.x))[1]
+    # a sum of O(N) terms of size ~1e2, each exact to ~1e-14 at the mode (the objective is
+    # flat there, so the scipy mode's ~1e-8 tolerance enters quadratically): 1e-9 relative
+    assert res.log_evidence == pytest.approx(ref, rel=1e-9)
+    np.testing.assert_allclose(res.mean.numpy(), opt.x, rtol=1e-5, atol=1e-8 * np.abs(opt.x).max())

@@ -32,7 +32,11 @@ decision from factors accurate to ~1e-13 (relative) whatever the code path:
    (relative) of the best are a tie, won by the lowest basis index; a re-estimate and an
    addition tie the same way. Duplicated columns therefore give the same choice whatever
    their order or the last bits of their gains.
-4. **Stopping margin**. An action with gain below :data:`NEGLIGIBLE_GAIN` nats counts as no
+4. **Exact thresholds and arg-maxima** (:func:`exact_near_threshold`,
+   :func:`verified_argmax`). Screened (float32) products that decide a threshold test (the
+   alignment test) or an arg-max (the first basis column) are recomputed exactly where the
+   screened value is too close to call.
+5. **Stopping margin**. An action with gain below :data:`NEGLIGIBLE_GAIN` nats counts as no
    action (a gain of 1e-9 nats is a Bayes factor of 1.000000001): the stop rule does not hinge
    on the sign of a gain at rounding level.
 """
@@ -56,8 +60,11 @@ __all__ = [
     "Action",
     "best_action",
     "exact_factors",
+    "exact_near_threshold",
     "lowest_index_in_band",
     "verified_action",
+    "verified_argmax",
+    "weighted_exact_factors",
 ]
 
 #: theta = q^2 - s <= this counts as zero (SparseBayes v2)
@@ -189,12 +196,14 @@ def exact_factors(
     Bc: Tensor,
     Z: Tensor,
 ) -> tuple[Tensor, Tensor]:
-    """``S`` and ``Q`` of candidate columns ``Bc`` in residual form (no cancellation).
+    """``S`` and ``Q`` of candidate columns ``Bc`` in residual form (no cancellation), Gaussian
+    noise of precision ``beta``.
 
     With ``c = beta H^-1 Phi^T b``: ``S = beta ||b - Phi c||^2 + c^T A c`` and
     ``Q = beta (b - Phi c)^T (t - Phi mu) + c^T A mu`` (equal to the textbook
     ``beta b^T b - beta^2 b^T Phi Sigma Phi^T b`` and ``beta b^T t - beta^2 b^T Phi Sigma Phi^T t``
-    in exact arithmetic). Cost ``O(N M K)``.
+    in exact arithmetic). Cost ``O(N M K)``. :func:`weighted_exact_factors` is the same for
+    per-sample noise precisions (the Bernoulli model's Laplace approximation).
 
     Parameters
     ----------
@@ -216,6 +225,95 @@ def exact_factors(
     S = beta * (R * R).sum(0) + (AC * C).sum(0)
     Q = beta * (R.T @ resid) + AC.T @ mu
     return S, Q
+
+
+def weighted_exact_factors(
+    fac: _Factor,
+    Phi: Tensor,
+    alpha: Tensor,
+    weights: Tensor,
+    mu: Tensor,
+    score: Tensor,
+    Bc: Tensor,
+    WZ: Tensor,
+) -> tuple[Tensor, Tensor]:
+    """``S`` and ``Q`` in residual form for per-sample noise precisions ``W = diag(weights)``.
+
+    The Laplace approximation of the Bernoulli model at the mode ``mu`` is a Gaussian model
+    with noise precisions ``w = y (1 - y)`` and working targets ``t_hat = Phi mu + W^-1 (t - y)``
+    (SparseBayes). With ``H = A + Phi^T W Phi`` and ``c = H^-1 Phi^T W b``:
+
+    ``S = (b - Phi c)^T W (b - Phi c) + c^T A c``,
+    ``Q = (b - Phi c)^T (t - y) + c^T A mu``,
+
+    equal in exact arithmetic to the textbook ``b^T W b - b^T W Phi Sigma Phi^T W b`` and
+    ``b^T W t_hat - b^T W Phi Sigma Phi^T W t_hat = b^T (t - y) - c^T g`` with the gradient
+    ``g = Phi^T (t - y) - A mu`` of the log posterior. ``Q`` is thus the factor at the Newton
+    update of ``mu``, and an error ``delta`` of the mode changes it only to second order
+    (``d(b^T (t - y)) = -b^T W Phi delta`` is cancelled by ``-c^T dg = c^T H delta``): the
+    decisions do not depend on how the last Newton step rounded. Cost ``O(N M K)``.
+
+    Parameters
+    ----------
+    fac : _Factor
+        Cholesky factor of ``H = A + Phi^T W Phi`` (fresh, not rank-one updated).
+    Phi : Tensor
+        ``(N, M)`` active columns; ``alpha`` ``(M,)`` their precisions.
+    weights : Tensor
+        ``(N,)`` noise precisions ``w`` (``y (1 - y)`` at the mode).
+    mu : Tensor
+        ``(M,)`` mode (posterior mean).
+    score : Tensor
+        ``(N,)`` weighted working residual ``W (t_hat - Phi mu)`` (Bernoulli: ``t - y``).
+    Bc : Tensor
+        ``(N, K)`` candidate columns (active columns allowed).
+    WZ : Tensor
+        ``(M, K)`` their weighted Gram entries ``Phi^T W Bc``.
+    """
+    C = fac.solve_matrix(WZ)
+    R = Bc - Phi @ C
+    AC = alpha[:, None] * C
+    S = (weights[:, None] * R * R).sum(0) + (AC * C).sum(0)
+    Q = R.T @ score + AC.T @ mu
+    return S, Q
+
+
+def verified_argmax(
+    screened: Tensor,
+    usable: Tensor,
+    exact: Callable[[Tensor], Tensor],
+    *,
+    relative: float,
+) -> int:
+    """Index of the largest ``|value|`` among ``usable`` entries, decided on exact values.
+
+    ``screened`` holds approximate values (e.g. float32 products) accurate to ``relative`` of
+    the largest magnitude; every usable entry within that distance of the top is recomputed by
+    ``exact`` (``idx -> values``) and the winner is chosen by :func:`lowest_index_in_band`.
+    """
+    mag = torch.where(usable, screened.abs(), -1.0)
+    top = float(mag.max())
+    near = (usable & (mag >= top * (1.0 - 2.0 * relative))).nonzero().squeeze(1)
+    exact_mag = exact(near).abs()
+    return int(near[lowest_index_in_band(exact_mag, near)])
+
+
+def exact_near_threshold(
+    screened: Tensor,
+    threshold: float,
+    exact: Callable[[Tensor], Tensor],
+    *,
+    relative: float,
+) -> Tensor:
+    """Recompute (in place) the entries of ``screened`` whose magnitude is within ``relative``
+    (relative) of ``threshold`` by ``exact`` (``idx -> values``), so that a test
+    ``|value| > threshold`` (the alignment test) is decided on exact values. Returns
+    ``screened``.
+    """
+    near = ((screened.abs() - threshold).abs() <= relative * threshold).nonzero().squeeze(1)
+    if near.numel():
+        screened[near] = exact(near)
+    return screened
 
 
 def verified_action(
