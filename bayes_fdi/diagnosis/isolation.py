@@ -200,15 +200,15 @@ def _natural(name: str) -> tuple[str, int]:
 
 
 def isolability_groups(
-    states: Sequence[str], error: Any, *, threshold: float = 0.15
+    states: Sequence[str], error: Any, *, threshold: float = 0.15, linkage: str = "complete"
 ) -> list[list[str]]:
-    """Groups of states that cannot be told apart (complete linkage on a pairwise error).
+    """Groups of states that cannot be told apart, from a pairwise error.
 
-    Two states are confusable when ``error[a, b] >= threshold``; groups merge only when every
-    pair across them is confusable, the pair of groups with the largest smallest error first
-    (ties: the earliest states). The rule of `bayes_fdi.experiments.reproduce.find_groups`
-    (``linkage="complete"``), restated here because the diagnosis layer may not import the
-    experiments layer. Groups come in order of their first state.
+    Two states are confusable when ``error[a, b] >= threshold``. With ``linkage="complete"``
+    groups merge only when every pair across them is confusable, the pair of groups with the
+    largest smallest error first (ties: the earliest states); with ``"single"`` (connected
+    components) the largest largest error first. Groups come in order of their first state.
+    `bayes_fdi.experiments.separability.find_groups` uses this rule too.
     """
     e = np.asarray(error, dtype=np.float64)
     k = len(states)
@@ -216,12 +216,15 @@ def isolability_groups(
         raise ValueError(f"error must be ({k}, {k}), got {e.shape}")
     if not np.allclose(e, e.T):
         raise ValueError("error must be symmetric")
+    if linkage not in ("complete", "single"):
+        raise ValueError(f"linkage must be 'complete' or 'single', got {linkage!r}")
     clusters: list[list[int]] = [[i] for i in range(k)]
     while len(clusters) > 1:
         best, pair = -np.inf, None
         for a in range(len(clusters)):
             for b in range(a + 1, len(clusters)):
-                score = e[np.ix_(clusters[a], clusters[b])].min()
+                block = e[np.ix_(clusters[a], clusters[b])]
+                score = block.min() if linkage == "complete" else block.max()
                 if score > best:
                     best, pair = score, (a, b)
         if pair is None or best < threshold:

@@ -146,30 +146,9 @@ def find_groups(
         Groups in order of their first state; states within a group in ``states`` order.
         Singletons are the separable states.
     """
-    error = np.asarray(error, dtype=np.float64)
-    k = len(states)
-    if error.shape != (k, k):
-        raise ValueError(f"error must be ({k}, {k}), got {error.shape}")
-    if not np.allclose(error, error.T, equal_nan=False):
-        raise ValueError("error must be symmetric")
-    if linkage not in ("complete", "single"):
-        raise ValueError(f"linkage must be 'complete' or 'single', got {linkage!r}")
-    clusters: list[list[int]] = [[i] for i in range(k)]
-    while len(clusters) > 1:
-        best, pair = -np.inf, None
-        for a in range(len(clusters)):
-            for b in range(a + 1, len(clusters)):
-                block = error[np.ix_(clusters[a], clusters[b])]
-                score = block.min() if linkage == "complete" else block.max()
-                if score > best:
-                    best, pair = score, (a, b)
-        if pair is None or best < threshold:
-            break
-        a, b = pair
-        clusters[a] = sorted(clusters[a] + clusters[b])
-        del clusters[b]
-    clusters.sort(key=min)
-    return [[str(states[i]) for i in c] for c in clusters]
+    from bayes_fdi.diagnosis.isolation import isolability_groups
+
+    return isolability_groups(states, error, threshold=threshold, linkage=linkage)
 
 
 def group_metrics(
