@@ -23,32 +23,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from tiny_campaign import CAMPAIGN, STATES
 
 from bayes_fdi.experiments.campaign_cache import load_or_simulate
 from bayes_fdi.experiments.reproduce_report import render_report
 
-# Five states of the paper whose faults move the residuals strongly (as in
-# test_reproduce_end_to_end.py): a small campaign that still has a 4-node tree per method.
-STATES = ["fn", "f1", "f2", "f17", "f18"]
-CAMPAIGN = """
-[campaign]
-name = "tiny"
-seed = 5
-duration = 100
-source = "benchmark-inputs"
-runs_per_state = 24
-states = {states}
-batch_size = 60
-
-[inputs]
-vary = true
-
-[faults]
-strength = [0.5, 1.0]
-onset = 0.0
-profile = "abrupt"
-ramp = 0.0
-"""
 SEED = 3
 #: The reference: the default code paths of MKL and OpenBLAS, one thread.
 REFERENCE = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}

@@ -42,6 +42,33 @@ def _smooth_problem(n=120, seed=0, width=0.4):
     return K, t
 
 
+def _assert_factors_match_reference(S, Q, Phi, alpha, precisions, rhs, B, cand):
+    """Compare ``S, Q`` with ``b^T C^-1 b`` and ``b^T C^-1 rhs`` in 50-digit arithmetic.
+
+    ``C = diag(1 / precisions) + Phi A^-1 Phi^T`` is formed and solved with 50 significant digits
+    from the same float64 inputs. S is a sum of squared residuals: relative error of a few
+    float64 roundings (~1e-16; the textbook form in float64 is off by ~1e-7 for the active
+    columns here). Q is an inner product of two residuals, ``|Q| <= sqrt(S rhs^T C^-1 rhs)``:
+    its rounding is relative to that bound, not to ``|Q|`` itself (which may be small by
+    cancellation), and grows with the residuals' coefficients, up to ~1e3 here for
+    ``alpha = 1e-6``: 1e-12 allowed.
+    """
+    mpmath.mp.dps = 50
+    Pm = mpmath.matrix(Phi.tolist())
+    C = Pm * mpmath.diag([1 / mpmath.mpf(float(a)) for a in alpha]) * Pm.T
+    for i in range(C.rows):
+        C[i, i] += 1 / mpmath.mpf(precisions[i])
+    rm = mpmath.matrix(rhs)
+    Cr = mpmath.lu_solve(C, rm)
+    rCr = (rm.T * Cr)[0]
+    for k, c in enumerate(cand.tolist()):
+        bm = mpmath.matrix(B[:, c].tolist())
+        S_ref = (bm.T * mpmath.lu_solve(C, bm))[0]
+        Q_ref = (bm.T * Cr)[0]
+        assert abs(float(S[k]) - S_ref) <= 1e-13 * abs(S_ref)
+        assert abs(float(Q[k]) - Q_ref) <= 1e-12 * mpmath.sqrt(S_ref * rCr)
+
+
 def test_exact_factors_match_high_precision_textbook_form():
     K, t = _smooth_problem()
     B = K / torch.linalg.vector_norm(K, dim=0)
@@ -57,25 +84,7 @@ def test_exact_factors_match_high_precision_textbook_form():
     S, Q = exact_factors(fac, Phi, alpha, beta, mu, resid, Bc, Phi.T @ Bc)
     # independent reference: S = b^T C^-1 b, Q = b^T C^-1 t with C = I/beta + Phi A^-1 Phi^T,
     # formed and solved with 50 significant digits from the same float64 inputs
-    mpmath.mp.dps = 50
-    Pm = mpmath.matrix(Phi.tolist())
-    C = Pm * mpmath.diag([1 / mpmath.mpf(float(a)) for a in alpha]) * Pm.T
-    for i in range(C.rows):
-        C[i, i] += 1 / mpmath.mpf(beta)
-    tm = mpmath.matrix(t.tolist())
-    Ct = mpmath.lu_solve(C, tm)
-    tCt = (tm.T * Ct)[0]
-    for k, c in enumerate(cand.tolist()):
-        bm = mpmath.matrix(B[:, c].tolist())
-        S_ref = (bm.T * mpmath.lu_solve(C, bm))[0]
-        Q_ref = (bm.T * Ct)[0]
-        # S is a sum of squared residuals: relative error of a few float64 roundings (~1e-16;
-        # the textbook form in float64 is off by ~1e-7 for the active columns here). Q is an
-        # inner product of two residuals, |Q| <= sqrt(S t^T C^-1 t): its rounding is relative to
-        # that bound, not to |Q| itself (which may be small by cancellation).
-        assert abs(float(S[k]) - S_ref) <= 1e-13 * abs(S_ref)
-        # (the residuals' rounding grows with |c|, up to ~1e3 here for alpha = 1e-6: 1e-12 allowed)
-        assert abs(float(Q[k]) - Q_ref) <= 1e-12 * mpmath.sqrt(S_ref * tCt)
+    _assert_factors_match_reference(S, Q, Phi, alpha, [beta] * Phi.shape[0], t.tolist(), B, cand)
 
 
 def test_lowest_index_wins_within_the_tie_band():
@@ -178,23 +187,10 @@ def test_weighted_exact_factors_match_high_precision_textbook_form():
     # Q = b^T C^-1 t_hat with C = W^-1 + Phi A^-1 Phi^T, t_hat = Phi mu + W^-1 (t - y), formed
     # and solved with 50 significant digits from the same float64 inputs
     mpmath.mp.dps = 50
-    Pm = mpmath.matrix(Phi.tolist())
-    C = Pm * mpmath.diag([1 / mpmath.mpf(float(a)) for a in alpha]) * Pm.T
+    a_m = mpmath.matrix(Phi.tolist()) * mpmath.matrix(mu.tolist())
     wm = [mpmath.mpf(float(v)) for v in w]
-    for i in range(C.rows):
-        C[i, i] += 1 / wm[i]
-    a_m = Pm * mpmath.matrix(mu.tolist())
-    th = mpmath.matrix([a_m[i] + (float(t[i]) - float(y[i])) / wm[i] for i in range(C.rows)])
-    Ct = mpmath.lu_solve(C, th)
-    tCt = (th.T * Ct)[0]
-    for k, c in enumerate(cand.tolist()):
-        bm = mpmath.matrix(B[:, c].tolist())
-        S_ref = (bm.T * mpmath.lu_solve(C, bm))[0]
-        Q_ref = (bm.T * Ct)[0]
-        # as in the Gaussian test: S relative to itself, Q relative to its Cauchy-Schwarz
-        # bound sqrt(S t_hat^T C^-1 t_hat) (the residuals' rounding grows with |c|: 1e-12)
-        assert abs(float(S[k]) - S_ref) <= 1e-13 * abs(S_ref)
-        assert abs(float(Q[k]) - Q_ref) <= 1e-12 * mpmath.sqrt(S_ref * tCt)
+    t_hat = [a_m[i] + (float(t[i]) - float(y[i])) / wm[i] for i in range(len(wm))]
+    _assert_factors_match_reference(S, Q, Phi, alpha, w.tolist(), t_hat, B, cand)
 
 
 def test_verified_argmax_decides_on_exact_values():
