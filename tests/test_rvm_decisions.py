@@ -18,6 +18,9 @@ from bayes_fdi.rvm.sbl_decisions import (
     best_action,
     exact_factors,
     lowest_index_in_band,
+    mean_error,
+    optimistic_ratio,
+    screened_factors,
     verified_argmax,
     weighted_exact_factors,
 )
@@ -85,6 +88,50 @@ def test_exact_factors_match_high_precision_textbook_form():
     # independent reference: S = b^T C^-1 b, Q = b^T C^-1 t with C = I/beta + Phi A^-1 Phi^T,
     # formed and solved with 50 significant digits from the same float64 inputs
     _assert_factors_match_reference(S, Q, Phi, alpha, [beta] * Phi.shape[0], t.tolist(), B, cand)
+
+
+@pytest.mark.parametrize("low", [torch.float32, torch.float64])
+def test_screened_factors_bound_the_exact_ones(low):
+    """Screening factors from ``B^T Phi`` rounded to ``low`` precision: the exact (residual
+    form) ``S`` and ``Q`` lie within the stated error bounds, so the optimistic ratio bounds
+    the exact ``Q^2/S`` of every candidate; in float64 the bounds are tight enough to screen
+    (below 1e-6 of ``beta``), in float32 they are honest about being far looser."""
+    K, t = _smooth_problem(n=300, seed=3)
+    B = K / torch.linalg.vector_norm(K, dim=0)
+    N = B.shape[0]
+    act = torch.tensor([3, 40, 77, 101, 250])
+    Phi = B[:, act]
+    alpha = torch.tensor([2e-5, 3e-4, 1e-6, 5e-3, 1e-2], dtype=torch.float64)
+    beta = 400.0
+    M = act.numel()
+    fac = _factor(alpha, beta * (Phi.T @ Phi))
+    mu = beta * fac.solve(Phi.T @ t)
+    resid = t - Phi @ mu
+    S_ex, Q_ex = exact_factors(fac, Phi, alpha, beta, mu, resid, B, Phi.T @ B)
+    BtPhi = (B.to(low).T @ Phi.to(low)).to(torch.float64)  # products rounded to `low`
+    u = torch.finfo(low).eps / 2
+    eps = (N + 8) * u / (1 - (N + 8) * u)  # Design.screening_error's bound
+    Z = beta * BtPhi
+    S, S_err, v_norm = screened_factors(
+        fac, Z, beta * torch.ones(N, dtype=torch.float64), z_error=beta * eps * M**0.5
+    )
+    Bt_t = B.T @ t
+    Q = beta * Bt_t - Z @ mu
+    Q_err = (
+        beta * eps * float(mu.abs().sum())
+        + mean_error(fac, mu, v_norm)
+        + (M + 2) * torch.finfo(torch.float64).eps * (beta * Bt_t.abs() + Z.abs() @ mu.abs())
+    )
+    assert bool(((S - S_ex).abs() <= S_err).all())
+    assert bool(((Q - Q_ex).abs() <= Q_err).all())
+    free = torch.ones(N, dtype=torch.bool)
+    free[act] = False
+    x_opt = optimistic_ratio(S, Q, S_err, Q_err)[free]
+    assert bool((x_opt >= (Q_ex * Q_ex / S_ex)[free]).all())
+    if low == torch.float64:
+        assert float(S_err.max()) < 1e-6 * beta
+    else:
+        assert float(S_err.max()) > 1e-6 * beta
 
 
 def test_lowest_index_wins_within_the_tie_band():
@@ -290,3 +337,17 @@ def test_bernoulli_evidence_is_the_laplace_approximation_at_the_mode(sep):
     # flat there, so the scipy mode's ~1e-8 tolerance enters quadratically): 1e-9 relative
     assert res.log_evidence == pytest.approx(ref, rel=1e-9)
     np.testing.assert_allclose(res.mean.numpy(), opt.x, rtol=1e-5, atol=1e-8 * np.abs(opt.x).max())
+
+
+def test_bernoulli_float32_screening_takes_the_exact_decisions():
+    """The Bernoulli solver screening with float32 products (error bounded by
+    ``Design.screening_error``) takes exactly the float64 design's path."""
+    rng = np.random.default_rng(4)
+    X = torch.tensor(rng.uniform(0, 1, (600, 2)))
+    noise = torch.tensor(0.3 * rng.standard_normal(600))
+    t = (torch.sin(4 * X[:, 0]) + X[:, 1] + noise > 0.6).to(torch.float64)
+    exact = fast_bernoulli(Design(kernel=RBF(0.3), X=X, bias=True, screen=False), t)
+    screen = fast_bernoulli(Design(kernel=RBF(0.3), X=X, bias=True, screen=True), t)
+    assert screen.active.tolist() == exact.active.tolist()
+    assert screen.n_iter == exact.n_iter
+    assert screen.log_evidence == pytest.approx(exact.log_evidence, abs=1e-9)

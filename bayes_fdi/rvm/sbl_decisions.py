@@ -9,7 +9,9 @@ the active columns are nearly collinear and those factors lose most of their dig
 * the textbook form ``S_m = beta b^T b - beta^2 z^T Sigma z`` (``z = Phi^T b``) subtracts two
   numbers that agree to 5-8 digits, through an explicit inverse ``Sigma`` of condition 1e7+;
 * the rank-one updates of ``S`` and ``Q`` accumulate that error from iteration to iteration
-  (relative errors of 1e-3 after two additions on the normal models' width-0.4 fits).
+  (relative errors of 1e-3 after two additions on the normal models' width-0.4 fits);
+* products in float32 (a screening copy of the kernel matrix) resolve ``S`` only to ~1e-4 of
+  ``beta``, while on smooth kernels most candidates have ``S`` near 1e-6 of ``beta``.
 
 Gains computed this way differ between BLAS code paths in their 4th digit, so the path of
 actions -- and the local optimum reached -- changed with the machine. The rules here make every
@@ -21,21 +23,27 @@ decision from factors accurate to ~1e-13 (relative) whatever the code path:
    minimum over ``c`` of that quadratic (an error ``delta`` in ``c`` changes it by
    ``delta^T H delta`` only), and ``Q`` is the inner product of two projection residuals
    (first-order errors are orthogonal to the other residual), so neither suffers cancellation.
-2. **Verified action** (:func:`verified_action`). The maintained (drifting) factors only
-   *screen*: the actives' factors and those of every addition candidate that could still win
-   are recomputed in residual form from a fresh Cholesky factor before the action is chosen.
-   A candidate is skipped only when even its optimistic gain -- its screened ``Q^2/S``
-   enlarged by a drift margin :data:`DRIFT_MARGIN` (or 4x the drift measured on this
-   iteration's exact recomputations, if larger) -- is below the best verified gain.
-   The exact values are written back into ``S, Q``, so drift cannot accumulate on them.
+2. **Screening with error bounds, verified action** (:func:`screened_factors`,
+   :func:`optimistic_ratio`, :func:`verified_action`). Each iteration the screening factors
+   of all candidates are computed from a fresh Cholesky factor (never by rank-one updates,
+   which drift), together with a rigorous bound of their error: that of the products
+   ``B^T Phi`` behind them (``Design.screening_error``: float64, or float32 for a screening
+   copy) and of the float64 solves and sums (Higham's bounds). The actives' factors and those
+   of every addition candidate whose *optimistic* ratio -- the largest ``Q^2/S`` its screened
+   factors and their bounds allow -- reaches the best verified gain are recomputed in
+   residual form before the action is chosen. The action is thus the one on exact factors
+   whatever the rounding of the screening, and only candidates that could win cost an exact
+   recomputation (well under one per iteration on the normal models' float64 designs; most
+   candidates with float32 products on smooth kernels, whose ``S`` is below float32's
+   resolution).
 3. **Deterministic ties** (:func:`lowest_index_in_band`). Gains within :data:`TIE_RELATIVE`
    (relative) of the best are a tie, won by the lowest basis index; a re-estimate and an
    addition tie the same way. Duplicated columns therefore give the same choice whatever
    their order or the last bits of their gains.
 4. **Exact thresholds and arg-maxima** (:func:`exact_near_threshold`,
-   :func:`verified_argmax`). Screened (float32) products that decide a threshold test (the
-   alignment test) or an arg-max (the first basis column) are recomputed exactly where the
-   screened value is too close to call.
+   :func:`verified_argmax`). Screened products that decide a threshold test (the alignment
+   test) or an arg-max (the first basis column) are recomputed exactly where the screened
+   value is within its error bound of the decision.
 5. **Stopping margin**. An action with gain below :data:`NEGLIGIBLE_GAIN` nats counts as no
    action (a gain of 1e-9 nats is a Bayes factor of 1.000000001): the stop rule does not hinge
    on the sign of a gain at rounding level.
@@ -54,7 +62,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from bayes_fdi.rvm.sparse_bayes import _Factor
 
 __all__ = [
-    "DRIFT_MARGIN",
     "NEGLIGIBLE_GAIN",
     "TIE_RELATIVE",
     "Action",
@@ -62,6 +69,9 @@ __all__ = [
     "exact_factors",
     "exact_near_threshold",
     "lowest_index_in_band",
+    "mean_error",
+    "optimistic_ratio",
+    "screened_factors",
     "verified_action",
     "verified_argmax",
     "weighted_exact_factors",
@@ -76,10 +86,6 @@ TIE_RELATIVE = 1e-9
 #: Actions gaining less than this (nats) are not taken: the stopping rule never depends on the
 #: sign of a gain of rounding size.
 NEGLIGIBLE_GAIN = 1e-9
-#: Minimum relative drift assumed for screened (rank-one updated) ``Q^2/S`` of candidates not
-#: yet recomputed exactly: a candidate is verified unless its screened ratio enlarged by this
-#: factor still loses. Measured drift on the normal models' fits reaches 3e-3 between refreshes.
-DRIFT_MARGIN = 1e-2
 #: At most this many addition candidates are recomputed exactly per round of verification.
 SHORTLIST_MAX = 64
 
@@ -316,6 +322,86 @@ def exact_near_threshold(
     return screened
 
 
+def _gamma(n: int, dtype: torch.dtype) -> float:
+    """Higham's ``gamma_n = n u / (1 - n u)``: the relative error bound of ``n`` roundings."""
+    nu = n * torch.finfo(dtype).eps / 2.0
+    return nu / (1.0 - nu)
+
+
+def screened_factors(
+    fac: _Factor,
+    Z: Tensor,
+    diag: Tensor,
+    *,
+    z_error: float,
+    diag_error: Tensor | float = 0.0,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """Screening ``S = diag - z^T H^-1 z`` for the rows ``z`` of ``Z`` (``(N_B, M)``) from a
+    fresh Cholesky factor, and a bound on its error.
+
+    ``z^T H^-1 z = ||v||^2`` with ``v = L^-1 D z`` (no explicit inverse, no rank-one updates,
+    which drift): its error is that of the inputs, of one triangular solve and of one
+    subtraction.
+
+    * Inputs: if each row of ``Z`` is within ``z_error`` (Euclidean norm) of the exact one and
+      ``diag`` within ``diag_error``, then with ``e = z_error sqrt(lambda_max(H^-1))`` and
+      ``lambda_max(H^-1) <= tr H^-1``, ``|z^T H^-1 z - z'^T H^-1 z'| <= 2 e ||v|| + e^2``
+      (Cauchy-Schwarz in the ``H^-1`` inner product).
+    * The solve: the computed ``v`` solves ``(L + dL) v = D z`` with
+      ``|dL| <= gamma_M |L|`` (Higham, Thm 8.5), and ``||L^-1|| <= 1`` (the scaled precision
+      ``I + D G D`` has eigenvalues >= 1), so ``v`` is within ``r ||v||`` with
+      ``r = gamma_{M+2} ||L||_F`` (two more roundings form ``D z``), and ``||v||^2`` within
+      ``(2 r + r^2) ||v||^2``.
+    * The subtraction and the sum of squares: ``gamma_{M+1} (|diag| + ||v||^2)``.
+
+    Cost ``O(M^2 N_B)``.
+
+    Returns
+    -------
+    S, S_error, v_norm : Tensor
+        ``(N_B,)`` each; ``v_norm = ||v|| = sqrt(z^T H^-1 z)`` (for :func:`mean_error`).
+    """
+    M = Z.shape[1]
+    V = torch.linalg.solve_triangular(fac.L, fac.d[:, None] * Z.T, upper=False)
+    vv = (V * V).sum(0)
+    S = diag - vv
+    trace = float((fac.d * fac.d * torch.cholesky_inverse(fac.L).diagonal()).sum())
+    e = z_error * math.sqrt(max(trace, 0.0))
+    r = _gamma(M + 2, Z.dtype) * float(torch.linalg.matrix_norm(fac.L))
+    v_norm = vv.sqrt()
+    S_error = (
+        2.0 * e * v_norm
+        + e * e
+        + diag_error
+        + (2.0 * r + r * r) * vv
+        + _gamma(M + 1, Z.dtype) * (diag.abs() + vv)
+    )
+    return S, S_error, v_norm
+
+
+def mean_error(fac: _Factor, mu: Tensor, v_norm: Tensor) -> Tensor:
+    """Bound of ``|z^T (mu' - mu)|`` for the computed mean ``mu' = H^-1 r`` (a Cholesky solve)
+    and rows ``z`` with ``||L^-1 D z|| = v_norm`` (:func:`screened_factors`).
+
+    In scaled form ``mu = D nu``, ``(I + D G D) nu = D r``; the computed ``nu'`` solves
+    ``(Hs + dHs) nu' = D r`` with ``||dHs|| <= gamma_{3M+1} ||L||_F^2`` (Higham, Thm 10.4 with
+    the solves), so ``|z^T D (nu' - nu)| = |(L^-1 D z)^T L^-1 dHs nu'|
+    <= v_norm ||dHs|| ||nu'||`` (``||L^-1|| <= 1``).
+    """
+    M = mu.numel()
+    norm_L2 = float(torch.linalg.matrix_norm(fac.L)) ** 2
+    nu = float(torch.linalg.vector_norm(mu / fac.d))
+    return _gamma(3 * M + 4, mu.dtype) * norm_L2 * nu * v_norm
+
+
+def optimistic_ratio(S: Tensor, Q: Tensor, S_error: Tensor, Q_error: Tensor) -> Tensor:
+    """The largest ``Q^2/S`` consistent with screened factors and their error bounds:
+    ``(|Q| + Q_error)^2 / (S - S_error)``, ``inf`` where ``S - S_error <= 0``."""
+    low = S - S_error
+    high = (Q.abs() + Q_error).square()
+    return torch.where(low > 0, high / low.clamp_min(torch.finfo(S.dtype).tiny), math.inf)
+
+
 def verified_action(
     S: Tensor,
     Q: Tensor,
@@ -323,14 +409,17 @@ def verified_action(
     alpha: Tensor,
     addable: Tensor,
     exact: Callable[[Tensor], tuple[Tensor, Tensor]],
+    *,
+    optimistic: Tensor,
 ) -> tuple[Action, int]:
     """The best action chosen on exactly recomputed factors (rule 2 of the module).
 
     The actives' factors and those of every addition candidate that could still win are
     recomputed by ``exact`` and written into ``S, Q`` (in place); candidates are verified in
-    rounds, best screened first, until no unverified candidate's optimistic gain (screened
-    ``Q^2/S`` times ``1 + margin``, ``margin = max(DRIFT_MARGIN, 4 * measured drift)``) reaches
-    the best verified gain.
+    rounds, best bound first, until no unverified candidate's ``optimistic`` ratio (an upper
+    bound of its exact ``Q^2/S`` from the error bounds of its screened factors,
+    :func:`optimistic_ratio`) reaches the best verified gain. The choice is therefore the one
+    on exact factors, whatever the rounding of the screening.
 
     Parameters
     ----------
@@ -341,6 +430,8 @@ def verified_action(
     exact : callable
         ``idx -> (S_idx, Q_idx)``, the exact factors of the basis columns ``idx``
         (see :func:`exact_factors`).
+    optimistic : Tensor
+        ``(N_B,)`` upper bounds of the exact ``Q^2/S`` of the candidates (``inf``: unknown).
 
     Returns
     -------
@@ -348,45 +439,34 @@ def verified_action(
     n_verified : int
         Number of addition candidates recomputed exactly.
     """
-    drift = 0.0
 
-    def refresh(idx: Tensor, *, measure: bool) -> None:
-        nonlocal drift
-        S_new, Q_new = exact(idx)
-        if measure:  # how far screening underestimated Q^2/S of the candidates it let through
-            x_old = Q[idx] * Q[idx] / S[idx]
-            x_new = Q_new * Q_new / S_new
-            rel = ((x_new - x_old) / x_old).nan_to_num(0.0, 0.0, 0.0)
-            drift = max(drift, float(rel.max()))
-        S[idx], Q[idx] = S_new, Q_new
+    def refresh(idx: Tensor) -> None:
+        S[idx], Q[idx] = exact(idx)
 
-    refresh(act, measure=False)
+    refresh(act)
     verified = torch.zeros_like(addable)
     verified[act] = True
     n_verified = 0
-    cleared = (math.inf, 0.0)  # (gain, margin) that no unverified candidate could reach
+    cleared = math.inf  # a gain that no unverified candidate could reach
     while True:
         best = best_action(S, Q, act, alpha, addable)
         if best.kind == 2:  # deletions pre-empt: additions cannot change the choice
             return best, n_verified
-        margin = max(DRIFT_MARGIN, 4.0 * drift)
-        if best.gain >= cleared[0] and margin <= cleared[1]:
+        if best.gain >= cleared:
             return best, n_verified  # the verified best still beats every unverified one
-        Q2 = Q * Q
-        open_ = addable & ~verified & (Q2 - S > ZERO_FACTOR) & (S > 0)
-        x = torch.where(open_, Q2 / S, 0.0) * (1.0 + margin)
+        x = torch.where(addable & ~verified, optimistic, 0.0)
         # optimistic gain above the best verified one (or above nothing when none applies);
         # the factor 1 - 1e-8 keeps candidates in the tie band of the best
         g = best.gain if best.kind >= 0 else NEGLIGIBLE_GAIN
         cand = (x >= _ratio_of_gain(g) * (1.0 - 1e-8)).nonzero().squeeze(1)
         if cand.numel() == 0:
             return best, n_verified
-        cleared = (g, margin)
+        cleared = g
         if cand.numel() > SHORTLIST_MAX:
             cand = cand[torch.topk(x[cand], SHORTLIST_MAX).indices]
-            cleared = (math.inf, 0.0)  # candidates above the cut remain unverified
+            cleared = math.inf  # candidates above the cut remain unverified
         cand = cand.sort().values
-        refresh(cand, measure=True)
+        refresh(cand)
         verified[cand] = True
         n_verified += cand.numel()
 

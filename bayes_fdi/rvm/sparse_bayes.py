@@ -6,9 +6,10 @@ Four solvers share one result type, :class:`SBLResult`:
   marginal-likelihood maximisation as realised in SparseBayes v2 (see
   ``shared/reference/fast-sbl.md``): candidate factors ``S, Q``, one add /
   re-estimate / delete per iteration chosen by the largest exact evidence gain,
-  deletions first, rank-one updates of ``Sigma``, ``mu``, ``S`` and ``Q`` (Gaussian),
-  a cache ``B^T Phi`` growing one column per addition, the alignment test and the
-  SparseBayes stopping rules.
+  deletions first, a cache ``B^T Phi`` growing one column per addition, the alignment
+  test and the SparseBayes stopping rules. Unlike SparseBayes, the posterior is
+  refactorised each iteration (no rank-one updates, which drift) and every decision is
+  taken on exact factors (:mod:`bayes_fdi.rvm.sbl_decisions`).
 * :func:`em_gaussian` / :func:`em_bernoulli` -- the classical re-estimation of
   Tipping (2001), the paper's eqs. (10)-(11) and (26)-(29): ``alpha_i = gamma_i/mu_i^2``,
   ``sigma^2 = ||t - Phi mu||^2 / (N - sum gamma)``, pruning large ``alpha``.
@@ -34,6 +35,9 @@ from bayes_fdi.rvm.sbl_decisions import (
     exact_factors,
     exact_near_threshold,
     lowest_index_in_band,
+    mean_error,
+    optimistic_ratio,
+    screened_factors,
     verified_action,
     verified_argmax,
     weighted_exact_factors,
@@ -62,8 +66,6 @@ _POSTERIOR_MODE_ITS = 50
 # (quadratic regime), and below which (relative to 1 + |log posterior|) it stops
 _MODE_QUADRATIC = 1e-8
 _MODE_FLOOR = 1e-24
-# relative accuracy assumed for float32-screened products B^T v (a sum of N float32 terms)
-_SCREEN_RELATIVE = 1e-4
 _LINE_SEARCH_MIN_STEP = 2.0**-8
 _LOG_2PI = math.log(2.0 * math.pi)
 # Bernoulli fast solver: stop when the Laplace evidence has not risen by _STALL_GAIN
@@ -249,28 +251,17 @@ class _Alignment:
         return self.count == 0
 
 
-def _screening_S(fac: _Factor, WBtPhi: Tensor, diag: Tensor) -> Tensor:
-    """Screening ``S = diag - z^T H^-1 z`` for the rows ``z`` of ``WBtPhi`` (``(N_B, M)``)
-    from the Cholesky factor: ``z^T H^-1 z = ||L^-1 D z||^2``, no explicit inverse.
-
-    Through the explicit ``Sigma`` and its rank-one updates, ``S`` of candidates nearly in the
-    span of the active columns was measured 3% off (a difference of numbers 1e5 times larger):
-    more than the screening margin of ``sbl_decisions.verified_action``, so whether such a
-    candidate was verified -- and won -- changed with the BLAS code path. Here the error is
-    that of the subtraction alone (~1e-16 of ``diag``). Cost ``O(M^2 N_B)``.
-    """
-    V = torch.linalg.solve_triangular(fac.L, fac.d[:, None] * WBtPhi.T, upper=False)
-    return diag - (V * V).sum(0)
-
-
-def _exact_alignment(BtBi: Tensor, design: Design, norms: Tensor, b_i: Tensor) -> None:
-    """Recompute exactly (in place) the screened cosines ``B^T b_i`` too close to the alignment
-    threshold to call (``sbl_decisions.exact_near_threshold``)."""
+def _exact_alignment(
+    BtBi: Tensor, design: Design, norms: Tensor, b_i: Tensor, error: float
+) -> None:
+    """Recompute exactly (in place) the screened cosines ``B^T b_i`` within their error bound
+    ``error`` (``Design.screening_error``) of the alignment threshold
+    (``sbl_decisions.exact_near_threshold``)."""
     exact_near_threshold(
         BtBi,
         _ALIGNMENT_MAX,
         lambda idx: (design.columns(idx) / norms[idx]).T @ b_i,
-        relative=_SCREEN_RELATIVE,
+        relative=2.0 * error / _ALIGNMENT_MAX,
     )
 
 
@@ -338,6 +329,11 @@ def fast_gaussian(
         that raised the log evidence by less than 1e-3 in all: a weakly determined ``alpha``
         can otherwise be re-estimated for thousands of iterations at no gain.
 
+    Each iteration the posterior is refactorised (Cholesky of the scaled precision) and the
+    candidates are screened from that factor with error bounds; the action is decided on
+    exact factors (``sbl_decisions.verified_action``), so the path of actions does not depend
+    on the BLAS code path, the thread count or a float32 screening copy of the design.
+
     Returns
     -------
     SBLResult
@@ -374,6 +370,7 @@ def fast_gaussian(
     BtPhi_buf[j, 0] = phi @ phi
     act_t = torch.tensor(active, dtype=torch.long, device=device)
     align = _Alignment(P, device)
+    _exact_alignment(BtPhi_buf[:, 0], design, norms, phi, design.screening_error())
     align.add(BtPhi_buf[:, 0])
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
@@ -383,39 +380,41 @@ def fast_gaussian(
 
     addable = addable_mask()
 
-    def full_statistics(beta: float, alpha: Tensor, Phi: Tensor, BtPhi: Tensor):
+    def statistics(beta: float, alpha: Tensor, Phi: Tensor, BtPhi: Tensor):
+        """Posterior from a fresh factorisation (never from rank-one updates, which drift)."""
         fac = _factor(alpha, beta * BtPhi[act_t])
         mu = beta * fac.solve(Bt_t[act_t])
-        Sigma = fac.covariance()
         resid = t - Phi @ mu
-        ee = float(resid @ resid)
-        Z = BtPhi @ Sigma
-        S = beta - beta * beta * (Z * BtPhi).sum(1)
-        Q = beta * (Bt_t - BtPhi @ mu)
-        log_ml = _gaussian_log_ml(N, beta, ee, alpha, mu, fac)
-        return mu, Sigma, S, Q, log_ml
+        log_ml = _gaussian_log_ml(N, beta, float(resid @ resid), alpha, mu, fac)
+        return fac, mu, resid, log_ml
 
+    eps = design.screening_error()  # error bound of the cosines in B^T Phi
     M = 1
-    mu, Sigma, S, Q, log_ml = full_statistics(beta, alpha, Phi_buf[:, :M], BtPhi_buf[:, :M])
+    fac, mu, resid, log_ml = statistics(beta, alpha, Phi_buf[:, :M], BtPhi_buf[:, :M])
     trace = [log_ml]
     converged = False
     it = 0
     last_structural = 0  # iteration of the last addition or deletion
     for it in range(1, max_iter + 1):
         Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
-        # a fresh factorisation each iteration (the rank-one updated Sigma and mu drift)
-        fac = _factor(alpha, beta * BtPhi[act_t])
-        mu = beta * fac.solve(Bt_t[act_t])
-        Sigma = fac.covariance()
-        resid = t - Phi @ mu
+        if it > 1:
+            fac, mu, resid, _ = statistics(beta, alpha, Phi, BtPhi)
+        # screening factors from the fresh factor, with bounds of their error: the actions
+        # are decided on exact factors whatever the rounding of B^T Phi (float32 or not)
+        # (Q = beta b^T t - z^T mu with z = beta B^T Phi: the errors of z, of mu's solve, and
+        # of the M + 1 term sums)
+        Z = beta * BtPhi
+        S, S_err, v_norm = screened_factors(fac, Z, beta * unit, z_error=beta * eps * M**0.5)
+        Q = beta * Bt_t - Z @ mu
+        Q_err = (
+            beta * eps * float(mu.abs().sum())
+            + mean_error(fac, mu, v_norm)
+            + (M + 2) * torch.finfo(dtype).eps * (beta * Bt_t.abs() + Z.abs() @ mu.abs())
+        )
         exact = _ExactColumns(design, norms, fac, Phi, BtPhi[act_t], act_t, alpha, beta, mu, resid)
-        if design.F is not None:
-            # B^T Phi is a product of the stored matrix (not float32 screening): screen from
-            # the fresh factor each iteration instead of the drifting rank-one updates
-            S = _screening_S(fac, beta * BtPhi, beta * unit)
-            Q = beta * (Bt_t - BtPhi @ mu)
-        best, _ = verified_action(S, Q, act_t, alpha, addable, exact)
-        exact_col = (best.index, *exact.fetched[best.index]) if best.kind == 0 else None
+        best, _ = verified_action(
+            S, Q, act_t, alpha, addable, exact, optimistic=optimistic_ratio(S, Q, S_err, Q_err)
+        )
         nu, gain, action, jj = best.index, best.gain, best.kind, best.position
         last = not gain > 0
         if not last and action == 1:
@@ -425,14 +424,6 @@ def fast_gaussian(
             if action != 1:
                 last_structural = it
             if action == 1:  # re-estimate
-                sj = Sigma[:, jj].clone()
-                mu_j = float(mu[jj])
-                kappa = 1.0 / (float(Sigma[jj, jj]) + 1.0 / (best.new_alpha - float(alpha[jj])))
-                Sigma = Sigma - kappa * torch.outer(sj, sj)
-                mu = mu - kappa * mu_j * sj
-                v = BtPhi @ (beta * sj)
-                S.addcmul_(v, v, value=kappa)
-                Q.add_(v, alpha=kappa * mu_j)
                 alpha = alpha.clone()
                 alpha[jj] = best.new_alpha
             elif action == 0:  # add
@@ -441,34 +432,20 @@ def fast_gaussian(
                     Phi_buf = torch.cat([Phi_buf, Phi_buf.new_empty(N, cap - M)], dim=1)
                     BtPhi_buf = torch.cat([BtPhi_buf, BtPhi_buf.new_empty(P, cap - M)], dim=1)
                     Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
-                if exact_col is not None and exact_col[0] == nu:
-                    _, b_i, gram = exact_col
+                if nu in exact.fetched:  # the exact column its factors were computed from
+                    b_i, gram = exact.fetched[nu]
                 else:
                     b_i = design.columns([nu])[:, 0] / norms[nu]
-                    gram = Phi.T @ b_i  # exact Gram entries with the active columns
+                    gram = Phi.T @ b_i
                 BtBi = BtPhi_buf[:, M]
                 BtBi.copy_(design.rmatmul(b_i[:, None], exact=False)[:, 0])
                 BtBi.div_(norms)
                 BtBi[act_t] = gram
                 BtBi[nu] = b_i @ b_i
-                _exact_alignment(BtBi, design, norms, b_i)
+                _exact_alignment(BtBi, design, norms, b_i, eps)
                 BtPhi[nu] = gram
-                u = beta * (Sigma @ gram)
-                a_new = best.new_alpha
-                s_ii = 1.0 / (a_new + float(S[nu]))
-                mu_i = s_ii * float(Q[nu])
-                Sig = torch.empty(M + 1, M + 1, dtype=dtype, device=device)
-                Sig[:M, :M] = Sigma + s_ii * torch.outer(u, u)
-                Sig[:M, M] = -s_ii * u
-                Sig[M, :M] = -s_ii * u
-                Sig[M, M] = s_ii
-                Sigma = Sig
-                mu = torch.cat([mu - mu_i * u, mu.new_tensor([mu_i])])
-                e = beta * (BtBi - BtPhi @ u)
-                S.addcmul_(e, e, value=-s_ii)
-                Q.add_(e, alpha=-mu_i)
                 Phi_buf[:, M] = b_i
-                alpha = torch.cat([alpha, alpha.new_tensor([a_new])])
+                alpha = torch.cat([alpha, alpha.new_tensor([best.new_alpha])])
                 active.append(nu)
                 act_t = torch.cat([act_t, act_t.new_tensor([nu])])
                 M += 1
@@ -476,20 +453,11 @@ def fast_gaussian(
                 align.add(BtBi)
                 addable = addable_mask()
             else:  # delete
-                Sjj = float(Sigma[jj, jj])
-                sj = Sigma[:, jj].clone()
-                mu_j = float(mu[jj])
-                Sigma = Sigma - torch.outer(sj, sj) / Sjj
-                mu = mu - (mu_j / Sjj) * sj
-                v = BtPhi @ (beta * sj)
-                S.addcmul_(v, v, value=1.0 / Sjj)
-                Q.add_(v, alpha=mu_j / Sjj)
                 keep_t = torch.tensor(
                     [k for k in range(M) if k != jj], dtype=torch.long, device=device
                 )
                 align.remove(BtPhi[:, jj])
-                Sigma = Sigma[keep_t][:, keep_t]
-                mu, alpha = mu[keep_t], alpha[keep_t]
+                alpha = alpha[keep_t]
                 if jj < M - 1:  # close the gap in the buffers
                     Phi_buf[:, jj : M - 1] = Phi_buf[:, jj + 1 : M].clone()
                     BtPhi_buf[:, jj : M - 1] = BtPhi_buf[:, jj + 1 : M].clone()
@@ -502,18 +470,12 @@ def fast_gaussian(
         if it <= _BETA_UPDATE_START or it % _BETA_UPDATE_FREQUENCY == 0 or last:
             Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
             if not last:
-                # beta is not a decision verified in exact arithmetic: set it from a fresh
-                # factorisation, not from the rank-one updated (drifting) mu and Sigma
-                fac = _factor(alpha, beta * BtPhi[act_t])
-                mu = beta * fac.solve(Bt_t[act_t])
-                Sigma = fac.covariance()
-            resid = t - Phi @ mu
-            ee = float(resid @ resid)
-            gamma = 1.0 - alpha * Sigma.diagonal()
+                fac, mu, resid, _ = statistics(beta, alpha, Phi, BtPhi)
+            gamma = 1.0 - alpha * fac.covariance().diagonal()
             beta_old = beta
-            beta = min((N - float(gamma.sum())) / max(ee, 1e-300), beta_max)
+            beta = min((N - float(gamma.sum())) / max(float(resid @ resid), 1e-300), beta_max)
             beta = max(beta, 1e-300)
-            mu, Sigma, S, Q, log_ml = full_statistics(beta, alpha, Phi, BtPhi)
+            fac, mu, resid, log_ml = statistics(beta, alpha, Phi, BtPhi)
             if last and abs(math.log(beta) - math.log(beta_old)) > beta_tol:
                 last = False
         trace.append(log_ml)
@@ -525,16 +487,17 @@ def fast_gaussian(
             and log_ml - trace[-1 - _GAUSS_STALL_WINDOW] < _GAUSS_STALL_GAIN
         ):
             # only re-estimations, at no gain: the optimum is reached within the tolerance
-            Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
-            mu, Sigma, S, Q, log_ml = full_statistics(beta, alpha, Phi, BtPhi)
-            trace[-1] = log_ml
             converged = True
             break
 
+    # the reported posterior and evidence: exact, from a fresh factorisation
+    Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
+    fac, mu, resid, log_ml = statistics(beta, alpha, Phi, BtPhi)
+    trace[-1] = log_ml
     return _result(
         torch.tensor(active, device=device),
         mu,
-        Sigma,
+        fac.covariance(),
         alpha,
         norms,
         beta=beta,
@@ -792,11 +755,13 @@ def fast_bernoulli(
     tp = 2.0 * t - 1.0
     Bt_tp = design.rmatmul(tp[:, None], exact=False)[:, 0] / norms
     # the initial column: largest |b^T tp|, decided on exact products near the screened top
+    eps = design.screening_error()  # error bound of screened cosines (unit vectors)
+    top = float(torch.where(valid, Bt_tp.abs(), 0.0).max())
     j = verified_argmax(
         Bt_tp,
         valid,
         lambda idx: (design.columns(idx) / norms[idx]).T @ tp,
-        relative=_SCREEN_RELATIVE,
+        relative=eps * math.sqrt(t.numel()) / max(top, 1e-300),  # ||tp|| = sqrt(N)
     )
     Phi = design.columns([j]) / norms[j]
     target = (tp * 0.9 + 1.0) / 2.0
@@ -808,18 +773,30 @@ def fast_bernoulli(
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
     align = _Alignment(P, device)
+    _exact_alignment(BtPhi[:, 0], design, norms, Phi[:, 0], eps)
     align.add(BtPhi[:, 0])
 
     def full_statistics(Phi: Tensor, alpha: Tensor, mu: Tensor):
-        """The mode and the screening factors (textbook form, possibly float32 products)."""
+        """The mode, the screening factors (textbook form, possibly float32 products) and
+        bounds of their exact ``Q^2/S`` (``sbl_decisions.optimistic_ratio``)."""
         mode = posterior_mode(Phi, t, alpha, mu)
         V = torch.cat([mode.w[:, None] * Phi, (t - mode.y)[:, None]], dim=1)
         BtV = design.rmatmul(V, exact=False) / norms[:, None]
         BtWPhi, Q = BtV[:, :-1], BtV[:, -1]
-        S = _screening_S(mode.fac, BtWPhi, design.sq_rmatmul(mode.w, exact=False) / norms**2)
-        return mode, S, Q
+        # each product is within eps * ||v|| of the exact one (unit columns); the weighted
+        # squared norms (B * B)^T w / ||b||^2 of positive terms within eps * max(w)
+        v_norms = torch.linalg.vector_norm(V, dim=0)
+        S, S_err, _ = screened_factors(
+            mode.fac,
+            BtWPhi,
+            design.sq_rmatmul(mode.w, exact=False) / norms**2,
+            z_error=eps * float(torch.linalg.vector_norm(v_norms[:-1])),
+            diag_error=eps * float(mode.w.max()),
+        )
+        Q_err = eps * float(v_norms[-1]) + 4.0 * eps * Q.abs()  # + rounding of the division
+        return mode, S, Q, optimistic_ratio(S, Q, S_err, Q_err)
 
-    mode, S, Q = full_statistics(Phi, alpha, mu)
+    mode, S, Q, x_opt = full_statistics(Phi, alpha, mu)
     trace = [mode.log_ml]
     best = (mode.log_ml, 0, list(active), alpha.clone())
     converged = False
@@ -827,7 +804,8 @@ def fast_bernoulli(
     for it in range(1, max_iter + 1):
         act_t = torch.tensor(active, dtype=torch.long, device=device)
         exact = _LaplaceColumns(design, norms, mode, Phi, act_t, alpha, t)
-        choice, _ = verified_action(S, Q, act_t, alpha, valid & align.free & ~in_model, exact)
+        addable = valid & align.free & ~in_model
+        choice, _ = verified_action(S, Q, act_t, alpha, addable, exact, optimistic=x_opt)
         nu, gain, action, jj = choice.index, choice.gain, choice.kind, choice.position
         if not gain > 0:
             converged = True
@@ -842,7 +820,7 @@ def fast_bernoulli(
         elif action == 0:
             b_i = exact.fetched[nu][:, None]  # the exact column its factors were computed from
             BtBi = design.rmatmul(b_i, exact=False)[:, 0] / norms
-            _exact_alignment(BtBi, design, norms, b_i[:, 0])
+            _exact_alignment(BtBi, design, norms, b_i[:, 0], eps)
             a_new = choice.new_alpha
             mu_i = float(Q[nu]) / (a_new + float(S[nu]))
             Phi = torch.cat([Phi, b_i], dim=1)
@@ -859,7 +837,7 @@ def fast_bernoulli(
             alpha, mu = alpha[keep_t], mode.mu[keep_t]
             del active[jj]
             in_model[nu] = False
-        mode, S, Q = full_statistics(Phi, alpha, mu)
+        mode, S, Q, x_opt = full_statistics(Phi, alpha, mu)
         trace.append(mode.log_ml)
         if mode.log_ml > best[0] + _STALL_GAIN:
             best = (mode.log_ml, it, list(active), alpha.clone())
