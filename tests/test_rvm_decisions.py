@@ -24,7 +24,8 @@ from bayes_fdi.rvm.sbl_decisions import (
     verified_argmax,
     weighted_exact_factors,
 )
-from bayes_fdi.rvm.sparse_bayes import _factor, fast_bernoulli, fast_gaussian, posterior_mode
+from bayes_fdi.rvm.sbl_numerics import _factor
+from bayes_fdi.rvm.sparse_bayes import fast_bernoulli, fast_gaussian, posterior_mode
 from bayes_fdi.rvm.threads import fit_threads
 
 

@@ -327,7 +327,7 @@ def test_screening_product_and_monotone_evidence():
 
 def test_buffer_growth_does_not_change_the_fit(monkeypatch):
     """Phi / B^T Phi buffers that must grow (capacity 2) give the same fit as roomy ones."""
-    from bayes_fdi.rvm import sparse_bayes
+    from bayes_fdi.rvm import sbl_gaussian
     from bayes_fdi.rvm.design import Design
     from bayes_fdi.rvm.sparse_bayes import fast_gaussian
 
@@ -337,7 +337,7 @@ def test_buffer_growth_does_not_change_the_fit(monkeypatch):
     for screen in (False, True):
         design = Design(kernel=RBF(1.0), X=X, bias=True, rhs=t, screen=screen)
         roomy = fast_gaussian(design, t)
-        monkeypatch.setattr(sparse_bayes, "_INITIAL_CAPACITY", 2)
+        monkeypatch.setattr(sbl_gaussian, "_INITIAL_CAPACITY", 2)
         tight = fast_gaussian(design, t)
         monkeypatch.undo()
         assert roomy.active.numel() > 4  # the tight buffers had to grow
@@ -348,7 +348,7 @@ def test_buffer_growth_does_not_change_the_fit(monkeypatch):
 
 def test_fast_solver_stops_when_only_reestimations_gain_nothing(monkeypatch):
     """The stall rule ends a fit early only at the evidence the full run reaches anyway."""
-    import bayes_fdi.rvm.sparse_bayes as sb
+    import bayes_fdi.rvm.sbl_gaussian as sb
 
     rng = np.random.default_rng(1)
     X = rng.uniform(0, 1, (800, 3))

@@ -59,7 +59,7 @@ import torch
 from torch import Tensor
 
 if TYPE_CHECKING:  # pragma: no cover
-    from bayes_fdi.rvm.sparse_bayes import _Factor
+    from bayes_fdi.rvm.sbl_numerics import _Factor
 
 __all__ = [
     "NEGLIGIBLE_GAIN",
