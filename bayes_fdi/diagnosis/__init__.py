@@ -15,6 +15,9 @@
   (`bayes_fdi.diagnosis.seva_record`: the record and its conversions;
   `bayes_fdi.diagnosis.seva_rules`: thresholds, screening and status rules;
   `bayes_fdi.diagnosis.novelty`: the nearest-neighbour novelty reference).
+- `bayes_fdi.diagnosis.persistence`: model files of fitted diagnosers, without pickle
+  (`bayes_fdi.diagnosis.model_codec`: the object tree as JSON and arrays;
+  `bayes_fdi.diagnosis.persistable`: the classes a file may hold).
 """
 
 from bayes_fdi.diagnosis.baselines import (
