@@ -7,6 +7,8 @@
 - `bayes_fdi.diagnosis.normal_models`: `NormalModels`, the fault-free RVR models ``g1``, ``g2``
   of ``X`` and ``F`` and their residuals.
 - `bayes_fdi.diagnosis.interval_scaling`: recalibration of their predictive standard deviations.
+- `bayes_fdi.diagnosis.interval_calibration`: the cross-fitted factors per command-speed bin
+  that `NormalModels` applies to them.
 - `bayes_fdi.diagnosis.features`: residual features (a registry).
 - `bayes_fdi.diagnosis.tree`: the k-means designed binary tree of classifiers.
 - `bayes_fdi.diagnosis.baselines`: the SVM baseline through the same interfaces.
