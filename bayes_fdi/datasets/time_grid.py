@@ -147,6 +147,7 @@ def to_second_grid(
 
 
 def gap_summary(time: np.ndarray, channels: Mapping[str, np.ndarray]) -> dict[str, dict]:
+    """Per channel: its NaN seconds, its number of gaps and their ``[first, last]`` times."""
     summary = {}
     for name in CHANNELS:
         isnan = np.isnan(channels[name]).astype(np.int8)
@@ -158,6 +159,7 @@ def gap_summary(time: np.ndarray, channels: Mapping[str, np.ndarray]) -> dict[st
 
 
 def warn_gaps(gaps: Mapping[str, dict], missing_seconds: int, source: str) -> None:
+    """A `RecordingGapWarning` naming the channels with gaps (none when there are none)."""
     with_gaps = {k: v for k, v in gaps.items() if v["n_missing"]}
     if with_gaps:
         detail = ", ".join(
