@@ -61,6 +61,15 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.datasets.format import CHANNELS, validate_dataset
+from bayes_fdi.datasets.time_grid import (
+    RESAMPLE_METHODS,
+    TIME_TOLERANCE,
+    RecordingGapWarning,
+    gap_summary,
+    to_second_grid,
+    to_seconds,
+    warn_gaps,
+)
 from bayes_fdi.datasets.units import (
     _ALIASES,
     PHYSICAL_UNITS,
@@ -87,7 +96,6 @@ __all__ = [
     "to_physical",
 ]
 
-RESAMPLE_METHODS: tuple[str, ...] = ("mean", "linear")
 FORMATS: dict[str, str] = {
     ".csv": "csv",
     ".tsv": "csv",
@@ -98,134 +106,11 @@ FORMATS: dict[str, str] = {
     ".h5": "netcdf",
     ".txt": "day",
 }
-#: Timestamps closer than this to the 1-s grid (s) are taken as on it.
-_TIME_TOLERANCE = 1e-6
-
-
-class RecordingGapWarning(UserWarning):
-    """A recording has gaps (NaN or missing seconds); they are kept, and come out BLIND."""
 
 
 # ----------------------------------------------------------------------------------------------
-# the 1-s grid
+# a file's columns to a one-run dataset
 # ----------------------------------------------------------------------------------------------
-def _seconds(time: Any, source: str) -> tuple[np.ndarray, str]:
-    """Seconds (float) of a time column or coordinate, and the ISO origin for date-times."""
-    t = np.asarray(time)
-    if np.issubdtype(t.dtype, np.datetime64):
-        origin = t[0]
-        seconds = (t - origin) / np.timedelta64(1, "ns") * 1e-9
-        import pandas as pd
-
-        return seconds.astype(np.float64), pd.Timestamp(origin).isoformat()
-    if np.issubdtype(t.dtype, np.timedelta64):
-        return (t / np.timedelta64(1, "ns") * 1e-9).astype(np.float64), ""
-    if t.dtype.kind in "OUS":
-        import pandas as pd
-
-        try:
-            stamps = pd.to_datetime(pd.Series(t), format="ISO8601").to_numpy()
-        except (ValueError, TypeError) as exc:
-            raise ValueError(
-                f"{source}: the time column is neither seconds nor date-times ({exc})"
-            ) from None
-        return _seconds(stamps.astype("datetime64[ns]"), source)
-    try:
-        return t.astype(np.float64), ""
-    except (TypeError, ValueError):
-        raise ValueError(f"{source}: the time column is not numeric") from None
-
-
-def _grid(
-    time: np.ndarray, channels: dict[str, np.ndarray], resample: str | None, source: str
-) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
-    """Put the samples on the 1-s grid (see the module docstring); returns time, channels, info."""
-    if resample is not None and resample not in RESAMPLE_METHODS:
-        raise ValueError(f"resample must be None or one of {RESAMPLE_METHODS}, got {resample!r}")
-    n = time.size
-    if n == 0:
-        raise ValueError(f"{source}: the recording has no samples")
-    if not np.all(np.isfinite(time)):
-        row = int(np.flatnonzero(~np.isfinite(time))[0])
-        raise ValueError(f"{source}: time of sample {row + 1} is missing or not finite")
-    if n > 1:
-        step = np.diff(time)
-        if np.any(step <= 0):
-            row = int(np.flatnonzero(step <= 0)[0])
-            raise ValueError(
-                f"{source}: time must increase; sample {row + 2} ({time[row + 1]:g} s) does not "
-                f"come after sample {row + 1} ({time[row]:g} s)"
-            )
-        typical = float(np.median(step))
-    else:
-        typical = 1.0
-    on_grid = n == 1 or (
-        abs(typical - 1.0) <= _TIME_TOLERANCE
-        and np.all(np.abs(np.diff(time) - np.round(np.diff(time))) <= _TIME_TOLERANCE)
-    )
-    info: dict[str, Any] = {"sampling_step": typical, "resampled": "no"}
-    if on_grid:
-        offsets = np.round(time - time[0]).astype(np.int64)
-        grid = time[0] + np.arange(offsets[-1] + 1, dtype=np.float64)
-        out = {}
-        for name, values in channels.items():
-            full = np.full(grid.size, np.nan)
-            full[offsets] = values
-            out[name] = full
-        info["missing_seconds"] = int(grid.size - n)
-        return grid, out, info
-    if resample is None:
-        raise ValueError(
-            f"{source}: sampled every {typical:g} s ({1 / typical:g} Hz); the model runs at 1 Hz. "
-            "Ask for resampling explicitly: resample='mean' (average each second, for faster "
-            "recordings) or 'linear' (interpolate, for slower ones); on the command line "
-            "--resample mean|linear"
-        )
-    if resample == "mean":  # every sample falls in a second: the edge seconds may be partial
-        start, stop = math.floor(time[0] + 0.5), math.floor(time[-1] + 0.5)
-    else:  # interpolation only between samples: never beyond the first and the last
-        start = math.ceil(time[0] - _TIME_TOLERANCE)
-        stop = math.floor(time[-1] + _TIME_TOLERANCE)
-    grid = np.arange(start, stop + 1, dtype=np.float64)
-    out = {}
-    if resample == "mean":
-        # second k holds the samples with k - 0.5 <= t < k + 0.5
-        which = np.floor(time - start + 0.5).astype(np.int64)
-        keep = (which >= 0) & (which < grid.size)
-        counts = np.bincount(which[keep], minlength=grid.size)
-        for name, values in channels.items():
-            v = values[keep]
-            nan = np.bincount(which[keep], weights=np.isnan(v), minlength=grid.size)
-            total = np.bincount(which[keep], weights=np.nan_to_num(v), minlength=grid.size)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                mean = total / counts
-            out[name] = np.where((counts > 0) & (nan == 0), mean, np.nan)
-    else:
-        right = np.searchsorted(time, grid, side="left").clip(1, n - 1)
-        left = right - 1
-        exact = np.isclose(time[right], grid, rtol=0, atol=_TIME_TOLERANCE)
-        left = np.where(exact, right, left)
-        close = (time[right] - time[left]) <= 2 * typical + _TIME_TOLERANCE
-        span = np.where(right > left, time[right] - time[left], 1.0)
-        w = np.where(right > left, (grid - time[left]) / span, 0.0)
-        for name, values in channels.items():
-            value = (1 - w) * values[left] + w * values[right]
-            out[name] = np.where(close, value, np.nan)
-    info["resampled"] = resample
-    return grid, out, info
-
-
-def _gaps(time: np.ndarray, channels: Mapping[str, np.ndarray]) -> dict[str, dict]:
-    summary = {}
-    for name in CHANNELS:
-        isnan = np.isnan(channels[name]).astype(np.int8)
-        edges = np.diff(np.concatenate(([0], isnan, [0])))
-        starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        spans = [[float(time[a]), float(time[b - 1])] for a, b in zip(starts, stops, strict=True)]
-        summary[name] = {"n_missing": int(isnan.sum()), "n_gaps": len(spans), "spans": spans}
-    return summary
-
-
 def _build(
     time: np.ndarray,
     raw: dict[str, np.ndarray],
@@ -242,8 +127,8 @@ def _build(
             row = int(np.flatnonzero(np.isinf(values))[0])
             raise ValueError(f"{source}: {name} of sample {row + 1} is infinite")
     normalised = {name: normalise(raw[name], name, unit_of[name]) for name in CHANNELS}
-    grid, channels, info = _grid(time, normalised, resample, source)
-    gaps = _gaps(grid, channels)
+    grid, channels, info = to_second_grid(time, normalised, resample, source)
+    gaps = gap_summary(grid, channels)
     ds = xr.Dataset(
         {name: (("run", "time"), channels[name][None, :]) for name in CHANNELS},
         coords={"run": [0], "time": grid},
@@ -258,22 +143,8 @@ def _build(
         },
     )
     validate_dataset(ds, require=CHANNELS, allow_nan=True)
-    _warn_gaps(gaps, info.get("missing_seconds", 0), source)
+    warn_gaps(gaps, info.get("missing_seconds", 0), source)
     return ds
-
-
-def _warn_gaps(gaps: Mapping[str, dict], missing_seconds: int, source: str) -> None:
-    with_gaps = {k: v for k, v in gaps.items() if v["n_missing"]}
-    if with_gaps:
-        detail = ", ".join(
-            f"{k} ({v['n_missing']} s in {v['n_gaps']} gap(s))" for k, v in with_gaps.items()
-        )
-        extra = f"; {missing_seconds} s without any sample" if missing_seconds else ""
-        warnings.warn(
-            f"{source}: gaps kept as NaN (diagnosed BLIND) in {detail}{extra}",
-            RecordingGapWarning,
-            stacklevel=3,
-        )
 
 
 def _pick_columns(
@@ -374,7 +245,7 @@ def read_csv(
             time = column.astype(np.float64).to_numpy()
             origin = ""
         except ValueError:
-            time, origin = _seconds(column.to_numpy(dtype=object), source)
+            time, origin = to_seconds(column.to_numpy(dtype=object), source)
         if origin:
             attrs["time_origin"] = origin
     else:
@@ -495,7 +366,7 @@ def read_netcdf(
                 f"{source}: variable {chosen[name]!r} declares units {declared!r} but "
                 f"{name} was given as {unit_of[name]!r} ('1' = normalised); pass units= to match"
             )
-    time, origin = _seconds(opened["time"].values, source)
+    time, origin = to_seconds(opened["time"].values, source)
     attrs = {"ignored_columns": json.dumps([c for c in ignored if c != "time"])}
     if origin:
         attrs["time_origin"] = origin
@@ -556,7 +427,7 @@ def _lazy(
 ) -> xr.Dataset:
     steps = np.diff(time)
     if time.size > 1 and (
-        np.any(np.abs(steps - 1.0) > _TIME_TOLERANCE) or not np.all(np.isfinite(time))
+        np.any(np.abs(steps - 1.0) > TIME_TOLERANCE) or not np.all(np.isfinite(time))
     ):
         raise ValueError(
             f"{source}: a lazily read recording must be sampled every 1 s without missing "
@@ -598,7 +469,7 @@ def read_day_file(path: str | os.PathLike, *, actuator: int = 3) -> xr.Dataset:
     ds = ds.drop_vars([c for c in ("state", "strength", "onset", "profile", "ramp") if c in ds])
     ds.attrs["format"] = "day"
     gaps = json.loads(ds.attrs["gaps"])
-    _warn_gaps(gaps, 0, os.fspath(path))
+    warn_gaps(gaps, 0, os.fspath(path))
     return ds
 
 

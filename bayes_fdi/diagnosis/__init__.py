@@ -7,6 +7,8 @@
 - `bayes_fdi.diagnosis.normal_models`: `NormalModels`, the fault-free RVR models ``g1``, ``g2``
   of ``X`` and ``F`` and their residuals.
 - `bayes_fdi.diagnosis.interval_scaling`: recalibration of their predictive standard deviations.
+- `bayes_fdi.diagnosis.interval_calibration`: the cross-fitted factors per command-speed bin
+  that `NormalModels` applies to them.
 - `bayes_fdi.diagnosis.features`: residual features (a registry).
 - `bayes_fdi.diagnosis.tree`: the k-means designed binary tree of classifiers.
 - `bayes_fdi.diagnosis.baselines`: the SVM baseline through the same interfaces.
@@ -15,6 +17,9 @@
   (`bayes_fdi.diagnosis.seva_record`: the record and its conversions;
   `bayes_fdi.diagnosis.seva_rules`: thresholds, screening and status rules;
   `bayes_fdi.diagnosis.novelty`: the nearest-neighbour novelty reference).
+- `bayes_fdi.diagnosis.persistence`: model files of fitted diagnosers, without pickle
+  (`bayes_fdi.diagnosis.model_codec`: the object tree as JSON and arrays;
+  `bayes_fdi.diagnosis.persistable`: the classes a file may hold).
 """
 
 from bayes_fdi.diagnosis.baselines import (

@@ -38,6 +38,12 @@ import xarray as xr
 from sklearn.base import BaseEstimator, clone
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
+from bayes_fdi.diagnosis.interval_calibration import (
+    command_speed,
+    cross_fit_std_scales,
+    predict_with_std,
+    speed_bins,
+)
 from bayes_fdi.diagnosis.model_inputs import check_lags, input_names, model_inputs
 from bayes_fdi.diagnosis.width_search import (
     WIDTH_GRID,
@@ -54,21 +60,6 @@ def _default_regressor() -> Any:
     from bayes_fdi.rvm import RVR
 
     return RVR(kernel="rbf", width="auto")
-
-
-def _predict_with_std(est: Any, X: np.ndarray, chunk: int) -> tuple[np.ndarray, np.ndarray]:
-    means, stds = [], []
-    for start in range(0, X.shape[0], chunk):
-        out = est.predict(X[start : start + chunk], return_std=True)
-        if not (isinstance(out, tuple) and len(out) == 2):
-            raise ValueError(
-                f"{type(est).__name__}.predict(X, return_std=True) must return (mean, std)"
-            )
-        means.append(np.asarray(out[0], dtype=np.float64).ravel())
-        stds.append(np.asarray(out[1], dtype=np.float64).ravel())
-    if not means:
-        return np.empty(0), np.empty(0)
-    return np.concatenate(means), np.concatenate(stds)
 
 
 class NormalModels(BaseEstimator):
@@ -470,10 +461,7 @@ class NormalModels(BaseEstimator):
         self.std_scale_edges_ = np.empty(0)
         if self.interval_calibration is None:
             return
-        from bayes_fdi.diagnosis.interval_scaling import StdScaler
-
         k = int(self.calibration_folds)
-        n_runs, n_times = runs.sizes["run"], runs.sizes["time"]
         if int(finite.sum()) < 2 * k:
             warnings.warn(
                 f"only {int(finite.sum())} finite fault-free samples: too few for "
@@ -482,83 +470,33 @@ class NormalModels(BaseEstimator):
                 stacklevel=3,
             )
             return
-        rng = np.random.default_rng(
-            None if self.random_state is None else [int(self.random_state), 7919]
+        scales = cross_fit_std_scales(
+            runs,
+            U,
+            targets,
+            finite,
+            self.regressors_,
+            width_param=self.width_param,
+            n_folds=k,
+            n_bins=int(self.calibration_bins),
+            method=self.calibration_method,
+            max_samples=self.calibration_max_samples,
+            chunk_size=int(self.chunk_size),
+            random_state=self.random_state,
         )
-        # segments: whole runs, or contiguous time blocks when there are fewer runs than folds
-        blocks = 1 if n_runs >= k else min(n_times, -(-k // n_runs))
-        block_of_time = (np.arange(n_times) * blocks) // n_times
-        segment = (np.arange(n_runs)[:, None] * blocks + block_of_time[None, :]).ravel()
-        n_seg = n_runs * blocks
-        fold_of_segment = np.empty(n_seg, dtype=np.int64)
-        fold_of_segment[rng.permutation(n_seg)] = np.arange(n_seg) % k
-        fold = np.where(finite, fold_of_segment[segment], -1)
-        speed = self._cv_speed(runs)
-        t0 = time.perf_counter()
-        z = {name: np.full(U.shape[0], np.nan) for name in OUTPUT_CHANNELS}
-        for name, y in targets.items():
-            fitted = self.regressors_[name]
-            est0 = clone(fitted)  # the final fit's parameters, width search included
-            if est0.get_params().get(self.width_param, None) == "auto" and hasattr(
-                fitted, f"{self.width_param}_"
-            ):  # keep the width the final fit found instead of searching again per fold
-                est0.set_params(**{self.width_param: getattr(fitted, f"{self.width_param}_")})
-            for f in range(k):
-                held = np.flatnonzero(fold == f)
-                train = np.flatnonzero((fold >= 0) & (fold != f))
-                if held.size == 0 or train.size < 2:
-                    continue
-                if self.calibration_max_samples is not None and train.size > int(
-                    self.calibration_max_samples
-                ):
-                    train = np.sort(
-                        rng.choice(train, size=int(self.calibration_max_samples), replace=False)
-                    )
-                est = clone(est0).fit(U[train], y[train])
-                mean, std = _predict_with_std(est, U[held], int(self.chunk_size))
-                ok = np.isfinite(std) & (std > 0)
-                z[name][held[ok]] = (y[held[ok]] - mean[ok]) / std[ok]
-        self.fit_seconds_["calibration"] = time.perf_counter() - t0
-        used = np.all([np.isfinite(z[name]) for name in OUTPUT_CHANNELS], axis=0)
-        nb = int(self.calibration_bins)
-        fast = speed[used]
-        fast = fast[np.isfinite(fast)]
-        edges = np.quantile(fast, np.arange(1, nb) / nb) if (nb > 1 and fast.size) else []
-        self.std_scale_edges_ = np.asarray(edges, dtype=np.float64)
-        bins = self._speed_bins(speed)
-        for name in OUTPUT_CHANNELS:
-            zn = z[name][used]
-            scaler = StdScaler(method=self.calibration_method)
-            self.std_scale_all_[name] = scaler.fit(zn, np.zeros_like(zn), np.ones_like(zn)).scale_
-            scales = np.full(nb, self.std_scale_all_[name])
-            for b in range(nb):
-                zb = z[name][used & (bins == b)]
-                if zb.size >= 10 and np.any(zb != 0):
-                    scales[b] = scaler.fit(zb, np.zeros_like(zb), np.ones_like(zb)).scale_
-            self.std_scale_[name] = scales
-        self.calibration_fold_ = fold.reshape(n_runs, n_times)
+        self.fit_seconds_["calibration"] = scales.seconds
+        self.std_scale_edges_ = scales.edges
+        self.std_scale_all_ = scales.scale_all
+        self.std_scale_ = scales.scale
+        self.calibration_fold_ = scales.fold
         self.interval_calibration_ = self.interval_calibration
-
-    @staticmethod
-    def _cv_speed(runs: xr.Dataset) -> np.ndarray:
-        """``|dCV/dt|`` per sample (per second, central differences), flattened run-major."""
-        cv = np.asarray(runs["CV"].transpose("run", "time").values, dtype=np.float64)
-        if cv.shape[1] < 2:
-            return np.full(cv.size, np.nan)
-        t = np.asarray(runs["time"].values, dtype=np.float64)
-        return np.abs(np.gradient(cv, t, axis=1)).ravel()
-
-    def _speed_bins(self, speed: np.ndarray) -> np.ndarray:
-        """Bin index of each ``|dCV/dt|`` (-1 where it is not finite)."""
-        bins = np.searchsorted(self.std_scale_edges_, speed, side="right")
-        return np.where(np.isfinite(speed), bins, -1)
 
     def _std_factors(self, runs: xr.Dataset) -> dict[str, np.ndarray]:
         """Calibration factor of each sample of ``runs`` (flattened), per output name."""
         n = runs.sizes["run"] * runs.sizes["time"]
         if getattr(self, "interval_calibration_", None) is None:
             return {name: np.ones(n) for name in self.regressors_}
-        bins = self._speed_bins(self._cv_speed(runs))
+        bins = speed_bins(self.std_scale_edges_, command_speed(runs))
         factors = {}
         for name in self.regressors_:
             scales = self.std_scale_[name]
@@ -595,7 +533,7 @@ class NormalModels(BaseEstimator):
             mean = np.full(U.shape[0], np.nan)
             std = np.full(U.shape[0], np.nan)
             if ok.any():
-                mean[ok], std[ok] = _predict_with_std(est, U[ok], int(self.chunk_size))
+                mean[ok], std[ok] = predict_with_std(est, U[ok], int(self.chunk_size))
                 std *= factors[name]
             data[f"{name}_hat"] = (("run", "time"), mean.reshape(shape))
             data[f"{name}_hat_std"] = (("run", "time"), std.reshape(shape))
