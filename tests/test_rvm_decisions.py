@@ -17,8 +17,8 @@ from bayes_fdi.rvm.kernels import RBF
 from bayes_fdi.rvm.sbl_decisions import (
     best_action,
     exact_factors,
+    gaussian_screened_Q,
     lowest_index_in_band,
-    mean_error,
     optimistic_ratio,
     screened_factors,
     verified_argmax,
@@ -105,24 +105,29 @@ def test_screened_factors_bound_the_exact_ones(low):
     alpha = torch.tensor([2e-5, 3e-4, 1e-6, 5e-3, 1e-2], dtype=torch.float64)
     beta = 400.0
     M = act.numel()
-    fac = _factor(alpha, beta * (Phi.T @ Phi))
+    G = Phi.T @ Phi
+    fac = _factor(alpha, beta * G)
     mu = beta * fac.solve(Phi.T @ t)
     resid = t - Phi @ mu
     S_ex, Q_ex = exact_factors(fac, Phi, alpha, beta, mu, resid, B, Phi.T @ B)
     BtPhi = (B.to(low).T @ Phi.to(low)).to(torch.float64)  # products rounded to `low`
     u = torch.finfo(low).eps / 2
     eps = (N + 8) * u / (1 - (N + 8) * u)  # Design.screening_error's bound
+    u64 = torch.finfo(torch.float64).eps / 2
+    z_error = torch.full((M,), beta * eps, dtype=torch.float64)
+    H = torch.diag(alpha) + beta * G
     Z = beta * BtPhi
-    S, S_err, v_norm = screened_factors(
-        fac, Z, beta * torch.ones(N, dtype=torch.float64), z_error=beta * eps * M**0.5
+    screening = screened_factors(
+        fac, H, Z, beta * torch.ones(N, dtype=torch.float64), z_error=z_error
     )
-    Bt_t = B.T @ t
-    Q = beta * Bt_t - Z @ mu
-    Q_err = (
-        beta * eps * float(mu.abs().sum())
-        + mean_error(fac, mu, v_norm)
-        + (M + 2) * torch.finfo(torch.float64).eps * (beta * Bt_t.abs() + Z.abs() @ mu.abs())
+    b_t = beta * (B.T @ t)
+    gradient = H @ mu - b_t[act]
+    gradient_error = (M + 3) * u64 * (H.abs() @ mu.abs() + b_t[act].abs())
+    b_t_error = beta * (N + 8) * u64 * float(torch.linalg.vector_norm(t))
+    Q, Q_err = gaussian_screened_Q(
+        screening, Z, b_t, b_t_error, mu, gradient, gradient_error, z_error
     )
+    S, S_err = screening.S, screening.S_error
     assert bool(((S - S_ex).abs() <= S_err).all())
     assert bool(((Q - Q_ex).abs() <= Q_err).all())
     free = torch.ones(N, dtype=torch.bool)

@@ -226,13 +226,15 @@ def fast_bernoulli(
         # each product is within eps * ||v|| of the exact one (unit columns); the weighted
         # squared norms (B * B)^T w / ||b||^2 of positive terms within eps * max(w)
         v_norms = torch.linalg.vector_norm(V, dim=0)
-        S, S_err, _ = screened_factors(
+        screening = screened_factors(
             mode.fac,
+            torch.diag(alpha) + 0.5 * (mode.G + mode.G.T),
             BtWPhi,
             design.sq_rmatmul(mode.w, exact=False) / norms**2,
-            z_error=eps * float(torch.linalg.vector_norm(v_norms[:-1])),
+            z_error=eps * v_norms[:-1],
             diag_error=eps * float(mode.w.max()),
         )
+        S, S_err = screening.S, screening.S_error
         Q_err = eps * float(v_norms[-1]) + 4.0 * eps * Q.abs()  # + rounding of the division
         return mode, S, Q, optimistic_ratio(S, Q, S_err, Q_err)
 

@@ -16,8 +16,8 @@ from torch import Tensor
 from bayes_fdi.rvm.design import Design
 from bayes_fdi.rvm.sbl_decisions import (
     exact_factors,
+    gaussian_screened_Q,
     lowest_index_in_band,
-    mean_error,
     optimistic_ratio,
     screened_factors,
     verified_action,
@@ -175,6 +175,10 @@ def fast_gaussian(
         return fac, mu, resid, log_ml
 
     eps = design.screening_error()  # error bound of the cosines in B^T Phi
+    u64 = torch.finfo(dtype).eps / 2.0
+    z_err = torch.tensor([beta * eps], dtype=dtype, device=device)  # set with beta below
+    # b^T t of unit columns: a float64 product of N terms, within gamma_N ||t||
+    bt_rel = (N + 8) * u64 / (1.0 - (N + 8) * u64) * math.sqrt(t_sq)
     M = 1
     fac, mu, resid, log_ml = statistics(beta, alpha, Phi_buf[:, :M], BtPhi_buf[:, :M])
     trace = [log_ml]
@@ -185,18 +189,23 @@ def fast_gaussian(
         Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
         if it > 1:
             fac, mu, resid, _ = statistics(beta, alpha, Phi, BtPhi)
-        # screening factors from the fresh factor, with bounds of their error: the actions
-        # are decided on exact factors whatever the rounding of B^T Phi (float32 or not)
-        # (Q = beta b^T t - z^T mu with z = beta B^T Phi: the errors of z, of mu's solve, and
-        # of the M + 1 term sums)
+        # screening factors from the fresh factor, with rigorous bounds of their error: the
+        # actions are decided on exact factors whatever the rounding of B^T Phi (float32 or
+        # not), of the solves and of the sums
+        z_err = z_err.new_tensor([beta * eps])
+        b_t_err = beta * bt_rel
         Z = beta * BtPhi
-        S, S_err, v_norm = screened_factors(fac, Z, beta * unit, z_error=beta * eps * M**0.5)
-        Q = beta * Bt_t - Z @ mu
-        Q_err = (
-            beta * eps * float(mu.abs().sum())
-            + mean_error(fac, mu, v_norm)
-            + (M + 2) * torch.finfo(dtype).eps * (beta * Bt_t.abs() + Z.abs() @ mu.abs())
+        G = BtPhi[act_t]
+        H = torch.diag(alpha) + beta * (0.5 * (G + G.T))
+        screening = screened_factors(fac, H, Z, beta * unit, z_error=z_err.expand(M))
+        b_t = beta * Bt_t
+        Phi_t = b_t[act_t]
+        gradient = H @ mu - Phi_t
+        gradient_error = (M + 3) * u64 * (H.abs() @ mu.abs() + Phi_t.abs())
+        Q, Q_err = gaussian_screened_Q(
+            screening, Z, b_t, b_t_err, mu, gradient, gradient_error, z_err.expand(M)
         )
+        S, S_err = screening.S, screening.S_error
         exact = _ExactColumns(design, norms, fac, Phi, BtPhi[act_t], act_t, alpha, beta, mu, resid)
         best, _ = verified_action(
             S, Q, act_t, alpha, addable, exact, optimistic=optimistic_ratio(S, Q, S_err, Q_err)
