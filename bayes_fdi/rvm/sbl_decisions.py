@@ -339,7 +339,8 @@ class Screening(NamedTuple):
     S_error: Tensor  # (N_B,) bound of |S - exact S|
     C: Tensor  # (N_B, M) rows: solve coefficients c = H^-1 z (for the Gaussian model's Q)
     solve_error: Tensor  # (N_B,) bound of ||H^-1/2 (H c - z)||: the solve's error in H-norm
-    abs_C: Tensor  # (N_B, M) |c|
+    c_norm: Tensor  # (N_B,) ||c||
+    z_norm: Tensor  # (N_B,) ||z||
     trace: float  # upper bound of tr(H^-1) >= lambda_max(H^-1)
 
 
@@ -355,47 +356,45 @@ def screened_factors(
     """Screening ``S = diag - z^T H^-1 z`` for the rows ``z`` of ``Z`` (``(N_B, M)``) from a
     fresh Cholesky factor, in a form stationary in the solve, with a rigorous error bound.
 
-    With ``c`` the computed ``H^-1 z`` (two triangular solves with the factor), ``S`` is
-    evaluated as ``f(c) = diag - 2 z^T c + c^T H c`` with ``H`` itself (not the factor): ``f``
-    is minimal at the exact solve, ``f(c) - S = (c - c*)^T H (c - c*) =
-    r^T H^-1 r <= tr(H^-1) ||r||^2`` for the solve residual ``r = H c - z`` (computed), so the
-    factor's own backward error enters only to second order. The remaining terms of the bound:
+    With ``c`` the computed ``H^-1 z`` (a Cholesky solve with the factor), ``S`` is evaluated as
+    ``f(c) = diag - 2 z^T c + c^T H c`` with ``H`` itself (not the factor): ``f`` is minimal at
+    the exact solve, ``f(c) - S = (c - c*)^T H (c - c*) = r^T H^-1 r <= tr(H^-1) ||r||^2`` for
+    the solve residual ``r = H c - z`` (computed), so the factor's own backward error enters
+    only to second order. The remaining terms of the bound:
 
     * the inputs: each entry ``k`` of a row of ``Z`` within ``z_error[k]`` of the exact one
-      (``Design.screening_error``) moves ``S`` by at most ``2 |c|^T z_error +
+      (``Design.screening_error``) moves ``S`` by at most ``2 ||c|| ||z_error|| +
       ||z_error||^2 tr(H^-1)``, and ``diag`` by ``diag_error``;
     * rounding of the sums (Higham's ``gamma_n``, eq. 3.5, relative to the sums of absolute
-      values, with ``|| |H| |c| || <= ||H||_F ||c||``).
+      values, bounded by Cauchy-Schwarz and ``|| |H| |c| || <= ||H||_F ||c||``).
 
-    Cost ``O(M^2 N_B)`` (two triangular solves and one product with ``H``).
+    Cost ``O(M^2 N_B)`` (a Cholesky solve and one product with ``H``) and a few passes over
+    ``Z``.
     """
     M = Z.shape[1]
     dt = Z.dtype
     d = fac.d
-    # rows: v^T = (D z)^T L^-T, c^T = v^T L^-1 D (row layout: contiguous reductions)
-    Vt = torch.linalg.solve_triangular(fac.L.T, Z * d, upper=True, left=False)
-    C = torch.linalg.solve_triangular(fac.L, Vt, upper=False, left=False) * d
-    abs_C = C.abs()
-    R = C @ H - Z  # rows: (H c - z)^T
-    S = diag - (Z * C).sum(1) + (C * R).sum(1)  # = diag - 2 z^T c + c^T H c
+    # rows c^T = (D z)^T (L L^T)^-1 D: one Cholesky solve on the column-major view of Z
+    C = torch.cholesky_solve((Z * d).T, fac.L).T * d
+    W = torch.addmm(Z, C, H, beta=-2.0)  # rows: (H c - 2 z)^T
+    S = diag + (C * W).sum(1)  # = diag - 2 z^T c + c^T H c
     trace = float((d * d * torch.cholesky_inverse(fac.L).diagonal()).sum())
     trace = max(trace, 0.0) * (1.0 + _gamma(3 * M, dt))
-    abs_Z = Z.abs()
-    # || |H| |c| || <= ||H||_F ||c||: bounds of the sums of absolute values behind R and S
     H_F = float(torch.linalg.matrix_norm(H)) * (1.0 + _gamma(M * M, dt))
-    c_norm = C.square().sum(1).sqrt()
-    z_norm = Z.square().sum(1).sqrt()
-    r_norm = R.square().sum(1).sqrt() + _gamma(M + 2, dt) * (H_F * c_norm + z_norm)
+    c_norm = torch.linalg.vector_norm(C, dim=1)
+    z_norm = torch.linalg.vector_norm(Z, dim=1)
+    r_norm = torch.linalg.vector_norm(W.add_(Z), dim=1)  # W + Z = H c - z
+    r_norm += _gamma(M + 2, dt) * (H_F * c_norm + z_norm)
     solve_error = math.sqrt(trace) * r_norm
+    ze = float(torch.linalg.vector_norm(z_error))
     S_error = (
         solve_error.square()
-        + 2.0 * (abs_C @ z_error)
-        + float(z_error.square().sum()) * trace
+        + 2.0 * ze * c_norm
+        + ze * ze * trace
         + diag_error
-        + _gamma(2 * M + 4, dt)
-        * (diag.abs() + 2.0 * (abs_Z * abs_C).sum(1) + H_F * c_norm.square())
+        + _gamma(2 * M + 4, dt) * (diag.abs() + c_norm * (2.0 * z_norm + H_F * c_norm))
     )
-    return Screening(S, S_error, C, solve_error, abs_C, trace)
+    return Screening(S, S_error, C, solve_error, c_norm, z_norm, trace)
 
 
 def gaussian_screened_Q(
@@ -424,23 +423,19 @@ def gaussian_screened_Q(
         ``(N_B,)`` each.
     """
     M = Z.shape[1]
-    C = screening.C
-    cg = C @ gradient
-    zmu = Z @ mu
-    Q = b_t - zmu + cg
-    g_norm = float(torch.linalg.vector_norm(gradient)) + float(
-        torch.linalg.vector_norm(gradient_error)
-    )
-    # ||H^-1/2 g|| <= sqrt(tr H^-1) ||g||; the screening's solve_error is sqrt(tr) ||r||
+    Q = b_t - Z @ mu + screening.C @ gradient
+    g_norm = float(torch.linalg.vector_norm(gradient))
+    g_err = float(torch.linalg.vector_norm(gradient_error))
+    mu_norm = float(torch.linalg.vector_norm(mu))
     trace = screening.trace
-    abs_mu = mu.abs()
+    c_norm = screening.c_norm
     Q_error = (
-        screening.solve_error * (g_norm * math.sqrt(trace))
+        screening.solve_error * ((g_norm + g_err) * math.sqrt(trace))
         + b_t_error
-        + float(z_error @ abs_mu)
-        + float(torch.linalg.vector_norm(z_error)) * trace * g_norm
-        + screening.abs_C @ gradient_error
-        + _gamma(M + 3, Z.dtype) * (b_t.abs() + Z.abs() @ abs_mu + screening.abs_C @ gradient.abs())
+        + float(z_error @ mu.abs())
+        + float(torch.linalg.vector_norm(z_error)) * trace * (g_norm + g_err)
+        + c_norm * g_err
+        + _gamma(M + 3, Z.dtype) * (b_t.abs() + screening.z_norm * mu_norm + c_norm * g_norm)
     )
     return Q, Q_error
 
