@@ -61,10 +61,9 @@ class RVR(RegressorMixin, RVMBase):
     device : str, torch.device or None, default None
         Compute device; None uses the device of torch inputs (CPU for numpy inputs).
     max_kernel_bytes : int, default 2e9
-        Materialise the training kernel matrix only up to this size (for float64 models
-        with ``N >= 2000`` as a float32 copy that only screens candidates; the model itself
-        stays exact); larger problems compute kernel rows in blocks (memory ``O(N M)``,
-        slower additions).
+        Materialise the training kernel matrix only up to this size (2 GB: ``N`` up to about
+        15 800 in float64); larger problems compute kernel rows in blocks (memory
+        ``O(N M)``, slower additions). Either way the fit is the same.
     random_state : int or None, default None
         Unused (the algorithm is deterministic); accepted for API compatibility.
 
