@@ -52,7 +52,9 @@ def deferred_signals(signals: Sequence[int] = DEFERRED_SIGNALS) -> Iterator[list
 
     Yields the list of signals received so far (the caller may look at it). On exit the previous
     handlers are restored and every recorded signal is raised again, once, in arrival order. Off
-    the main thread (where Python cannot install handlers) the block runs unchanged.
+    the main thread (where Python cannot install handlers) the block runs unchanged. A signal the
+    process ignores (``SIG_IGN``, e.g. SIGINT of a background job or under ``nohup``) stays
+    ignored: recording it would make the caller abandon work that nothing will stop.
     """
     if threading.current_thread() is not threading.main_thread():
         yield []
@@ -65,7 +67,10 @@ def deferred_signals(signals: Sequence[int] = DEFERRED_SIGNALS) -> Iterator[list
 
     previous = {}
     for sig in signals:
-        previous[sig] = signal.getsignal(sig)
+        handler = signal.getsignal(sig)
+        if handler is signal.SIG_IGN:
+            continue
+        previous[sig] = handler
         signal.signal(sig, record)
     try:
         yield received

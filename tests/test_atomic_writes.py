@@ -43,17 +43,33 @@ def _temporaries(folder: Path, name: str) -> list[Path]:
     return sorted(folder.glob(f".{name}.*.tmp"))
 
 
-def _interrupt_while_writing(tmp_path: Path, sig: int) -> tuple[subprocess.Popen, float, str]:
+def _default_signals() -> None:
+    """In the child: SIGINT and SIGTERM at their defaults, whatever the test runner inherited
+    (a background job or ``nohup`` starts with SIGINT ignored, and the child would inherit it)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _interrupt_while_writing(
+    tmp_path: Path, sig: int, *, ignore: bool = False
+) -> tuple[subprocess.Popen, float, str]:
     script = tmp_path / "writer.py"
     script.write_text(WRITER)
     target = tmp_path / "out.nc"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+
+    def preexec() -> None:
+        _default_signals()
+        if ignore:
+            signal.signal(sig, signal.SIG_IGN)
+
     proc = subprocess.Popen(
         [sys.executable, str(script), str(target)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=env,
+        preexec_fn=preexec,
     )
     assert proc.stdout is not None
     assert proc.stdout.readline().strip() == "writing"
@@ -91,6 +107,16 @@ def test_signal_during_netcdf_write_leaves_nothing_and_exits(tmp_path, sig):
     assert seconds < 60
 
 
+def test_ignored_signal_during_write_does_not_drop_the_file(tmp_path):
+    """A process that ignores SIGINT (a background job, ``nohup``) finishes the write: the
+    signal is not recorded, so the data are not silently abandoned."""
+    proc, _, output = _interrupt_while_writing(tmp_path, signal.SIGINT, ignore=True)
+    assert proc.returncode == 0
+    assert "written" in output
+    assert load_dataset(tmp_path / "out.nc").sizes["run"] == 40
+    assert _temporaries(tmp_path, "out.nc") == []
+
+
 def test_interrupted_cli_simulate_exits_130_without_output(tmp_path):
     """``bayes-fdi simulate`` interrupted during its netCDF write: exit 130, one line, no file."""
     campaign = tmp_path / "c.toml"
@@ -114,6 +140,7 @@ def test_interrupted_cli_simulate_exits_130_without_output(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_default_signals,
     )  # fmt: skip
     deadline = time.monotonic() + 300
     while not _temporaries(tmp_path, "sim.nc"):

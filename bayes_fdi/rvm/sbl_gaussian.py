@@ -100,6 +100,11 @@ def fast_gaussian(
 ) -> SBLResult:
     """Tipping & Faul fast marginal-likelihood maximisation, Gaussian noise.
 
+    Each iteration the posterior is refactorised (Cholesky of the scaled precision) and the
+    candidates are screened from that factor with error bounds; the action is decided on
+    exact factors (``sbl_decisions.verified_action``), so the path of actions does not depend
+    on the BLAS code path, the thread count or a float32 screening copy of the design.
+
     Parameters
     ----------
     design : Design
@@ -114,11 +119,6 @@ def fast_gaussian(
         (converged) after 200 iterations of re-estimations only (no addition or deletion)
         that raised the log evidence by less than 1e-3 in all: a weakly determined ``alpha``
         can otherwise be re-estimated for thousands of iterations at no gain.
-
-    Each iteration the posterior is refactorised (Cholesky of the scaled precision) and the
-    candidates are screened from that factor with error bounds; the action is decided on
-    exact factors (``sbl_decisions.verified_action``), so the path of actions does not depend
-    on the BLAS code path, the thread count or a float32 screening copy of the design.
 
     Returns
     -------
