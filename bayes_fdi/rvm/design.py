@@ -20,8 +20,8 @@ exact float64, and the solvers decide every action on exact factors within the r
 bound of those products (:meth:`Design.screening_error`), so the fit is the same as with the
 float64 matrix.  It is not the default: on smooth kernels float32 products cannot resolve most
 candidates' factors (``S`` near 1e-6 of the noise precision against a float32 error bound of
-~1e-4), and the solver then has to recompute nearly every candidate exactly (a 2400-sample
-normal model: 1.7 s against 0.18 s with the float64 matrix).
+~1e-4), and the solver then has to recompute nearly every candidate exactly (two 2400-sample
+normal models: 1.6 s and 84 s against 0.20 s and 2.1 s with the float64 matrix).
 """
 
 from __future__ import annotations
