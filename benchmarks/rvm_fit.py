@@ -2,8 +2,12 @@
 
 One command (from the repository root, in the project's environment)::
 
-    OMP_NUM_THREADS=1 PYTHONPATH=$PWD python benchmarks/rvm_fit.py            # N = 500 ... 20000
-    OMP_NUM_THREADS=1 PYTHONPATH=$PWD python benchmarks/rvm_fit.py --quick    # N = 500, 2000
+    OMP_NUM_THREADS=1 PYTHONPATH=$PWD python benchmarks/rvm_fit.py            # both problems
+    OMP_NUM_THREADS=1 PYTHONPATH=$PWD python benchmarks/rvm_fit.py --quick    # smallest sizes
+
+Two problems (:data:`PROBLEMS`): ``smooth``, the project's smooth 3-input function on
+``[-1, 1]^3`` (N = 500 ... 20000, RBF sigma 0.5), and ``sinc``, ``sum_j sin(x_j) / x_j`` on
+``[-10, 10]^3`` (N = 2000 ... 20000, sigma sqrt(5)), which needs hundreds of relevance vectors.
 
 Every fit runs in a fresh, single-threaded subprocess (``benchmarks/rvm_worker.py``) on the same
 seeded data (written once to ``benchmarks/out/rvm_fit_data.npz``), with the same RBF width for
@@ -39,8 +43,8 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -50,10 +54,12 @@ __all__ = [
     "DEFAULT_SIGMA",
     "METHODS",
     "PEER_REQUIREMENTS",
+    "PROBLEMS",
     "QUICK_SIZES",
     "SIZES",
     "TARGETS",
     "Method",
+    "Problem",
     "Targets",
     "add_ratios",
     "check_targets",
@@ -69,6 +75,7 @@ __all__ = [
     "replace_marked_block",
     "run_worker",
     "sigma_to_gamma",
+    "sinc_sum",
     "skip_reason",
     "snapshot_source",
     "summarise_repeats",
@@ -121,10 +128,23 @@ def target_function(X: np.ndarray) -> np.ndarray:
     return np.sin(np.pi * X[:, 0]) * np.cos(0.5 * np.pi * X[:, 1]) + 0.5 * X[:, 2] ** 2
 
 
+def sinc_sum(X: np.ndarray) -> np.ndarray:
+    """The sinc-sum test function ``sum_j sin(x_j) / x_j`` (1 at ``x_j = 0``) of 3 inputs."""
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != 3:
+        raise ValueError(f"X must have shape (n, 3), got {X.shape}")
+    return np.sinc(X / np.pi).sum(1)
+
+
 def make_data(
-    n_train: int, n_test: int = N_TEST, *, noise_std: float = NOISE_STD, seed: int = SEED
+    n_train: int,
+    n_test: int = N_TEST,
+    *,
+    noise_std: float = NOISE_STD,
+    seed: int = SEED,
+    problem: str = "smooth",
 ) -> dict[str, np.ndarray]:
-    """Seeded benchmark data: inputs uniform on ``[-1, 1]^3``, Gaussian noise of ``noise_std``.
+    """Seeded benchmark data: inputs uniform on the problem's cube, Gaussian noise of ``noise_std``.
 
     The benchmark generates the set once for its largest N and fits size N on the first N rows,
     so the sizes are nested. The test set does not depend on ``n_train`` (separate random
@@ -140,11 +160,14 @@ def make_data(
         raise ValueError(f"n_train and n_test must be positive, got {n_train}, {n_test}")
     if not (np.isfinite(noise_std) and noise_std >= 0):
         raise ValueError(f"noise_std must be finite and >= 0, got {noise_std}")
+    if problem not in PROBLEMS:
+        raise ValueError(f"unknown problem {problem!r}; expected one of {sorted(PROBLEMS)}")
+    spec = PROBLEMS[problem]
     train_rng, test_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
     out: dict[str, np.ndarray] = {}
     for name, rng, n in (("train", train_rng, n_train), ("test", test_rng, n_test)):
-        X = rng.uniform(-1.0, 1.0, size=(n, 3))
-        f = target_function(X)
+        X = rng.uniform(spec.low, spec.high, size=(n, 3))
+        f = spec.function(X)
         out[f"X_{name}"] = X
         out[f"f_{name}"] = f
         out[f"y_{name}"] = f + noise_std * rng.standard_normal(n)
@@ -204,14 +227,75 @@ OURS = "bayes_fdi"
 
 @dataclass(frozen=True)
 class Targets:
-    """Acceptance targets for bayes_fdi (issue text): CPU-seconds at N, peak MB at N, RMSE ratio."""
+    """Acceptance targets for bayes_fdi (issue text).
+
+    ``fit_seconds``: CPU seconds at N; ``peak_mb``: peak RSS at N; ``rmse_ratio``: test RMSE /
+    the best peer's at every N; ``speedup``: at N, the fastest peer's CPU seconds / ours;
+    ``evidence``: whether the log evidence must be at least every peer's that reports one.
+    """
 
     fit_seconds: Mapping[int, float]
     peak_mb: Mapping[int, float]
     rmse_ratio: float
+    speedup: Mapping[int, float] = field(default_factory=dict)
+    evidence: bool = False
 
 
-TARGETS = Targets(fit_seconds={5000: 3.0, 7000: 5.0}, peak_mb={20000: 4096.0}, rmse_ratio=1.02)
+@dataclass(frozen=True)
+class Problem:
+    """A benchmark problem: inputs uniform on ``[low, high]^3``, targets ``function(X) + noise``."""
+
+    name: str
+    function: Callable[[np.ndarray], np.ndarray]
+    low: float
+    high: float
+    sigma: float
+    sizes: tuple[int, ...]
+    quick_sizes: tuple[int, ...]
+    targets: Targets
+    description: str
+
+
+TARGETS = Targets(
+    fit_seconds={5000: 0.5},
+    peak_mb={20000: 4096.0},
+    rmse_ratio=1.02,
+    evidence=True,
+)
+SINC_TARGETS = Targets(
+    fit_seconds={5000: 2.5, 20000: 30.0},
+    peak_mb={20000: 2048.0},
+    rmse_ratio=1.02,
+    speedup={5000: 15.0},
+    evidence=True,
+)
+PROBLEMS: dict[str, Problem] = {
+    p.name: p
+    for p in (
+        Problem(
+            "smooth",
+            target_function,
+            -1.0,
+            1.0,
+            DEFAULT_SIGMA,
+            SIZES,
+            QUICK_SIZES,
+            TARGETS,
+            "y = sin(pi x1) cos(pi x2 / 2) + x3^2 / 2 + e, x ~ U[-1, 1]^3",
+        ),
+        Problem(
+            "sinc",
+            sinc_sum,
+            -10.0,
+            10.0,
+            math.sqrt(5.0),
+            (2000, 5000, 7000, 20000),
+            (2000,),
+            SINC_TARGETS,
+            "y = sum_j sin(x_j) / x_j + e, x ~ U[-10, 10]^3",
+        ),
+    )
+}
 
 
 # --------------------------------------------------------------------------------------------
@@ -411,25 +495,41 @@ def skip_reason(
 # --------------------------------------------------------------------------------------------
 # ratios, targets, report
 # --------------------------------------------------------------------------------------------
+def _best_evidence(row: Mapping[str, Any]) -> float | None:
+    """A peer's log evidence for the comparison: the larger of the exact value of its returned
+    hyperparameters and the value it reports itself (whichever it provides)."""
+    values = [row.get(k) for k in ("log_evidence", "log_evidence_reported")]
+    values = [v for v in values if v is not None and math.isfinite(v)]
+    return max(values) if values else None
+
+
 def add_ratios(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Return copies of ``rows`` with ratios to the best peer at the same N.
+    """Return copies of ``rows`` with ratios to the best peer at the same N (and problem).
 
     ``time_ratio`` = fit CPU seconds / those of the fastest successful peer; ``rmse_ratio`` =
     test RMSE / the lowest test RMSE among successful peers; ``rmse_f_ratio`` likewise for the
-    RMSE against the noise-free function. ``best_peer_time`` and ``best_peer_rmse`` name the
-    peers. Ratios are ``None`` where the row or every peer at that N failed.
+    RMSE against the noise-free function; ``evidence_gap`` = log evidence - the largest peer
+    log evidence (exact or reported, see :func:`_best_evidence`). ``best_peer_time`` and
+    ``best_peer_rmse`` name the peers. Ratios are ``None`` where the row or every peer at that
+    N failed.
     """
     out = [dict(r) for r in rows]
     for r in out:
         peers = [
             p
             for p in out
-            if p["n"] == r["n"] and p.get("status") == "ok" and METHODS[p["method"]].env == "peers"
+            if p["n"] == r["n"]
+            and p.get("problem") == r.get("problem")
+            and p.get("status") == "ok"
+            and METHODS[p["method"]].env == "peers"
         ]
-        r["time_ratio"] = r["rmse_ratio"] = r["rmse_f_ratio"] = None
+        r["time_ratio"] = r["rmse_ratio"] = r["rmse_f_ratio"] = r["evidence_gap"] = None
         r["best_peer_time"] = r["best_peer_rmse"] = None
         if not peers or r.get("status") != "ok":
             continue
+        evidences = [_best_evidence(p) for p in peers if _best_evidence(p) is not None]
+        if evidences and r.get("log_evidence") is not None:
+            r["evidence_gap"] = r["log_evidence"] - max(evidences)
         fastest = min(peers, key=lambda p: p["fit_cpu_s"])
         accurate = min(peers, key=lambda p: p["rmse"])
         accurate_f = min(peers, key=lambda p: p["rmse_f"])
@@ -468,6 +568,20 @@ def check_targets(
             checks.append(
                 {"n": n, "what": "peak MB", "limit": lim, "value": val, "verdict": verdict}
             )
+        if n in targets.speedup:
+            lim = targets.speedup[n]
+            tr = r.get("time_ratio")
+            val = 1.0 / tr if ok and tr else None
+            verdict = "FAIL" if not ok else ("n/a" if val is None else _verdict(val >= lim))
+            checks.append(
+                {
+                    "n": n,
+                    "what": "speed-up vs fastest peer",
+                    "limit": lim,
+                    "value": val,
+                    "verdict": verdict,
+                }
+            )
         ratio = r.get("rmse_ratio")
         if not ok:
             verdict = "FAIL"
@@ -484,64 +598,102 @@ def check_targets(
                 "verdict": verdict,
             }
         )
+        if targets.evidence:
+            gap = r.get("evidence_gap")
+            verdict = "FAIL" if not ok else ("n/a" if gap is None else _verdict(gap >= 0.0))
+            checks.append(
+                {
+                    "n": n,
+                    "what": "log evidence - best peer's",
+                    "limit": 0.0,
+                    "value": gap,
+                    "verdict": verdict,
+                }
+            )
     return checks
+
+
+def _verdict(ok: bool) -> str:
+    return "PASS" if ok else "FAIL"
 
 
 def _fmt(x: Any, spec: str) -> str:
     return "–" if x is None else format(x, spec)
 
 
+def _fmt_evidence(r: Mapping[str, Any]) -> str:
+    exact, reported = r.get("log_evidence"), r.get("log_evidence_reported")
+    if exact is None and reported is None:
+        return "–"
+    if exact is None:
+        return f"({reported:.1f} reported)"
+    if reported is None or abs(reported - exact) <= 0.05 + 1e-9 * abs(exact):
+        return f"{exact:.1f}"
+    return f"{exact:.1f} ({reported:.1f} reported)"
+
+
 def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """Markdown table, one line per (N, method), rows ordered by N then method order.
 
     Columns: N, method, fit CPU s, fit wall s, peak MB, n RV, test RMSE, RMSE vs f (noise-free),
-    time ratio and RMSE ratio to the best peer. Failed or skipped fits show their status.
+    log evidence (exact, of the returned hyperparameters; with the method's own value where it
+    differs), time ratio and RMSE ratio to the best peer. Failed or skipped fits show their
+    status.
     """
     order = {name: i for i, name in enumerate(METHODS)}
     head = (
         "| N | method | fit s (CPU) | fit s (wall) | peak MB | n RV | test RMSE | RMSE vs f "
-        "| time / fastest peer | RMSE / best peer |"
+        "| log evidence | time / fastest peer | RMSE / best peer |"
     )
-    lines = [head, "|---:|:---|" + "---:|" * 8]
+    lines = [head, "|---:|:---|" + "---:|" * 9]
     for r in sorted(rows, key=lambda r: (r["n"], order.get(r["method"], 99))):
         name = r["method"]
         if r.get("status") != "ok":
             status = r.get("status", "?")
             detail = f" ({r['detail']})" if r.get("detail") else ""
-            lines.append(f"| {r['n']} | {name} | {status}{detail} |  |  |  |  |  |  |  |")
+            lines.append(f"| {r['n']} | {name} | {status}{detail} |  |  |  |  |  |  |  |  |")
             continue
         lines.append(
             f"| {r['n']} | {name} | {r['fit_cpu_s']:.2f} | {r['fit_s']:.2f} "
             f"| {r['peak_rss_mb']:.0f} | {r['n_rv']} | {r['rmse']:.4f} | {r['rmse_f']:.4f} "
+            f"| {_fmt_evidence(r)} "
             f"| {_fmt(r.get('time_ratio'), '.3f')} | {_fmt(r.get('rmse_ratio'), '.3f')} |"
         )
     return "\n".join(lines)
 
 
 def format_report(rows: Sequence[Mapping[str, Any]], meta: Mapping[str, Any]) -> str:
-    """Full Markdown report: setup, results table, target checks."""
+    """Full Markdown report: setup, then per problem a results table and the target checks."""
     rows = add_ratios(rows)
-    checks = check_targets(rows)
+    problems = list(dict.fromkeys(r.get("problem", "smooth") for r in rows)) or ["smooth"]
     parts = [
         "### RVM regression fit benchmark",
         "",
         f"{meta.get('date', '')} · {meta.get('cpu', '')} · load average at start "
         f"{meta.get('load_start', '–')}, at end {meta.get('load_end', '–')} · "
-        f"single-threaded fresh process per fit · sigma = {meta.get('sigma')} "
-        f"(sklearn gamma = {meta.get('gamma'):.4g}) · {meta.get('n_test')} test points · "
+        f"single-threaded fresh process per fit · {meta.get('n_test')} test points · "
         f"noise std {meta.get('noise_std')} · seed {meta.get('seed')} · "
         f"bayes_fdi source {meta.get('bayes_fdi_source', '?')}",
-        "",
-        format_table(rows),
-        "",
-        "| N | target | limit | bayes_fdi | verdict |",
-        "|---:|:---|---:|---:|:---|",
     ]
-    for c in checks:
-        parts.append(
-            f"| {c['n']} | {c['what']} | {c['limit']:g} | {_fmt(c['value'], '.3f')} "
-            f"| {c['verdict']} |"
-        )
+    for name in problems:
+        prob = PROBLEMS[name]
+        sub = [r for r in rows if r.get("problem", "smooth") == name]
+        sigma = meta.get("sigmas", {}).get(name, meta.get("sigma", prob.sigma))
+        parts += [
+            "",
+            f"**{name}**: {prob.description}; RBF sigma = {sigma:.6g} "
+            f"(sklearn gamma = {sigma_to_gamma(sigma):.4g})",
+            "",
+            format_table(sub),
+            "",
+            "| N | target | limit | bayes_fdi | verdict |",
+            "|---:|:---|---:|---:|:---|",
+        ]
+        for c in check_targets(sub, prob.targets):
+            parts.append(
+                f"| {c['n']} | {c['what']} | {c['limit']:g} | {_fmt(c['value'], '.3f')} "
+                f"| {c['verdict']} |"
+            )
     versions = sorted({r["version"] for r in rows if r.get("status") == "ok" and "version" in r})
     if versions:
         parts += ["", "Versions: " + "; ".join(versions) + "."]
@@ -643,10 +795,15 @@ def _parse_sizes(text: str) -> tuple[int, ...]:
 def main(argv: Sequence[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="N = 500, 2000 only (smoke run)")
+    ap.add_argument("--quick", action="store_true", help="smallest sizes only (smoke run)")
+    ap.add_argument(
+        "--problems", default=",".join(PROBLEMS), help=f"subset of {','.join(PROBLEMS)}"
+    )
     ap.add_argument("--sizes", type=_parse_sizes, help="comma-separated N, e.g. 500,2000,5000")
     ap.add_argument("--methods", default=",".join(METHODS), help=f"subset of {','.join(METHODS)}")
-    ap.add_argument("--sigma", type=float, default=DEFAULT_SIGMA, help="RBF width (all methods)")
+    ap.add_argument(
+        "--sigma", type=float, help="RBF width (all methods; default: the problem's own)"
+    )
     ap.add_argument("--timeout", type=float, default=300.0, help="per-fit limit, s")
     ap.add_argument("--mem-limit-gb", type=float, default=12.0, help="per-fit RSS guard, GB")
     ap.add_argument("--repeats", type=int, default=3, help="max fits per (method, N)")
@@ -688,36 +845,33 @@ def main(argv: Sequence[str] | None = None) -> int:
                 path.write_text(replace_marked_block(path.read_text(), report))
         return 0
 
-    sizes = args.sizes or (QUICK_SIZES if args.quick else SIZES)
+    problems = [p for p in args.problems.split(",") if p]
+    if unknown := [p for p in problems if p not in PROBLEMS]:
+        ap.error(f"unknown problems {unknown}")
     methods = [METHODS[m] for m in args.methods.split(",") if m]
     if unknown := [m for m in args.methods.split(",") if m and m not in METHODS]:
         ap.error(f"unknown methods {unknown}")
-    sigma_to_gamma(args.sigma)  # validates
+    if args.sigma is not None:
+        sigma_to_gamma(args.sigma)  # validates
     mem_limit_mb = args.mem_limit_gb * 1024.0
     args.out.mkdir(parents=True, exist_ok=True)
 
     if args.ours_commit:
         args.ours_root = snapshot_source(args.ours_commit, args.out)
-    data_path = args.out / "rvm_fit_data.npz"
-    # always the set for the largest default size, so that a --sizes/--quick run fits exactly the
-    # rows (and scores on the test set) of the full run
-    data = make_data(max(*sizes, *SIZES), args.n_test, seed=args.seed)
-    np.savez(data_path, **data)
-
     pythons = {"ours": Path(sys.executable)}
     if any(m.env == "peers" for m in methods):
         pythons["peers"] = args.peers_python or ensure_peer_env()
 
+    sigmas = {p: args.sigma if args.sigma is not None else PROBLEMS[p].sigma for p in problems}
     meta = {
         "date": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "cpu": f"{_cpu_name()}, {os.cpu_count()} cores",
         "load_start": f"{os.getloadavg()[0]:.1f}",
-        "sigma": args.sigma,
-        "gamma": sigma_to_gamma(args.sigma),
+        "sigmas": sigmas,
         "n_test": args.n_test,
         "noise_std": NOISE_STD,
         "seed": args.seed,
-        "sizes": list(sizes),
+        "problems": problems,
         "timeout_s": args.timeout,
         "mem_limit_mb": mem_limit_mb,
         "python": platform.python_version(),
@@ -726,50 +880,72 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     rows: list[dict[str, Any]] = []
     t_start = time.monotonic()
-    for n in sizes:
-        for method in methods:
-            reason = skip_reason(method, n, rows, timeout_s=args.timeout, mem_limit_mb=mem_limit_mb)
-            if reason is not None:
-                rows.append({"method": method.name, "n": n, "status": "skipped", "detail": reason})
-                print(f"[rvm_fit] N={n:>6} {method.name:<12} skipped: {reason}", file=sys.stderr)
-                continue
-            results: list[dict[str, Any]] = []
-            for _ in range(max(args.repeats, 1)):
-                res = run_worker(
-                    pythons[method.env],
-                    method.name,
-                    data_path,
-                    n,
-                    args.sigma,
-                    timeout_s=args.timeout,
-                    mem_limit_mb=mem_limit_mb,
-                    ours_root=args.ours_root.resolve(),
-                    tmp_dir=args.out,
+    for name in problems:
+        prob = PROBLEMS[name]
+        sizes = args.sizes or (prob.quick_sizes if args.quick else prob.sizes)
+        data_path = args.out / f"rvm_fit_data_{name}.npz"
+        # always the set for the problem's largest default size, so that a --sizes/--quick run
+        # fits exactly the rows (and scores on the test set) of the full run
+        data = make_data(max(*sizes, *prob.sizes), args.n_test, seed=args.seed, problem=name)
+        np.savez(data_path, **data)
+        done: list[dict[str, Any]] = []
+        for n in sizes:
+            for method in methods:
+                reason = skip_reason(
+                    method, n, done, timeout_s=args.timeout, mem_limit_mb=mem_limit_mb
                 )
-                if res.get("status") != "ok":
-                    results = [res]
-                    break
-                results.append(res)
-                if res["fit_cpu_s"] >= args.repeat_below:
-                    break
-            row = summarise_repeats(results) if results[0].get("status") == "ok" else results[0]
-            rows.append(row)
-            if row.get("status") == "ok":
-                msg = (
-                    f"fit {row['fit_cpu_s']:.2f} s CPU ({row['fit_s']:.2f} s wall, "
-                    f"x{row['repeats']}), {row['peak_rss_mb']:.0f} MB, {row['n_rv']} RV, "
-                    f"RMSE {row['rmse']:.4f}"
+                if reason is not None:
+                    row = {"method": method.name, "n": n, "status": "skipped", "detail": reason}
+                    done.append({**row, "problem": name})
+                    print(
+                        f"[rvm_fit] {name} N={n:>6} {method.name:<12} skipped: {reason}",
+                        file=sys.stderr,
+                    )
+                    continue
+                results: list[dict[str, Any]] = []
+                for _ in range(max(args.repeats, 1)):
+                    res = run_worker(
+                        pythons[method.env],
+                        method.name,
+                        data_path,
+                        n,
+                        sigmas[name],
+                        timeout_s=args.timeout,
+                        mem_limit_mb=mem_limit_mb,
+                        ours_root=args.ours_root.resolve(),
+                        tmp_dir=args.out,
+                    )
+                    if res.get("status") != "ok":
+                        results = [res]
+                        break
+                    results.append(res)
+                    if res["fit_cpu_s"] >= args.repeat_below:
+                        break
+                ok = results[0].get("status") == "ok"
+                row = {**(summarise_repeats(results) if ok else results[0]), "problem": name}
+                done.append(row)
+                if row.get("status") == "ok":
+                    ev = row.get("log_evidence")
+                    msg = (
+                        f"fit {row['fit_cpu_s']:.2f} s CPU ({row['fit_s']:.2f} s wall, "
+                        f"x{row['repeats']}), {row['peak_rss_mb']:.0f} MB, {row['n_rv']} RV, "
+                        f"RMSE {row['rmse']:.4f}, log evidence {_fmt(ev, '.2f')}"
+                    )
+                else:
+                    msg = f"{row['status']}: {row.get('detail', '')}"
+                print(
+                    f"[rvm_fit] {name} N={n:>6} {method.name:<12} {msg}",
+                    file=sys.stderr,
+                    flush=True,
                 )
-            else:
-                msg = f"{row['status']}: {row.get('detail', '')}"
-            print(f"[rvm_fit] N={n:>6} {method.name:<12} {msg}", file=sys.stderr, flush=True)
+        rows += done
     meta["load_end"] = f"{os.getloadavg()[0]:.1f}"
     meta["total_s"] = round(time.monotonic() - t_start, 1)
 
     report = format_report(rows, meta)
     print(report)
     (args.out / "rvm_fit.md").write_text(report)
-    payload = {"meta": meta, "rows": add_ratios(rows), "checks": check_targets(add_ratios(rows))}
+    payload = {"meta": meta, "rows": add_ratios(rows)}
     (args.out / "rvm_fit.json").write_text(json.dumps(payload, indent=1))
     if args.update_docs:
         for path in DOC_FILES:

@@ -175,7 +175,7 @@ def test_format_table_rows_columns_and_statuses():
     lines = bench.format_table(rows).splitlines()
     n_cols = lines[0].count("|")
     assert all(line.count("|") == n_cols for line in lines)
-    assert n_cols - 1 == 10
+    assert n_cols - 1 == 11
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines[2:]]
     # ordered by N, then method order (bayes_fdi, fastrvm, sklearn-rvm, ...)
     assert [(c[0], c[1]) for c in cells] == [
@@ -186,8 +186,8 @@ def test_format_table_rows_columns_and_statuses():
     ]
     ours = cells[1]
     assert ours[2] == "0.25" and ours[6] == "0.1071"
-    assert ours[8] == "0.500" and ours[9] == f"{0.1071 / 0.105:.3f}"
-    assert cells[0][8] == "–"  # no peer at N=500
+    assert ours[9] == "0.500" and ours[10] == f"{0.1071 / 0.105:.3f}"
+    assert cells[0][9] == "–"  # no peer at N=500
     assert cells[3][2] == "skipped (timeout at N=500)"
     report = bench.format_report(rows, {"sigma": 0.5, "gamma": 2.0, "n_test": 10})
     assert "| 2000 | test RMSE / best peer | 1.02 | 1.020 | PASS |" in report
@@ -271,5 +271,6 @@ def test_render_saved_reproduces_the_report(tmp_path):
     path = tmp_path / "r.json"
     path.write_text(bench.json.dumps({"meta": meta, "rows": bench.add_ratios(rows)}))
     assert bench.render_saved(path) == bench.format_report(rows, meta)
-    assert "| 5000 | fit CPU s | 3 | 2.500 | PASS |" in bench.render_saved(path)
+    # the smooth problem's target at N = 5000 is 0.5 CPU s (bench.TARGETS)
+    assert "| 5000 | fit CPU s | 0.5 | 2.500 | FAIL |" in bench.render_saved(path)
     assert "Command: `python x.py` (total 9 s wall)." in bench.render_saved(path)
