@@ -184,12 +184,16 @@ def test_duplicated_columns_give_the_same_fit_in_any_order():
     assert got_ev == pytest.approx(ref_ev, rel=1e-9)
 
 
+def _fit_and_perturbed_fit(solver, K, t, seed):
+    """``solver`` on the design ``K`` and on ``K`` perturbed by 1e-13 (relative, seeded)."""
+    rng = np.random.default_rng(seed)
+    Kp = K * (1 + 1e-13 * torch.tensor(rng.standard_normal(K.shape)))
+    return solver(Design(matrix=K, bias=True), t), solver(Design(matrix=Kp, bias=True), t)
+
+
 def test_fit_is_unchanged_by_a_perturbation_of_rounding_size():
     K, t = _smooth_problem(n=150, seed=3, width=0.4)
-    a = fast_gaussian(Design(matrix=K, bias=True), t)
-    rng = np.random.default_rng(4)
-    Kp = K * (1 + 1e-13 * torch.tensor(rng.standard_normal(K.shape)))
-    b = fast_gaussian(Design(matrix=Kp, bias=True), t)
+    a, b = _fit_and_perturbed_fit(fast_gaussian, K, t, 4)
     assert a.active.tolist() == b.active.tolist()
     # a 1e-13 relative change of the data moves a log evidence of ~1e2 by ~1e-11 at most
     # through a well-conditioned path (1e-8 allowed)
@@ -298,11 +302,7 @@ def test_bernoulli_duplicated_columns_give_the_same_fit_in_any_order():
 def test_bernoulli_fit_is_unchanged_by_a_perturbation_of_rounding_size(perturbation_seed):
     # a problem whose relevance set used to change with a 1e-13 perturbation of the design
     X, t = _classes(11)
-    K = RBF(0.5)(X, X)
-    a = fast_bernoulli(Design(matrix=K, bias=True), t)
-    rng = np.random.default_rng(perturbation_seed)
-    Kp = K * (1 + 1e-13 * torch.tensor(rng.standard_normal(K.shape)))
-    b = fast_bernoulli(Design(matrix=Kp, bias=True), t)
+    a, b = _fit_and_perturbed_fit(fast_bernoulli, RBF(0.5)(X, X), t, perturbation_seed)
     assert a.active.tolist() == b.active.tolist()
     # a 1e-13 relative change of the data moves a log evidence of ~1e2 by ~1e-11 (1e-8 allowed)
     assert abs(a.log_evidence - b.log_evidence) <= 1e-8 * abs(a.log_evidence)

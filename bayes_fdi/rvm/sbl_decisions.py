@@ -74,6 +74,7 @@ __all__ = [
     "gaussian_screened_Q",
     "lowest_index_in_band",
     "optimistic_ratio",
+    "rounding_gamma",
     "screened_factors",
     "verified_action",
     "verified_argmax",
@@ -325,7 +326,7 @@ def exact_near_threshold(
     return screened
 
 
-def _gamma(n: int, dtype: torch.dtype) -> float:
+def rounding_gamma(n: int, dtype: torch.dtype) -> float:
     """Higham's ``gamma_n = n u / (1 - n u)``: the relative error bound of ``n`` roundings."""
     nu = n * torch.finfo(dtype).eps / 2.0
     return nu / (1.0 - nu)
@@ -379,12 +380,12 @@ def screened_factors(
     W = torch.addmm(Z, C, H, beta=-2.0)  # rows: (H c - 2 z)^T
     S = diag + (C * W).sum(1)  # = diag - 2 z^T c + c^T H c
     trace = float((d * d * torch.cholesky_inverse(fac.L).diagonal()).sum())
-    trace = max(trace, 0.0) * (1.0 + _gamma(3 * M, dt))
-    H_F = float(torch.linalg.matrix_norm(H)) * (1.0 + _gamma(M * M, dt))
+    trace = max(trace, 0.0) * (1.0 + rounding_gamma(3 * M, dt))
+    H_F = float(torch.linalg.matrix_norm(H)) * (1.0 + rounding_gamma(M * M, dt))
     c_norm = torch.linalg.vector_norm(C, dim=1)
     z_norm = torch.linalg.vector_norm(Z, dim=1)
     r_norm = torch.linalg.vector_norm(W.add_(Z), dim=1)  # W + Z = H c - z
-    r_norm += _gamma(M + 2, dt) * (H_F * c_norm + z_norm)
+    r_norm += rounding_gamma(M + 2, dt) * (H_F * c_norm + z_norm)
     solve_error = math.sqrt(trace) * r_norm
     ze = float(torch.linalg.vector_norm(z_error))
     S_error = (
@@ -392,7 +393,7 @@ def screened_factors(
         + 2.0 * ze * c_norm
         + ze * ze * trace
         + diag_error
-        + _gamma(2 * M + 4, dt) * (diag.abs() + c_norm * (2.0 * z_norm + H_F * c_norm))
+        + rounding_gamma(2 * M + 4, dt) * (diag.abs() + c_norm * (2.0 * z_norm + H_F * c_norm))
     )
     return Screening(S, S_error, C, solve_error, c_norm, z_norm, trace)
 
@@ -435,7 +436,8 @@ def gaussian_screened_Q(
         + float(z_error @ mu.abs())
         + float(torch.linalg.vector_norm(z_error)) * trace * (g_norm + g_err)
         + c_norm * g_err
-        + _gamma(M + 3, Z.dtype) * (b_t.abs() + screening.z_norm * mu_norm + c_norm * g_norm)
+        + rounding_gamma(M + 3, Z.dtype)
+        * (b_t.abs() + screening.z_norm * mu_norm + c_norm * g_norm)
     )
     return Q, Q_error
 

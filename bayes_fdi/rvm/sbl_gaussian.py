@@ -19,6 +19,7 @@ from bayes_fdi.rvm.sbl_decisions import (
     gaussian_screened_Q,
     lowest_index_in_band,
     optimistic_ratio,
+    rounding_gamma,
     screened_factors,
     verified_action,
 )
@@ -155,8 +156,9 @@ def fast_gaussian(
     BtPhi_buf[:, :1] = design.rmatmul(phi[:, None], exact=False) / norms[:, None]
     BtPhi_buf[j, 0] = phi @ phi
     act_t = torch.tensor(active, dtype=torch.long, device=device)
+    eps = design.screening_error()  # error bound of the cosines in B^T Phi
     align = _Alignment(P, device)
-    _exact_alignment(BtPhi_buf[:, 0], design, norms, phi, design.screening_error())
+    _exact_alignment(BtPhi_buf[:, 0], design, norms, phi, eps)
     align.add(BtPhi_buf[:, 0])
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
@@ -174,39 +176,37 @@ def fast_gaussian(
         log_ml = _gaussian_log_ml(N, beta, float(resid @ resid), alpha, mu, fac)
         return fac, mu, resid, log_ml
 
-    eps = design.screening_error()  # error bound of the cosines in B^T Phi
-    u64 = torch.finfo(dtype).eps / 2.0
-    z_err = torch.tensor([beta * eps], dtype=dtype, device=device)  # set with beta below
-    # b^T t of unit columns: a float64 product of N terms, within gamma_N ||t||
-    bt_rel = (N + 8) * u64 / (1.0 - (N + 8) * u64) * math.sqrt(t_sq)
+    # B^T t of unit columns: a product of N terms in the design's dtype, within gamma_N ||t||
+    bt_error = rounding_gamma(N + 8, dtype) * math.sqrt(t_sq)
     M = 1
     fac, mu, resid, log_ml = statistics(beta, alpha, Phi_buf[:, :M], BtPhi_buf[:, :M])
+    current = True  # whether fac, mu, resid are those of the present alpha, beta and basis
     trace = [log_ml]
     converged = False
     it = 0
     last_structural = 0  # iteration of the last addition or deletion
     for it in range(1, max_iter + 1):
         Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
-        if it > 1:
+        if not current:
             fac, mu, resid, _ = statistics(beta, alpha, Phi, BtPhi)
+            current = True
         # screening factors from the fresh factor, with rigorous bounds of their error: the
         # actions are decided on exact factors whatever the rounding of B^T Phi (float32 or
         # not), of the solves and of the sums
-        z_err = z_err.new_tensor([beta * eps])
-        b_t_err = beta * bt_rel
+        z_err = alpha.new_full((M,), beta * eps)  # per entry of a row of Z
         Z = beta * BtPhi
         G = BtPhi[act_t]
         H = torch.diag(alpha) + beta * (0.5 * (G + G.T))
-        screening = screened_factors(fac, H, Z, beta * unit, z_error=z_err.expand(M))
+        screening = screened_factors(fac, H, Z, beta * unit, z_error=z_err)
         b_t = beta * Bt_t
         Phi_t = b_t[act_t]
         gradient = H @ mu - Phi_t
-        gradient_error = (M + 3) * u64 * (H.abs() @ mu.abs() + Phi_t.abs())
+        gradient_error = rounding_gamma(M + 3, dtype) * (H.abs() @ mu.abs() + Phi_t.abs())
         Q, Q_err = gaussian_screened_Q(
-            screening, Z, b_t, b_t_err, mu, gradient, gradient_error, z_err.expand(M)
+            screening, Z, b_t, beta * bt_error, mu, gradient, gradient_error, z_err
         )
         S, S_err = screening.S, screening.S_error
-        exact = _ExactColumns(design, norms, fac, Phi, BtPhi[act_t], act_t, alpha, beta, mu, resid)
+        exact = _ExactColumns(design, norms, fac, Phi, G, act_t, alpha, beta, mu, resid)
         best, _ = verified_action(
             S, Q, act_t, alpha, addable, exact, optimistic=optimistic_ratio(S, Q, S_err, Q_err)
         )
@@ -216,6 +216,7 @@ def fast_gaussian(
             if abs(math.log(best.new_alpha) - math.log(float(alpha[jj]))) < tol:
                 last = True
         if not last:
+            current = False
             if action != 1:
                 last_structural = it
             if action == 1:  # re-estimate
@@ -264,7 +265,7 @@ def fast_gaussian(
             log_ml += gain
         if it <= _BETA_UPDATE_START or it % _BETA_UPDATE_FREQUENCY == 0 or last:
             Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
-            if not last:
+            if not current:
                 fac, mu, resid, _ = statistics(beta, alpha, Phi, BtPhi)
             gamma = 1.0 - alpha * fac.covariance().diagonal()
             beta_old = beta
@@ -286,9 +287,9 @@ def fast_gaussian(
             break
 
     # the reported posterior and evidence: exact, from a fresh factorisation
-    Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
-    fac, mu, resid, log_ml = statistics(beta, alpha, Phi, BtPhi)
-    trace[-1] = log_ml
+    if not current:
+        fac, mu, resid, log_ml = statistics(beta, alpha, Phi_buf[:, :M], BtPhi_buf[:, :M])
+        trace[-1] = log_ml
     return _result(
         torch.tensor(active, device=device),
         mu,

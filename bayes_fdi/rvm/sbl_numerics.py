@@ -113,7 +113,7 @@ class _Factor(NamedTuple):
         return self.d[:, None] * torch.cholesky_solve(self.d[:, None] * B, self.L)
 
     def covariance(self) -> Tensor:
-        """``Sigma = H^-1`` (needed explicitly by the rank-one updates)."""
+        """``Sigma = H^-1`` (explicit: the reported covariance, and ``gamma`` for ``beta``)."""
         return self.d[:, None] * torch.cholesky_inverse(self.L) * self.d[None, :]
 
     def half_logdet_scaled(self) -> float:
