@@ -71,6 +71,7 @@ __all__ = [
     "best_action",
     "exact_factors",
     "exact_near_threshold",
+    "factor_trace",
     "gaussian_screened_Q",
     "lowest_index_in_band",
     "optimistic_ratio",
@@ -340,9 +341,10 @@ class Screening(NamedTuple):
     S_error: Tensor  # (N_B,) bound of |S - exact S|
     C: Tensor  # (N_B, M) rows: solve coefficients c = H^-1 z (for the Gaussian model's Q)
     solve_error: Tensor  # (N_B,) bound of ||H^-1/2 (H c - z)||: the solve's error in H-norm
+    residual: Tensor  # (N_B,) bound of ||H c - z||
     c_norm: Tensor  # (N_B,) ||c||
     z_norm: Tensor  # (N_B,) ||z||
-    trace: float  # upper bound of tr(H^-1) >= lambda_max(H^-1)
+    trace: float  # upper bound of lambda_max(H^-1) (tr(H^-1) unless given)
 
 
 def screened_factors(
@@ -353,6 +355,7 @@ def screened_factors(
     *,
     z_error: Tensor,
     diag_error: Tensor | float = 0.0,
+    trace: float | None = None,
 ) -> Screening:
     """Screening ``S = diag - z^T H^-1 z`` for the rows ``z`` of ``Z`` (``(N_B, M)``) from a
     fresh Cholesky factor, in a form stationary in the solve, with a rigorous error bound.
@@ -361,7 +364,8 @@ def screened_factors(
     ``f(c) = diag - 2 z^T c + c^T H c`` with ``H`` itself (not the factor): ``f`` is minimal at
     the exact solve, ``f(c) - S = (c - c*)^T H (c - c*) = r^T H^-1 r <= tr(H^-1) ||r||^2`` for
     the solve residual ``r = H c - z`` (computed), so the factor's own backward error enters
-    only to second order. The remaining terms of the bound:
+    only to second order (``trace``: an upper bound of ``lambda_max(H^-1)``; when not given,
+    ``tr(H^-1)`` from :func:`factor_trace`). The remaining terms of the bound:
 
     * the inputs: each entry ``k`` of a row of ``Z`` within ``z_error[k]`` of the exact one
       (``Design.screening_error``) moves ``S`` by at most ``2 ||c|| ||z_error|| +
@@ -379,8 +383,8 @@ def screened_factors(
     C = torch.cholesky_solve((Z * d).T, fac.L).T * d
     W = torch.addmm(Z, C, H, beta=-2.0)  # rows: (H c - 2 z)^T
     S = diag + (C * W).sum(1)  # = diag - 2 z^T c + c^T H c
-    trace = float((d * d * torch.cholesky_inverse(fac.L).diagonal()).sum())
-    trace = max(trace, 0.0) * (1.0 + rounding_gamma(3 * M, dt))
+    if trace is None:
+        trace = factor_trace(fac)
     H_F = float(torch.linalg.matrix_norm(H)) * (1.0 + rounding_gamma(M * M, dt))
     c_norm = torch.linalg.vector_norm(C, dim=1)
     z_norm = torch.linalg.vector_norm(Z, dim=1)
@@ -395,7 +399,16 @@ def screened_factors(
         + diag_error
         + rounding_gamma(2 * M + 4, dt) * (diag.abs() + c_norm * (2.0 * z_norm + H_F * c_norm))
     )
-    return Screening(S, S_error, C, solve_error, c_norm, z_norm, trace)
+    return Screening(S, S_error, C, solve_error, r_norm, c_norm, z_norm, trace)
+
+
+def factor_trace(fac: _Factor) -> float:
+    """Upper bound of ``tr(H^-1)`` (``>= lambda_max(H^-1)``) from the Cholesky factor,
+    ``O(M^3)``."""
+    d = fac.d
+    M = d.numel()
+    trace = float((d * d * torch.cholesky_inverse(fac.L).diagonal()).sum())
+    return max(trace, 0.0) * (1.0 + rounding_gamma(3 * M, d.dtype))
 
 
 def gaussian_screened_Q(

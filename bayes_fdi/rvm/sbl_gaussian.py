@@ -14,15 +14,7 @@ import torch
 from torch import Tensor
 
 from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_decisions import (
-    exact_factors,
-    gaussian_screened_Q,
-    lowest_index_in_band,
-    optimistic_ratio,
-    rounding_gamma,
-    screened_factors,
-    verified_action,
-)
+from bayes_fdi.rvm.sbl_decisions import exact_factors, lowest_index_in_band, rounding_gamma
 from bayes_fdi.rvm.sbl_numerics import (
     SBLResult,
     _Alignment,
@@ -33,6 +25,8 @@ from bayes_fdi.rvm.sbl_numerics import (
     _result,
     _unit_columns,
 )
+from bayes_fdi.rvm.sbl_tracking import Posterior, TrackedFactors, posterior_context
+from bayes_fdi.rvm.sbl_verification import lazy_verified_action
 
 __all__ = ["fast_gaussian"]
 
@@ -48,14 +42,22 @@ _MIN_DELTA_LOG_BETA = 1e-6
 # evidence creeps by 1e-5 per iteration (SparseBayes runs to its iteration limit there).
 _GAUSS_STALL_GAIN = 1e-3
 _GAUSS_STALL_WINDOW = 200
+# the carried screening factors (sbl_tracking): a noise update moving some alpha / beta by
+# more than this (relative) refreshes them instead of carrying them; more than
+# max(_MIN_EXACT_BUDGET, M / 4) exact columns, or P / 8 tightened rows, in one round of a
+# decision refreshes them too (these choices change the cost, never the action). Tests set
+# _REFRESH_EVERY_ITERATION to compare.
+_BETA_RELATIVE_REFRESH = 1e-2
+_MIN_EXACT_BUDGET = 8
+_REFRESH_EVERY_ITERATION = False
 # initial number of columns of the fast Gaussian solver's Phi / B^T Phi buffers
 _INITIAL_CAPACITY = 64
 
 
 class _ExactColumns:
     """``idx -> (S_idx, Q_idx)`` in residual form (`sbl_decisions.exact_factors`) for the fast
-    Gaussian solver's current state; keeps the fetched columns and their Gram entries with the
-    active columns (an addition reuses them)."""
+    Gaussian solver's current state, active columns or not; keeps the fetched candidate columns
+    and their Gram entries (an addition reuses them)."""
 
     def __init__(
         self,
@@ -64,31 +66,35 @@ class _ExactColumns:
         fac: _Factor,
         Phi: Tensor,
         G: Tensor,
-        act: Tensor,
+        position: Tensor,
         alpha: Tensor,
         beta: float,
         mu: Tensor,
         resid: Tensor,
     ) -> None:
-        self.design, self.norms, self.fac, self.Phi, self.G, self.act = (
-            design,
-            norms,
-            fac,
-            Phi,
-            G,
-            act,
-        )
+        self.design, self.norms, self.fac, self.Phi, self.G = design, norms, fac, Phi, G
+        self.position = position  # (P,) position in the active set, -1 for candidates
         self.alpha, self.beta, self.mu, self.resid = alpha, beta, mu, resid
         self.fetched: dict[int, tuple[Tensor, Tensor]] = {}
 
     def __call__(self, idx: Tensor) -> tuple[Tensor, Tensor]:
-        if idx is self.act:
-            Bc, Z = self.Phi, self.G.T  # exact Gram entries among the active columns
-        else:
-            Bc = self.design.columns(idx) / self.norms[idx]
-            Z = self.Phi.T @ Bc
-            for k, i in enumerate(idx.tolist()):
-                self.fetched[i] = (Bc[:, k], Z[:, k])
+        pos = self.position[idx]
+        is_act = pos >= 0
+        N, K = self.Phi.shape[0], idx.numel()
+        Bc = self.Phi.new_empty(N, K)
+        Z = self.Phi.new_empty(self.Phi.shape[1], K)
+        if bool(is_act.any()):
+            pa = pos[is_act]
+            Bc[:, is_act] = self.Phi[:, pa]
+            Z[:, is_act] = self.G[:, pa]  # exact Gram entries among the active columns
+        if not bool(is_act.all()):
+            new = idx[~is_act]
+            Bn = self.design.columns(new) / self.norms[new]
+            Zn = self.Phi.T @ Bn
+            for k, i in enumerate(new.tolist()):
+                self.fetched[i] = (Bn[:, k], Zn[:, k])
+            Bc[:, ~is_act] = Bn
+            Z[:, ~is_act] = Zn
         return exact_factors(self.fac, self.Phi, self.alpha, self.beta, self.mu, self.resid, Bc, Z)
 
 
@@ -162,6 +168,9 @@ def fast_gaussian(
     align.add(BtPhi_buf[:, 0])
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
     in_model[j] = True
+    position = torch.full((P,), -1, dtype=torch.long, device=device)
+    position[j] = 0
+    tracker = TrackedFactors(P, cap, unit, Bt_t)
 
     def addable_mask() -> Tensor:
         return valid & align.free & ~in_model
@@ -175,6 +184,9 @@ def fast_gaussian(
         resid = t - Phi @ mu
         log_ml = _gaussian_log_ml(N, beta, float(resid @ resid), alpha, mu, fac)
         return fac, mu, resid, log_ml
+
+    def context(fac: _Factor, mu: Tensor, BtPhi: Tensor) -> Posterior:
+        return posterior_context(fac, alpha, beta, BtPhi[act_t], mu, Bt_t[act_t], eps)
 
     # B^T t of unit columns: a product of N terms in the design's dtype, within gamma_N ||t||
     bt_error = rounding_gamma(N + 8, dtype) * math.sqrt(t_sq)
@@ -190,26 +202,34 @@ def fast_gaussian(
         if not current:
             fac, mu, resid, _ = statistics(beta, alpha, Phi, BtPhi)
             current = True
-        # screening factors from the fresh factor, with rigorous bounds of their error: the
-        # actions are decided on exact factors whatever the rounding of B^T Phi (float32 or
-        # not), of the solves and of the sums
-        z_err = alpha.new_full((M,), beta * eps)  # per entry of a row of Z
-        Z = beta * BtPhi
-        G = BtPhi[act_t]
-        H = torch.diag(alpha) + beta * (0.5 * (G + G.T))
-        screening = screened_factors(fac, H, Z, beta * unit, z_error=z_err)
-        b_t = beta * Bt_t
-        Phi_t = b_t[act_t]
-        gradient = H @ mu - Phi_t
-        gradient_error = rounding_gamma(M + 3, dtype) * (H.abs() @ mu.abs() + Phi_t.abs())
-        Q, Q_err = gaussian_screened_Q(
-            screening, Z, b_t, beta * bt_error, mu, gradient, gradient_error, z_err
+        # screening factors carried with rigorous bounds of their error (sbl_tracking): the
+        # action is decided on exact factors of whatever could win (sbl_verification), so it
+        # does not depend on the BLAS code path, the thread count or how the bounds were made
+        post = context(fac, mu, BtPhi)
+        if _REFRESH_EVERY_ITERATION:
+            tracker.needs_refresh = True
+        tracker.prepare(post, BtPhi)
+        exact = _ExactColumns(
+            design, norms, fac, Phi, BtPhi[act_t], position, alpha, beta, mu, resid
         )
-        S, S_err = screening.S, screening.S_error
-        exact = _ExactColumns(design, norms, fac, Phi, G, act_t, alpha, beta, mu, resid)
-        best, _ = verified_action(
-            S, Q, act_t, alpha, addable, exact, optimistic=optimistic_ratio(S, Q, S_err, Q_err)
+        screened = tracker.screen(post, eps, bt_error)
+        best, _ = lazy_verified_action(
+            *screened,
+            act_t,
+            alpha,
+            addable,
+            exact,
+            tighten=lambda idx, post=post, Z=BtPhi: tracker.tighten(post, Z, idx, eps, bt_error),
+            budget=max(_MIN_EXACT_BUDGET, M // 4),
+            tighten_budget=max(_MIN_EXACT_BUDGET, P // 8),
         )
+        if best is None:  # the carried bounds have grown too loose: screen afresh
+            tracker.needs_refresh = True
+            tracker.prepare(post, BtPhi)
+            best, _ = lazy_verified_action(
+                *tracker.screen(post, eps, bt_error), act_t, alpha, addable, exact
+            )
+        assert best is not None
         nu, gain, action, jj = best.index, best.gain, best.kind, best.position
         last = not gain > 0
         if not last and action == 1:
@@ -220,6 +240,7 @@ def fast_gaussian(
             if action != 1:
                 last_structural = it
             if action == 1:  # re-estimate
+                tracker.reestimate(post, jj, best.new_alpha)
                 alpha = alpha.clone()
                 alpha[jj] = best.new_alpha
             elif action == 0:  # add
@@ -248,7 +269,13 @@ def fast_gaussian(
                 in_model[nu] = True
                 align.add(BtBi)
                 addable = addable_mask()
+                tracker.add(post, gram, float(BtBi[nu]), best.new_alpha, BtBi, float(Bt_t[nu]))
+                tracker.stale.add(nu)  # its stored products became the exact Gram entries
+                position[nu] = M - 1
             else:  # delete
+                tracker.delete(post, jj)
+                position[act_t[jj + 1 :]] -= 1
+                position[nu] = -1
                 keep_t = torch.tensor(
                     [k for k in range(M) if k != jj], dtype=torch.long, device=device
                 )
@@ -267,11 +294,16 @@ def fast_gaussian(
             Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
             if not current:
                 fac, mu, resid, _ = statistics(beta, alpha, Phi, BtPhi)
+            before = context(fac, mu, BtPhi)
             gamma = 1.0 - alpha * fac.covariance().diagonal()
             beta_old = beta
             beta = min((N - float(gamma.sum())) / max(float(resid @ resid), 1e-300), beta_max)
             beta = max(beta, 1e-300)
             fac, mu, resid, log_ml = statistics(beta, alpha, Phi, BtPhi)
+            current = True
+            # the carried factors follow the noise update; the actives' afresh (O(M^3))
+            tracker.rescale(before, context(fac, mu, BtPhi), _BETA_RELATIVE_REFRESH)
+            tracker.stale.update(active)
             if last and abs(math.log(beta) - math.log(beta_old)) > beta_tol:
                 last = False
         trace.append(log_ml)
