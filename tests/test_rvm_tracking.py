@@ -19,7 +19,11 @@ from bayes_fdi.rvm import RVR, sbl_gaussian
 from bayes_fdi.rvm.sbl_decisions import best_action, rounding_gamma
 from bayes_fdi.rvm.sbl_numerics import _factor
 from bayes_fdi.rvm.sbl_tracking import TrackedFactors, posterior_context
-from bayes_fdi.rvm.sbl_verification import lazy_verified_action
+from bayes_fdi.rvm.sbl_verification import (
+    lazy_verified_action,
+    reestimate_gain_bounds,
+    useful_lower_bound,
+)
 
 
 def _stored_problem(seed: int, N: int = 160, P: int = 60, width: float = 1.5, dtype=torch.float32):
@@ -222,3 +226,29 @@ def test_carried_screening_takes_the_refreshed_path(monkeypatch, width, n):
     np.testing.assert_array_equal(carried.relevance_indices_, fresh.relevance_indices_)
     assert carried.n_iter_ == fresh.n_iter_
     assert carried.log_evidence_ == pytest.approx(fresh.log_evidence_, rel=1e-10)
+
+
+def test_gain_bounds_hold_over_their_box():
+    """The re-estimation gain (best_action's formula) and q^2 - s at random points of the box
+    of (S, Q) stay within the bounds computed from its corners."""
+    gen = torch.Generator().manual_seed(11)
+    K = 400
+    alpha = torch.rand(K, generator=gen, dtype=torch.float64) * 10 + 0.01
+    S = alpha * (0.05 + 0.9 * torch.rand(K, generator=gen, dtype=torch.float64))
+    Q = torch.randn(K, generator=gen, dtype=torch.float64) * 2
+    rel = 10.0 ** -torch.randint(1, 8, (K,), generator=gen).double()
+    S_err, Q_err = rel * S, rel * Q.abs()
+    ub = reestimate_gain_bounds(S, S_err, Q, Q_err, alpha)
+    th_lo = useful_lower_bound(S, S_err, Q, Q_err, alpha)
+    for _ in range(200):
+        Sp = S + S_err * (2 * torch.rand(K, generator=gen, dtype=S.dtype) - 1)
+        Qp = Q + Q_err * (2 * torch.rand(K, generator=gen, dtype=Q.dtype) - 1)
+        s = alpha * Sp / (alpha - Sp)
+        q = alpha * Qp / (alpha - Sp)
+        theta = q * q - s
+        assert torch.all(theta >= th_lo - 1e-12 * theta.abs())
+        useful = theta > 0
+        new_alpha = s * s / torch.where(useful, theta, 1.0)
+        delta = 1.0 / new_alpha - 1.0 / alpha
+        gain = 0.5 * (delta * Qp * Qp / (Sp * delta + 1.0) - torch.log1p(Sp * delta))
+        assert torch.all(~useful | (gain <= ub + 1e-12 * gain.abs() + 1e-14))

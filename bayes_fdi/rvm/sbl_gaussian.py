@@ -3,7 +3,8 @@
 
 Written by hand: no maintained library implements it (``shared/reference/fast-sbl.md``;
 SparseBayes v2 is MATLAB). One add / re-estimate / delete per iteration, decided on exact
-factors (:mod:`bayes_fdi.rvm.sbl_decisions`).
+factors (:mod:`bayes_fdi.rvm.sbl_decisions`, :mod:`bayes_fdi.rvm.sbl_verification`) from
+screening factors carried with error bounds (:mod:`bayes_fdi.rvm.sbl_tracking`).
 """
 
 from __future__ import annotations
@@ -80,22 +81,27 @@ class _ExactColumns:
     def __call__(self, idx: Tensor) -> tuple[Tensor, Tensor]:
         pos = self.position[idx]
         is_act = pos >= 0
-        N, K = self.Phi.shape[0], idx.numel()
-        Bc = self.Phi.new_empty(N, K)
-        Z = self.Phi.new_empty(self.Phi.shape[1], K)
-        if bool(is_act.any()):
+        n_act = int(is_act.sum())
+        if n_act == idx.numel():  # active columns only: their exact Gram entries
+            Bc, Z = self.Phi[:, pos], self.G[:, pos]
+        elif n_act == 0:
+            Bc, Z = self._candidates(idx)
+        else:
+            N, K = self.Phi.shape[0], idx.numel()
+            Bc = self.Phi.new_empty(N, K)
+            Z = self.Phi.new_empty(self.Phi.shape[1], K)
             pa = pos[is_act]
             Bc[:, is_act] = self.Phi[:, pa]
-            Z[:, is_act] = self.G[:, pa]  # exact Gram entries among the active columns
-        if not bool(is_act.all()):
-            new = idx[~is_act]
-            Bn = self.design.columns(new) / self.norms[new]
-            Zn = self.Phi.T @ Bn
-            for k, i in enumerate(new.tolist()):
-                self.fetched[i] = (Bn[:, k], Zn[:, k])
-            Bc[:, ~is_act] = Bn
-            Z[:, ~is_act] = Zn
+            Z[:, is_act] = self.G[:, pa]
+            Bc[:, ~is_act], Z[:, ~is_act] = self._candidates(idx[~is_act])
         return exact_factors(self.fac, self.Phi, self.alpha, self.beta, self.mu, self.resid, Bc, Z)
+
+    def _candidates(self, idx: Tensor) -> tuple[Tensor, Tensor]:
+        Bn = self.design.columns(idx) / self.norms[idx]
+        Zn = self.Phi.T @ Bn
+        for k, i in enumerate(idx.tolist()):
+            self.fetched[i] = (Bn[:, k], Zn[:, k])
+        return Bn, Zn
 
 
 def fast_gaussian(
@@ -107,10 +113,11 @@ def fast_gaussian(
 ) -> SBLResult:
     """Tipping & Faul fast marginal-likelihood maximisation, Gaussian noise.
 
-    Each iteration the posterior is refactorised (Cholesky of the scaled precision) and the
-    candidates are screened from that factor with error bounds; the action is decided on
-    exact factors (``sbl_decisions.verified_action``), so the path of actions does not depend
-    on the BLAS code path, the thread count or a float32 screening copy of the design.
+    Each iteration the posterior is refactorised (Cholesky of the scaled precision); the
+    candidates' screening factors are carried by rank-one updates with rigorous error bounds
+    (``sbl_tracking``) and the action is decided on exact factors of whatever could win
+    (``sbl_verification.lazy_verified_action``), so the path of actions does not depend on the
+    BLAS code path, the thread count, the device or a float32 screening copy of the design.
 
     Parameters
     ----------
