@@ -252,3 +252,27 @@ def test_gain_bounds_hold_over_their_box():
         delta = 1.0 / new_alpha - 1.0 / alpha
         gain = 0.5 * (delta * Qp * Qp / (Sp * delta + 1.0) - torch.log1p(Sp * delta))
         assert torch.all(~useful | (gain <= ub + 1e-12 * gain.abs() + 1e-14))
+
+
+def test_precise_data_screen_from_the_fresh_factor(monkeypatch):
+    """With nearly noise-free data some alpha / beta fall below the stored Gram matrix's error
+    and the carried bounds do not apply: those iterations screen from the fresh factor
+    (``TrackedFactors.direct``), and the fit is the one of a full screening every iteration."""
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-3, 3, size=(500, 2))
+    y = np.sin(X[:, 0]) * np.cos(X[:, 1]) + 1e-7 * rng.standard_normal(500)
+    calls = {"direct": 0}
+    direct = TrackedFactors.direct
+
+    def counting(self, *args, **kwargs):
+        calls["direct"] += 1
+        return direct(self, *args, **kwargs)
+
+    monkeypatch.setattr(TrackedFactors, "direct", counting)
+    carried = RVR(width=1.0).fit(X, y)
+    assert calls["direct"] > 0
+    monkeypatch.setattr(sbl_gaussian, "_REFRESH_EVERY_ITERATION", True)
+    fresh = RVR(width=1.0).fit(X, y)
+    np.testing.assert_array_equal(carried.relevance_indices_, fresh.relevance_indices_)
+    assert carried.n_iter_ == fresh.n_iter_
+    assert carried.log_evidence_ == pytest.approx(fresh.log_evidence_, rel=1e-10)

@@ -213,29 +213,40 @@ def fast_gaussian(
         # action is decided on exact factors of whatever could win (sbl_verification), so it
         # does not depend on the BLAS code path, the thread count or how the bounds were made
         post = context(fac, mu, BtPhi)
-        if _REFRESH_EVERY_ITERATION:
-            tracker.needs_refresh = True
-        tracker.prepare(post, BtPhi)
         exact = _ExactColumns(
             design, norms, fac, Phi, BtPhi[act_t], position, alpha, beta, mu, resid
         )
-        screened = tracker.screen(post, eps, bt_error)
-        best, _ = lazy_verified_action(
-            *screened,
-            act_t,
-            alpha,
-            addable,
-            exact,
-            tighten=lambda idx, post=post, Z=BtPhi: tracker.tighten(post, Z, idx, eps, bt_error),
-            budget=max(_MIN_EXACT_BUDGET, M // 4),
-            tighten_budget=max(_MIN_EXACT_BUDGET, P // 8),
-        )
-        if best is None:  # the carried bounds have grown too loose: screen afresh
-            tracker.needs_refresh = True
+        if not tracker.usable(post):  # bounds of the fresh factor only, as a full screening
+            best, _ = lazy_verified_action(
+                *tracker.direct(post, BtPhi, eps, bt_error),
+                act_t,
+                alpha,
+                addable,
+                exact,
+                actives_first=True,
+            )
+        else:
+            if _REFRESH_EVERY_ITERATION:
+                tracker.needs_refresh = True
             tracker.prepare(post, BtPhi)
             best, _ = lazy_verified_action(
-                *tracker.screen(post, eps, bt_error), act_t, alpha, addable, exact
+                *tracker.screen(post, eps, bt_error),
+                act_t,
+                alpha,
+                addable,
+                exact,
+                tighten=lambda idx, post=post, Z=BtPhi: tracker.tighten(
+                    post, Z, idx, eps, bt_error
+                ),
+                budget=max(_MIN_EXACT_BUDGET, M // 4),
+                tighten_budget=max(_MIN_EXACT_BUDGET, P // 8),
             )
+            if best is None:  # the carried bounds have grown too loose: screen afresh
+                tracker.needs_refresh = True
+                tracker.prepare(post, BtPhi)
+                best, _ = lazy_verified_action(
+                    *tracker.screen(post, eps, bt_error), act_t, alpha, addable, exact
+                )
         assert best is not None
         nu, gain, action, jj = best.index, best.gain, best.kind, best.position
         last = not gain > 0

@@ -24,10 +24,11 @@ value comes with a bound of its error that grows with each update:
 
 The decisions are still taken on exact factors (:mod:`bayes_fdi.rvm.sbl_verification`): the
 carried factors and bounds only decide which candidates need an exact look, so they change the
-cost, never the path of actions. When the bounds have grown so loose that many candidates need
-a look, the solver asks for a full refresh (:meth:`TrackedFactors.refresh`, the ``O(P M^2)``
-screening). Everything is kept in ``beta``-free units: ``H_ = diag(alpha / beta) + Phi^T Phi``,
-``z_m = Phi^T b_m``; ``S = beta S_``, ``Q = beta Q_``.
+cost, never the path of actions. Rows that could win are first screened afresh from the fresh
+factor (:meth:`TrackedFactors.tighten`, ``O(M^2)`` each); when the bounds have grown so loose
+that many rows need it, the solver asks for a full refresh (:meth:`TrackedFactors.refresh`, the
+``O(P M^2)`` screening). Everything is kept in ``beta``-free units:
+``H_ = diag(alpha / beta) + Phi^T Phi``, ``z_m = Phi^T b_m``; ``S = beta S_``, ``Q = beta Q_``.
 """
 
 from __future__ import annotations
@@ -47,6 +48,10 @@ from bayes_fdi.rvm.sbl_decisions import (
 from bayes_fdi.rvm.sbl_numerics import _Factor
 
 __all__ = ["Posterior", "TrackedFactors", "posterior_context"]
+
+#: the carried bounds are used while the stored Gram matrix's error inflates them by at most
+#: this factor (``psd``, :func:`posterior_context`); beyond it the solver screens directly
+_MAX_PSD = 2.0
 
 
 class Posterior(NamedTuple):
@@ -186,6 +191,35 @@ class TrackedFactors:
             self.Q[rows], self.Q_err[rows] = Q / beta, Q_err / beta
             self.rho[rows], self.nu[rows] = rho, nu
 
+    @staticmethod
+    def usable(post: Posterior) -> bool:
+        """Whether the carried bounds can be used with this posterior: they rest on
+        ``H_ >= A / psd``, which needs every ``alpha / beta`` well above the stored Gram
+        matrix's error ``M eps`` (very precise data make some ``alpha / beta`` tiny)."""
+        return math.isfinite(post.lam) and post.psd <= _MAX_PSD
+
+    def direct(self, post: Posterior, Z: Tensor, eps: float, bt_error: float) -> tuple[Tensor, ...]:
+        """``S, Q`` (``beta`` units) of all rows screened from the fresh factor with the
+        complete bounds of ``sbl_decisions`` (input errors through ``tr(H^-1)``), for a
+        posterior the carried bounds cannot serve (:meth:`usable`); the carried values are
+        refreshed at the next usable posterior."""
+        M = Z.shape[1]
+        beta = post.beta
+        z_err = Z.new_full((M,), beta * eps)
+        scr = screened_factors(post.fac, beta * post.Hb, beta * Z, beta * self.unit, z_error=z_err)
+        Q, Q_err = gaussian_screened_Q(
+            scr,
+            beta * Z,
+            beta * self.Bt_t,
+            beta * bt_error,
+            post.mu,
+            beta * post.gradient,
+            beta * post.gradient_error,
+            z_err,
+        )
+        self.needs_refresh = True
+        return scr.S, Q, scr.S_error, Q_err
+
     def prepare(self, post: Posterior, Z: Tensor) -> None:
         """Bring the carried values up to date before a decision: a full refresh when asked
         for, else the stale rows (changed stored products, noise updates) afresh."""
@@ -248,6 +282,8 @@ class TrackedFactors:
         Exact algebra (``s = H_^-1 e_k``, ``kappa = delta / (1 + delta s_k)``):
         ``c' = c - kappa c_k s``, ``S_' = S_ + kappa c_k^2``, ``Q_' = Q_ + kappa c_k mu_k``.
         """
+        if self.needs_refresh:  # the next full refresh rewrites everything
+            return
         M = post.abar.numel()
         dt = self.dtype
         g2, g4 = rounding_gamma(2, dt), rounding_gamma(4, dt)
@@ -305,6 +341,8 @@ class TrackedFactors:
     def delete(self, post: Posterior, k: int) -> None:
         """Remove position ``k``: ``c' = (c - (c_k / s_k) s)`` without entry ``k``,
         ``S_' = S_ + c_k^2 / s_k``, ``Q_' = Q_ + mu_k c_k / s_k`` (``s = H_^-1 e_k``)."""
+        if self.needs_refresh:  # the next full refresh rewrites everything
+            return
         M = post.abar.numel()
         g2, g4 = rounding_gamma(2, self.dtype), rounding_gamma(4, self.dtype)
         s, r_s, r_round, sA = self._unit_solve(post, k)
@@ -369,6 +407,8 @@ class TrackedFactors:
         ``s_c = alpha_i / beta + d - h^T w``:
         ``xi_m = (z_new_m - h^T c_m) / s_c``, ``c' = [c - xi w, xi]``, ``S_' = S_ - s_c xi^2``,
         ``Q_' = Q_ - xi Q_i`` (``Q_i`` the new column's own factor)."""
+        if self.needs_refresh:  # the next full refresh rewrites everything
+            return
         M = post.abar.numel()
         dt = self.dtype
         u = self._u
@@ -442,6 +482,8 @@ class TrackedFactors:
         (exact but for ``-c*^T Delta H_'^-1 Delta c*``, at most ``||A'^-1/2 Delta c*||^2``,
         and the coefficient error, both in the bounds), ``rho`` by ``||A'^-1/2 Delta c||``.
         A relative change above ``max_relative`` asks for a refresh instead."""
+        if self.needs_refresh:  # the next full refresh rewrites everything
+            return
         M = new.abar.numel()
         dt = self.dtype
         Delta = new.abar - old.abar

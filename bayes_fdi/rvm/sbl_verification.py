@@ -117,6 +117,7 @@ def lazy_verified_action(
     shortlist: int = 64,
     budget: int | None = None,
     tighten_budget: int | None = None,
+    actives_first: bool = False,
 ) -> tuple[Action | None, int]:
     """The best action on exact factors, recomputing only what could win (module docstring).
 
@@ -138,6 +139,9 @@ def lazy_verified_action(
     budget, tighten_budget : int, optional
         Give up (``action`` None) rather than recompute exactly (tighten) more than this many
         columns in one round: the caller's bounds are too loose to be worth using.
+    actives_first : bool
+        Recompute every active column exactly at once (one batch): cheaper than rounds when
+        the bounds are loose.
 
     Returns
     -------
@@ -150,27 +154,37 @@ def lazy_verified_action(
     tightened = torch.zeros(P, dtype=torch.bool, device=S.device)
     n_exact = 0
 
-    def look(idx: Tensor) -> bool:
-        """Tighten the columns not yet tightened, else recompute exactly; False: over budget."""
+    def recompute(idx: Tensor) -> None:
         nonlocal n_exact
+        S[idx], Q[idx] = exact(idx)
+        S_err[idx], Q_err[idx] = 0.0, 0.0
+        verified[idx] = True
+        tightened[idx] = True
+        n_exact += idx.numel()
+
+    def look(idx: Tensor, likely: int = -1) -> bool:
+        """Tighten the columns not yet tightened, else recompute exactly; the ``likely``
+        winner (the best on screened values) is recomputed at once. False: over budget."""
         idx = idx.sort().values
         if tighten is not None:
             loose = idx[~tightened[idx]]
             if loose.numel():
                 if tighten_budget is not None and loose.numel() > tighten_budget:
                     return False
-                S[loose], Q[loose], S_err[loose], Q_err[loose] = tighten(loose)
-                tightened[loose] = True
+                if likely >= 0 and bool((loose == likely).any()):
+                    recompute(loose.new_tensor([likely]))
+                    loose = loose[loose != likely]
+                if loose.numel():
+                    S[loose], Q[loose], S_err[loose], Q_err[loose] = tighten(loose)
+                    tightened[loose] = True
                 return True
         if budget is not None and idx.numel() > budget:
             return False
-        S[idx], Q[idx] = exact(idx)
-        S_err[idx], Q_err[idx] = 0.0, 0.0
-        verified[idx] = True
-        tightened[idx] = True
-        n_exact += idx.numel()
+        recompute(idx)
         return True
 
+    if actives_first:
+        recompute(act)
     while True:
         if act.numel() > 1:  # deletions pre-empt: possibly useless actives are looked at first
             theta_lo = useful_lower_bound(S[act], S_err[act], Q[act], Q_err[act], alpha)
@@ -201,5 +215,6 @@ def lazy_verified_action(
             ub_n = 0.5 * (xn - 1.0 - torch.log(xn.clamp_min(1.0)))
             ub_n = torch.where(torch.isfinite(xn), ub_n, math.inf)
             cand = cand[torch.topk(torch.cat([ub_a, ub_n]), limit).indices]
-        if not look(cand):
+        likely = best.index if best.kind >= 0 and not bool(verified[best.index]) else -1
+        if not look(cand, likely):
             return None, n_exact
