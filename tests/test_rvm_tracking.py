@@ -238,7 +238,7 @@ def test_gain_bounds_hold_over_their_box():
     Q = torch.randn(K, generator=gen, dtype=torch.float64) * 2
     rel = 10.0 ** -torch.randint(1, 8, (K,), generator=gen).double()
     S_err, Q_err = rel * S, rel * Q.abs()
-    ub = reestimate_gain_bounds(S, S_err, Q, Q_err, alpha)
+    ub = reestimate_gain_bounds(S, S_err, Q, Q_err)
     th_lo = useful_lower_bound(S, S_err, Q, Q_err, alpha)
     for _ in range(200):
         Sp = S + S_err * (2 * torch.rand(K, generator=gen, dtype=S.dtype) - 1)

@@ -223,7 +223,6 @@ def fast_gaussian(
                 alpha,
                 addable,
                 exact,
-                actives_first=True,
             )
         else:
             if _REFRESH_EVERY_ITERATION:
@@ -312,16 +311,17 @@ def fast_gaussian(
             Phi, BtPhi = Phi_buf[:, :M], BtPhi_buf[:, :M]
             if not current:
                 fac, mu, resid, _ = statistics(beta, alpha, Phi, BtPhi)
-            before = context(fac, mu, BtPhi)
+            # the carried factors follow the noise update unless a refresh is pending anyway
+            before = None if tracker.needs_refresh else context(fac, mu, BtPhi)
             gamma = 1.0 - alpha * fac.covariance().diagonal()
             beta_old = beta
             beta = min((N - float(gamma.sum())) / max(float(resid @ resid), 1e-300), beta_max)
             beta = max(beta, 1e-300)
             fac, mu, resid, log_ml = statistics(beta, alpha, Phi, BtPhi)
             current = True
-            # the carried factors follow the noise update; the actives' afresh (O(M^3))
-            tracker.rescale(before, context(fac, mu, BtPhi), _BETA_RELATIVE_REFRESH)
-            tracker.stale.update(active)
+            if before is not None:  # and the actives' afresh (O(M^3))
+                tracker.rescale(before, context(fac, mu, BtPhi), _BETA_RELATIVE_REFRESH)
+                tracker.stale.update(active)
             if last and abs(math.log(beta) - math.log(beta_old)) > beta_tol:
                 last = False
         trace.append(log_ml)

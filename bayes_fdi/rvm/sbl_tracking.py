@@ -39,12 +39,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl_decisions import (
-    factor_trace,
-    gaussian_screened_Q,
-    rounding_gamma,
-    screened_factors,
-)
+from bayes_fdi.rvm.sbl_decisions import gaussian_screened_Q, rounding_gamma, screened_factors
 from bayes_fdi.rvm.sbl_numerics import _Factor
 
 __all__ = ["Posterior", "TrackedFactors", "posterior_context"]
@@ -141,9 +136,7 @@ class TrackedFactors:
         self.S_err, self.Q_err, self.rho, self.nu = inf, inf.clone(), inf.clone(), inf.clone()
         self.needs_refresh = True
         self.stale: set[int] = set()
-        self.n_refresh = 0
         self._u = torch.finfo(self.dtype).eps / 2.0
-        self._trace: tuple[_Factor, float] | None = None  # lambda_max(H^-1) bound, last factor
 
     # ----------------------------------------------------------------------- fresh values
     def refresh(self, post: Posterior, Z: Tensor, rows: Tensor | None = None) -> None:
@@ -156,12 +149,10 @@ class TrackedFactors:
         unit = self.unit if rows is None else self.unit[rows]
         Bt_t = self.Bt_t if rows is None else self.Bt_t[rows]
         zero = Zr.new_zeros(M)
-        if self._trace is None or self._trace[0] is not post.fac:
-            # an upper bound of lambda_max(H^-1): lam / beta when known, else the trace
-            bound = post.lam / beta if math.isfinite(post.lam) else factor_trace(post.fac)
-            self._trace = (post.fac, bound)
+        # lambda_max(H^-1) <= lam / beta (screened_factors falls back on tr(H^-1) without it)
+        trace = post.lam / beta if math.isfinite(post.lam) else None
         scr = screened_factors(
-            post.fac, beta * post.Hb, beta * Zr, beta * unit, z_error=zero, trace=self._trace[1]
+            post.fac, beta * post.Hb, beta * Zr, beta * unit, z_error=zero, trace=trace
         )
         Q, Q_err = gaussian_screened_Q(
             scr,
@@ -184,7 +175,6 @@ class TrackedFactors:
             self.rho, self.nu = rho, nu
             self.needs_refresh = False
             self.stale.clear()
-            self.n_refresh += 1
         else:
             self.C[rows, :M] = scr.C
             self.S[rows], self.S_err[rows] = scr.S / beta, scr.S_error / beta
@@ -223,7 +213,7 @@ class TrackedFactors:
     def prepare(self, post: Posterior, Z: Tensor) -> None:
         """Bring the carried values up to date before a decision: a full refresh when asked
         for, else the stale rows (changed stored products, noise updates) afresh."""
-        if self.needs_refresh or not math.isfinite(post.lam):
+        if self.needs_refresh:
             self.refresh(post, Z)
         elif self.stale:
             rows = torch.tensor(sorted(self.stale), dtype=torch.long, device=Z.device)

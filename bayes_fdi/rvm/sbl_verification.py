@@ -46,7 +46,7 @@ __all__ = ["lazy_verified_action", "reestimate_gain_bounds", "useful_lower_bound
 _SLACK = 1e-12
 
 
-def _box(S: Tensor, S_err: Tensor, Q: Tensor, Q_err: Tensor, alpha: Tensor):
+def _box(S: Tensor, S_err: Tensor, Q: Tensor, Q_err: Tensor):
     S_lo = (S - S_err).clamp_min(0.0)
     S_hi = S + S_err
     Qa_lo = (Q.abs() - Q_err).clamp_min(0.0)
@@ -54,21 +54,26 @@ def _box(S: Tensor, S_err: Tensor, Q: Tensor, Q_err: Tensor, alpha: Tensor):
     return S_lo, S_hi, Qa_lo, Qa_hi
 
 
-def _product_range(S_lo: Tensor, S_hi: Tensor, alpha: Tensor) -> tuple[Tensor, Tensor]:
-    """Range of ``S (alpha - S)`` over ``[S_lo, S_hi]`` (concave, top at ``alpha / 2``)."""
-    f_lo = S_lo * (alpha - S_lo)
-    f_hi = S_hi * (alpha - S_hi)
+def _product_max(S_lo: Tensor, S_hi: Tensor, alpha: Tensor) -> Tensor:
+    """Largest ``S (alpha - S)`` over ``[S_lo, S_hi]`` (concave, top at ``alpha / 2``)."""
     half = 0.5 * alpha
     inside = (S_lo <= half) & (half <= S_hi)
-    top = torch.where(inside, half * half, torch.maximum(f_lo, f_hi))
-    return torch.minimum(f_lo, f_hi), top
+    ends = torch.maximum(S_lo * (alpha - S_lo), S_hi * (alpha - S_hi))
+    return torch.where(inside, half * half, ends)
+
+
+def _ratio_gain(v: Tensor) -> Tensor:
+    """``(v - 1 - log v) / 2``: the gain of moving a precision to its optimum (re-estimation)
+    or from infinity (addition, ``v = Q^2 / S``)."""
+    v = v.clamp_min(torch.finfo(v.dtype).tiny)
+    return 0.5 * ((v - 1.0) - torch.log(v))
 
 
 def useful_lower_bound(S: Tensor, S_err: Tensor, Q: Tensor, Q_err: Tensor, alpha: Tensor) -> Tensor:
     """Lower bound of ``theta = q^2 - s = alpha f / (alpha - S)^2`` with
     ``f = alpha Q^2 - S (alpha - S)``, for active columns (``-inf`` where unknown)."""
-    S_lo, S_hi, Qa_lo, _ = _box(S, S_err, Q, Q_err, alpha)
-    _, prod_hi = _product_range(S_lo, S_hi, alpha)
+    S_lo, S_hi, Qa_lo, _ = _box(S, S_err, Q, Q_err)
+    prod_hi = _product_max(S_lo, S_hi, alpha)
     f_lo = alpha * Qa_lo * Qa_lo - prod_hi
     f_lo = f_lo - _SLACK * (alpha * Qa_lo * Qa_lo + prod_hi)
     ok = S_hi < alpha
@@ -78,9 +83,7 @@ def useful_lower_bound(S: Tensor, S_err: Tensor, Q: Tensor, Q_err: Tensor, alpha
     return torch.where(ok, low, -math.inf)
 
 
-def reestimate_gain_bounds(
-    S: Tensor, S_err: Tensor, Q: Tensor, Q_err: Tensor, alpha: Tensor
-) -> Tensor:
+def reestimate_gain_bounds(S: Tensor, S_err: Tensor, Q: Tensor, Q_err: Tensor) -> Tensor:
     """Upper bound of the re-estimation gain ``Delta L`` of useful active columns.
 
     Moving ``alpha`` of an active column to its optimum gains ``(v - 1 - log v) / 2`` with
@@ -89,16 +92,11 @@ def reestimate_gain_bounds(
     function of ``v`` with its minimum 0 at ``v = 1``: over the box of ``(S, |Q|)`` its largest
     value is at an end of ``[Q_lo^2 / S_hi, Q_hi^2 / S_lo]``. ``inf`` where ``S`` may be 0.
     """
-    S_lo, S_hi, Qa_lo, Qa_hi = _box(S, S_err, Q, Q_err, alpha)
+    S_lo, S_hi, Qa_lo, Qa_hi = _box(S, S_err, Q, Q_err)
     ok = S_lo > 0
     v_lo = Qa_lo * Qa_lo / S_hi
     v_hi = torch.where(ok, Qa_hi * Qa_hi / torch.where(ok, S_lo, 1.0), 1.0)
-
-    def h(v: Tensor) -> Tensor:
-        v = v.clamp_min(torch.finfo(v.dtype).tiny)
-        return (v - 1.0) - torch.log(v)
-
-    ub = 0.5 * torch.maximum(h(v_lo), h(v_hi))
+    ub = torch.maximum(_ratio_gain(v_lo), _ratio_gain(v_hi))
     ub = ub + _SLACK * (ub + 1e-300) + 1e-15 * (v_hi - v_lo).abs()
     return torch.where(ok, ub, math.inf)
 
@@ -117,7 +115,6 @@ def lazy_verified_action(
     shortlist: int = 64,
     budget: int | None = None,
     tighten_budget: int | None = None,
-    actives_first: bool = False,
 ) -> tuple[Action | None, int]:
     """The best action on exact factors, recomputing only what could win (module docstring).
 
@@ -139,9 +136,6 @@ def lazy_verified_action(
     budget, tighten_budget : int, optional
         Give up (``action`` None) rather than recompute exactly (tighten) more than this many
         columns in one round: the caller's bounds are too loose to be worth using.
-    actives_first : bool
-        Recompute every active column exactly at once (one batch): cheaper than rounds when
-        the bounds are loose.
 
     Returns
     -------
@@ -183,8 +177,6 @@ def lazy_verified_action(
         recompute(idx)
         return True
 
-    if actives_first:
-        recompute(act)
     while True:
         if act.numel() > 1:  # deletions pre-empt: possibly useless actives are looked at first
             theta_lo = useful_lower_bound(S[act], S_err[act], Q[act], Q_err[act], alpha)
@@ -200,7 +192,7 @@ def lazy_verified_action(
         band = g - TIE_RELATIVE * abs(g) if best.kind >= 0 else NEGLIGIBLE_GAIN
         # re-estimations that could reach the band
         un_a = ~verified[act]
-        re_ub = reestimate_gain_bounds(S[act], S_err[act], Q[act], Q_err[act], alpha)
+        re_ub = reestimate_gain_bounds(S[act], S_err[act], Q[act], Q_err[act])
         reach = un_a & (re_ub >= band)
         cand_a, ub_a = act[reach], re_ub[reach]
         # additions that could reach it
@@ -212,8 +204,7 @@ def lazy_verified_action(
         limit = shortlist if tighten is None else max(shortlist, tighten_budget or 0)
         if cand.numel() > limit:  # the most promising first: by upper bound of the gain
             xn = x[cand_n]
-            ub_n = 0.5 * (xn - 1.0 - torch.log(xn.clamp_min(1.0)))
-            ub_n = torch.where(torch.isfinite(xn), ub_n, math.inf)
+            ub_n = torch.where(torch.isfinite(xn), _ratio_gain(xn.clamp_min(1.0)), math.inf)
             cand = cand[torch.topk(torch.cat([ub_a, ub_n]), limit).indices]
         likely = best.index if best.kind >= 0 and not bool(verified[best.index]) else -1
         if not look(cand, likely):
