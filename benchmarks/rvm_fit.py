@@ -217,6 +217,7 @@ METHODS: dict[str, Method] = {
     m.name: m
     for m in (
         Method("bayes_fdi", "ours", "bayes_fdi RVR (fast, torch)", 2.0, False),
+        Method("bayes_fdi-polish", "ours", "bayes_fdi RVR (fast + polish)", 2.0, False),
         Method("fastrvm", "peers", "fastrvm 0.1.5 (C++ SparseBayes)", 2.0, True),
         Method("sklearn-rvm", "peers", "sklearn-rvm 0.1.1 EMRVR (EM)", 3.0, True),
         Method("sklearn-ard", "peers", "scikit-learn ARDRegression on the RBF design", 3.0, True),

@@ -74,7 +74,7 @@ def _rbf(X: np.ndarray, Z: np.ndarray, sigma: float) -> np.ndarray:
     return np.exp(-np.maximum(d2, 0.0) * _gamma(sigma))
 
 
-def _build_ours(sigma: float) -> tuple[Any, Callable[[Any], int], str]:
+def _build_ours(sigma: float, *, polish: bool = False) -> tuple[Any, Callable[[Any], int], str]:
     import torch
 
     torch.set_num_threads(1)
@@ -85,7 +85,7 @@ def _build_ours(sigma: float) -> tuple[Any, Callable[[Any], int], str]:
     import bayes_fdi
     from bayes_fdi.rvm import RVR
 
-    model = RVR(kernel="rbf", width=sigma, method="fast", bias=True)
+    model = RVR(kernel="rbf", width=sigma, method="fast", bias=True, polish=polish)
     version = f"bayes_fdi {getattr(bayes_fdi, '__version__', '?')}, torch {torch.__version__}"
     return model, lambda m: len(m.relevance_indices_), version
 
@@ -205,6 +205,7 @@ def _build_sklearn_ard(sigma: float) -> tuple[Any, Callable[[Any], int], str]:
 #: rescales its basis internally and ARDRegression leaves the intercept unregularised)
 EVIDENCE: dict[str, Callable[[Any, np.ndarray, np.ndarray, float], Evidence]] = {
     "bayes_fdi": _evidence_ours,
+    "bayes_fdi-polish": _evidence_ours,
     "fastrvm": _evidence_fastrvm,
     "sklearn-rvm": _evidence_none,
     "sklearn-ard": _evidence_none,
@@ -212,6 +213,7 @@ EVIDENCE: dict[str, Callable[[Any, np.ndarray, np.ndarray, float], Evidence]] = 
 
 METHOD_BUILDERS: dict[str, Callable[[float], tuple[Any, Callable[[Any], int], str]]] = {
     "bayes_fdi": _build_ours,
+    "bayes_fdi-polish": lambda sigma: _build_ours(sigma, polish=True),
     "fastrvm": _build_fastrvm,
     "sklearn-rvm": _build_sklearn_rvm,
     "sklearn-ard": _build_sklearn_ard,

@@ -18,6 +18,7 @@ import torch
 from bayes_fdi.rvm.classification import RVC
 from bayes_fdi.rvm.persistence import DEFAULT_MAX_BYTES, _params_from_json, read_model_file
 from bayes_fdi.rvm.regression import RVR
+from bayes_fdi.rvm.sbl_polish import Polish
 from bayes_fdi.rvm.sparse_bayes import SBLResult
 
 __all__ = ["load"]
@@ -44,6 +45,23 @@ def _float_array(array: np.ndarray, what: str, name: str) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name!r}: {what} contains NaN or infinity")
     return array
+
+
+def _polish(value: Any, name: str) -> Polish | None:
+    """The ``polish`` record of an RVR file (None when absent or null), validated."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != set(Polish._fields):
+        raise ValueError(f"{name!r}: polish must be null or a table of {Polish._fields}")
+    gain, restart, pool = value["gain"], value["restart_log_evidence"], value["pool_size"]
+    for what, v in (("gain", gain), ("restart_log_evidence", restart)):
+        if isinstance(v, bool) or not isinstance(v, Real) or not math.isfinite(v):
+            raise ValueError(f"{name!r}: polish {what} must be a finite number, got {v!r}")
+    if gain < 0:
+        raise ValueError(f"{name!r}: polish gain must be >= 0, got {gain!r}")
+    if isinstance(pool, bool) or not isinstance(pool, int) or pool < 1:
+        raise ValueError(f"{name!r}: polish pool_size must be a positive integer, got {pool!r}")
+    return Polish(gain=float(gain), restart_log_evidence=float(restart), pool_size=pool)
 
 
 def load(
@@ -194,6 +212,7 @@ def _rebuild(meta: dict, arrays: dict, name: str, device: Any) -> Any:
 
     if cls is RVR:
         binary(0, model)
+        model.polish_ = _polish(meta.get("polish"), name)
         return model
     if "classes" not in arrays:
         raise ValueError(f"{name!r}: an RVC file must hold the class labels")

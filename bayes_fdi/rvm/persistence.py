@@ -11,7 +11,9 @@ File format (``.npz``, read with ``allow_pickle=False``):
   ``params`` (constructor parameters; a kernel object as ``{"kernel": {...}}`` from
   :meth:`~bayes_fdi.rvm.kernels.Kernel.to_dict`), ``models`` (one entry per binary model:
   ``beta``, ``log_evidence``, ``n_iter``, ``converged``), ``width``, ``n_features_in``,
-  ``dtype``, ``bayes_fdi_version`` and (version 2) ``x_scale``, ``t_scale``.
+  ``dtype``, ``bayes_fdi_version``, (version 2) ``x_scale``, ``t_scale`` and (RVR, written
+  since the polish was added; absent means none) ``polish``: null or ``gain``,
+  ``restart_log_evidence``, ``pool_size``.
 * ``X_fit`` -- the training inputs divided by ``x_scale`` (the candidate basis; relevance
   vectors are rows of it).
 * per binary model ``k`` (one for RVR and binary RVC, one per class for one-vs-rest):
@@ -163,6 +165,9 @@ def save(model: Any, path: str | os.PathLike[str]) -> None:
         "t_scale": float(getattr(model, "_t_scale_", 1.0)),
         "bayes_fdi_version": _version(),
     }
+    if estimator == "RVR":
+        polish = getattr(model, "polish_", None)
+        meta["polish"] = None if polish is None else {k: v for k, v in polish._asdict().items()}
     with atomic_path(final) as tmp, open(tmp, "wb") as handle:
         np.savez(handle, metadata=np.array(json.dumps(meta)), **arrays)
 

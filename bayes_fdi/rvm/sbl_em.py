@@ -36,6 +36,7 @@ def em_gaussian(
     max_iter: int = 1000,
     tol: float = 1e-3,
     prune: float = 1e8,
+    columns: Tensor | None = None,
 ) -> SBLResult:
     """Tipping's (2001) re-estimation (the paper's eqs. 10-11), Gaussian noise.
 
@@ -59,10 +60,22 @@ def em_gaussian(
         Remove a basis when its (unit-norm) precision exceeds ``prune * beta``: its
         contribution ``b b^T / alpha`` to the marginal covariance is then below
         ``1/prune`` of the noise variance and changes the evidence by at most ~``1/prune``.
+    columns : Tensor or None
+        Start from these design columns only (indices; all-zero ones are left out as
+        always); None: the whole candidate basis.
     """
     N = design.n_samples
     dtype, device = design.dtype, design.device
     norms, valid = _unit_columns(design)
+    if columns is not None:
+        columns = torch.as_tensor(columns, dtype=torch.long, device=device)
+        if columns.numel() and (int(columns.min()) < 0 or int(columns.max()) >= valid.numel()):
+            raise ValueError(f"columns must index the design's {valid.numel()} columns")
+        chosen = torch.zeros_like(valid)
+        chosen[columns] = True
+        valid = valid & chosen
+        if not bool(valid.any()):
+            raise ValueError("columns contains no usable (non-zero) design column")
     active = valid.nonzero().squeeze(1)
     Phi_all = design.columns(active) / norms[active]
     G_all = Phi_all.T @ Phi_all

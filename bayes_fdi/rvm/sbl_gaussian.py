@@ -104,12 +104,36 @@ class _ExactColumns:
         return Bn, Zn
 
 
+def _start_state(
+    start: SBLResult, norms: Tensor, valid: Tensor, beta_max: float
+) -> tuple[list[int], Tensor, float]:
+    """Basis, unit-column precisions and noise precision of a warm start (validated)."""
+    active = start.active.to(norms.device)
+    if active.numel() == 0:
+        raise ValueError("start has an empty basis")
+    if active.unique().numel() != active.numel():
+        raise ValueError("start has a basis column more than once")
+    if int(active.min()) < 0 or int(active.max()) >= norms.numel():
+        raise ValueError(f"start's basis indices lie outside the design's {norms.numel()} columns")
+    if not bool(valid[active].all()):
+        raise ValueError("start's basis contains an all-zero column")
+    d = norms[active]
+    alpha = start.alpha.to(device=norms.device, dtype=norms.dtype) / (d * d)
+    if alpha.shape != active.shape or not bool(((alpha > 0) & torch.isfinite(alpha)).all()):
+        raise ValueError("start's precisions must be finite and > 0, one per basis column")
+    beta = float(start.beta)
+    if not (math.isfinite(beta) and beta > 0):
+        raise ValueError(f"start's noise precision must be finite and > 0, got {beta}")
+    return active.tolist(), alpha, min(beta, beta_max)
+
+
 def fast_gaussian(
     design: Design,
     t: Tensor,
     *,
     max_iter: int = 10000,
     tol: float = 1e-3,
+    start: SBLResult | None = None,
 ) -> SBLResult:
     """Tipping & Faul fast marginal-likelihood maximisation, Gaussian noise.
 
@@ -133,6 +157,11 @@ def fast_gaussian(
         (converged) after 200 iterations of re-estimations only (no addition or deletion)
         that raised the log evidence by less than 1e-3 in all: a weakly determined ``alpha``
         can otherwise be re-estimated for thousands of iterations at no gain.
+    start : SBLResult or None
+        Start from this state on the same design (its basis, precisions and noise precision,
+        e.g. a re-estimation run's, as :func:`bayes_fdi.rvm.sbl_polish.polish_gaussian` does)
+        instead of the single column best aligned with ``t``. Every iteration raises the
+        evidence, so the result's evidence is at least ``start``'s.
 
     Returns
     -------
@@ -152,31 +181,40 @@ def fast_gaussian(
     # of the N-term sums behind beta (float32 would otherwise cycle on rounding noise)
     beta_tol = max(_MIN_DELTA_LOG_BETA, N * torch.finfo(dtype).eps)
 
-    # initial basis: largest |b^T t| among usable columns
-    # (B^T t is exact: near-ties, e.g. duplicated columns, go to the lowest index)
-    j = lowest_index_in_band(torch.where(valid, Bt_t.abs(), -1.0), torch.arange(P, device=device))
-    phi = design.columns([j])[:, 0] / norms[j]
-    p, q = beta, beta * float(Bt_t[j])
-    a0 = p * p / (q * q - p) if q * q > p else -1.0
-    alpha = torch.tensor([a0 if a0 > 0 else 1e3], dtype=dtype, device=device)
-    active = [j]
+    eps = design.screening_error()  # error bound of the cosines in B^T Phi
+    if start is None:
+        # initial basis: largest |b^T t| among usable columns
+        # (B^T t is exact: near-ties, e.g. duplicated columns, go to the lowest index)
+        j = lowest_index_in_band(
+            torch.where(valid, Bt_t.abs(), -1.0), torch.arange(P, device=device)
+        )
+        p, q = beta, beta * float(Bt_t[j])
+        a0 = p * p / (q * q - p) if q * q > p else -1.0
+        alpha = torch.tensor([a0 if a0 > 0 else 1e3], dtype=dtype, device=device)
+        active = [j]
+    else:
+        active, alpha, beta = _start_state(start, norms, valid, beta_max)
+    M = len(active)
+    act_t = torch.tensor(active, dtype=torch.long, device=device)
     # Phi and the cache B^T Phi live in preallocated buffers (columns in active order);
     # B^T Phi has screening precision for candidates and is exact among active columns
-    cap = min(P, _INITIAL_CAPACITY)
+    cap = min(P, max(_INITIAL_CAPACITY, 2 * M))
     Phi_buf = torch.empty(N, cap, dtype=dtype, device=device)
     BtPhi_buf = torch.empty(P, cap, dtype=dtype, device=device)
-    Phi_buf[:, 0] = phi
-    BtPhi_buf[:, :1] = design.rmatmul(phi[:, None], exact=False) / norms[:, None]
-    BtPhi_buf[j, 0] = phi @ phi
-    act_t = torch.tensor(active, dtype=torch.long, device=device)
-    eps = design.screening_error()  # error bound of the cosines in B^T Phi
+    Phi0 = design.columns(act_t) / norms[act_t]
+    Phi_buf[:, :M] = Phi0
+    BtPhi_buf[:, :M] = design.rmatmul(Phi0, exact=False) / norms[:, None]
     align = _Alignment(P, device)
-    _exact_alignment(BtPhi_buf[:, 0], design, norms, phi, eps)
-    align.add(BtPhi_buf[:, 0])
+    for k in range(M):
+        # exact Gram entries among the actives (as an addition stores them)
+        BtPhi_buf[act_t, k] = Phi0.T @ Phi0[:, k]
+        BtPhi_buf[active[k], k] = Phi0[:, k] @ Phi0[:, k]
+        _exact_alignment(BtPhi_buf[:, k], design, norms, Phi0[:, k], eps)
+        align.add(BtPhi_buf[:, k])
     in_model = torch.zeros(P, dtype=torch.bool, device=device)
-    in_model[j] = True
+    in_model[act_t] = True
     position = torch.full((P,), -1, dtype=torch.long, device=device)
-    position[j] = 0
+    position[act_t] = torch.arange(M, device=device)
     tracker = TrackedFactors(P, cap, unit, Bt_t)
 
     def addable_mask() -> Tensor:
@@ -197,7 +235,6 @@ def fast_gaussian(
 
     # B^T t of unit columns: a product of N terms in the design's dtype, within gamma_N ||t||
     bt_error = rounding_gamma(N + 8, dtype) * math.sqrt(t_sq)
-    M = 1
     fac, mu, resid, log_ml = statistics(beta, alpha, Phi_buf[:, :M], BtPhi_buf[:, :M])
     current = True  # whether fac, mu, resid are those of the present alpha, beta and basis
     trace = [log_ml]
