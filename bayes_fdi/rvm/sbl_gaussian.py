@@ -160,8 +160,9 @@ def fast_gaussian(
     start : SBLResult or None
         Start from this state on the same design (its basis, precisions and noise precision,
         e.g. a re-estimation run's, as :func:`bayes_fdi.rvm.sbl_polish.polish_gaussian` does)
-        instead of the single column best aligned with ``t``. Every iteration raises the
-        evidence, so the result's evidence is at least ``start``'s.
+        instead of the single column best aligned with ``t``. Each addition, re-estimation
+        and deletion from there raises the evidence (the noise precision is re-estimated on
+        SparseBayes' schedule as in a fresh run).
 
     Returns
     -------

@@ -6,12 +6,12 @@ and stops at an optimum where no single addition, deletion or re-estimation help
 Tipping's re-estimation from the whole basis (:func:`~bayes_fdi.rvm.sbl_em.em_gaussian`,
 scikit-learn's ``ARDRegression``) often reaches a different one, nats higher (on 200 to 400
 noisy samples of a smooth function with an RBF basis of width 0.5, 0.1 to 6 nats; the two
-active sets share half their columns). Moves of one or two columns from the fast optimum do
-not get there. The polish therefore restarts the re-estimation from a pool of columns --
-the whole basis when it is small, else the fast fit's basis and the candidates most
-correlated with its residual -- continues it with the fast solver (whose decisions are taken
-on exact factors, and whose every step raises the evidence), and keeps whichever of the two
-fits has the higher evidence.
+active sets share half their columns). Moves of one or two columns from the fast optimum
+(swaps, tried on the branch ``rvr-engine``) did not get there. The polish therefore restarts
+the re-estimation from a pool of columns -- the whole basis when it is small, else the fast
+fit's basis and the candidates most correlated with its residual -- continues it with the
+fast solver (whose decisions are taken on exact factors, and whose every action raises the
+evidence), and keeps whichever of the two fits has the higher evidence.
 
 Written by hand on top of the two solvers; no maintained library combines them.
 """
