@@ -101,7 +101,14 @@ def test_restart_pool_is_the_basis_and_the_most_correlated_candidates():
     D, y = smooth_rbf_design(1, bias=True)
     design, t = Design(matrix=torch.tensor(D), bias=False), torch.tensor(y)
     fitted = fast_gaussian(design, t)
-    assert restart_pool(design, t, fitted, D.shape[1]) is None  # small basis: all of it
+    # small basis: every usable column (two all-zero columns stay out)
+    Z = D.copy()
+    Z[:, [3, 7]] = 0.0
+    zeroed = Design(matrix=torch.tensor(Z), bias=False)
+    np.testing.assert_array_equal(
+        restart_pool(zeroed, t, fitted, D.shape[1]).numpy(),
+        np.setdiff1d(np.arange(D.shape[1]), [3, 7]),
+    )
     pool = restart_pool(design, t, fitted, 60).numpy()
     # numpy: |b_i^T r| / ||b_i|| with r the fit's residual, the basis first
     act = fitted.active.numpy()

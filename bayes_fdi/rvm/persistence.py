@@ -167,7 +167,7 @@ def save(model: Any, path: str | os.PathLike[str]) -> None:
     }
     if estimator == "RVR":
         polish = getattr(model, "polish_", None)
-        meta["polish"] = None if polish is None else {k: v for k, v in polish._asdict().items()}
+        meta["polish"] = None if polish is None else polish._asdict()
     with atomic_path(final) as tmp, open(tmp, "wb") as handle:
         np.savez(handle, metadata=np.array(json.dumps(meta)), **arrays)
 

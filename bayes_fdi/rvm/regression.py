@@ -243,7 +243,6 @@ class RVR(RegressorMixin, RVMBase):
         with np.errstate(under="ignore", over="ignore"):
             self.beta_ = float(np.float64(result.beta) / np.float64(t_scale) ** 2)
         if search is not None:
-            shift = Xt.shape[0] * math.log(t_scale)
             self.width_search_ = search._replace(
                 width=search.width * x_scale,
                 log_evidence=search.log_evidence - shift,

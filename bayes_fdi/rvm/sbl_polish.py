@@ -53,11 +53,11 @@ class Polish(NamedTuple):
     pool_size: int
 
 
-def restart_pool(design: Design, t: Tensor, fitted: SBLResult, size: int) -> Tensor | None:
-    """The columns a restart begins with: None (the whole basis) when at most ``size`` columns
-    are usable, else ``fitted``'s basis and the usable candidates of largest
+def restart_pool(design: Design, t: Tensor, fitted: SBLResult, size: int) -> Tensor:
+    """The columns a restart begins with, sorted: every usable (non-zero) column when there
+    are at most ``size``, else ``fitted``'s basis and the usable candidates of largest
     ``|b_i^T r| / ||b_i||`` (``r = t - Phi mu``, the fit's residual), ``size`` in all (ties to
-    the lower index), sorted.
+    the lower index).
 
     Parameters
     ----------
@@ -74,7 +74,7 @@ def restart_pool(design: Design, t: Tensor, fitted: SBLResult, size: int) -> Ten
         raise ValueError(f"the pool size must be >= 1, got {size}")
     norms, valid = _unit_columns(design)
     if int(valid.sum()) <= size:
-        return None
+        return valid.nonzero().squeeze(1)
     active = fitted.active.to(norms.device)
     resid = t - design.columns(active) @ fitted.mean.to(t)
     score = (design.rmatmul(resid[:, None])[:, 0] / norms).abs()
@@ -121,13 +121,11 @@ def polish_gaussian(
         Its gain over ``fitted`` (``>= 0``), the restart's evidence and pool size.
     """
     columns = restart_pool(design, t, fitted, pool_size)
-    valid = _unit_columns(design)[1]
-    pool = int(valid.sum()) if columns is None else int(valid[columns].sum())
     restart = em_gaussian(design, t, max_iter=RESTART_MAX_ITER, tol=tol, columns=columns)
     continued = fast_gaussian(design, t, max_iter=max_iter, tol=tol, start=restart)
     kept = continued if continued.log_evidence > fitted.log_evidence else fitted
     return kept, Polish(
         gain=kept.log_evidence - fitted.log_evidence,
         restart_log_evidence=continued.log_evidence,
-        pool_size=pool,
+        pool_size=columns.numel(),
     )
