@@ -12,25 +12,30 @@ where ``F`` is either a dense matrix or the symmetric training kernel matrix
 budget ``max_bytes``; otherwise it is recomputed in row blocks, so memory grows like
 ``N x (block + active set)`` instead of ``N^2``.
 
-Screening copy.  With ``screen=True`` a float64 kernel design keeps only a *float32* copy of
-the kernel matrix (half the memory), used by ``rmatmul(V, exact=False)``: the ``B^T b_i``
-products that screen candidate columns in the fast solvers.  Everything that enters the model
--- active columns, ``B^T t``, column norms and the Gram entries between active columns -- stays
-exact float64, and the solvers decide every action on exact factors within the rigorous error
-bound of those products (:meth:`Design.screening_error`), so the fit is the same as with the
-float64 matrix.  It is not the default: on smooth kernels float32 products cannot resolve most
-candidates' factors (``S`` near 1e-6 of the noise precision against a float32 error bound of
-~1e-4), and the solver then has to recompute nearly every candidate exactly (two 2400-sample
-normal models: 1.6 s and 84 s against 0.20 s and 2.1 s with the float64 matrix).
+Screening copy.  A float64 kernel design may keep, instead of the matrix, only its upper
+triangle in 6 bytes an entry (a float32 value and a bfloat16 remainder:
+:class:`~bayes_fdi.rvm.screening_copy.TriangleCopy`, 37.5 % of the float64 matrix's memory),
+used by ``rmatmul(V, exact=False)``: the ``B^T b_i`` products that screen candidate columns in
+the fast solvers.  The products are accumulated in float64 from cache-sized blocks converted
+on the fly, so their error is the stored entries' (relative ``2^-33``) plus float64
+accumulation -- about ``5e-10`` of ``||b_i|| ||v||``, against ``~N 2^-24`` (``1e-3`` at
+``N = 20000``) had they been float32 products.  Everything that enters the model -- active
+columns, ``B^T t``, column norms and the Gram entries between active columns -- stays exact
+float64, and the solvers decide every action on exact factors within the rigorous error bound of
+those products (:meth:`Design.screening_error`), so the fit is the same as with the float64
+matrix.  With ``screen=None`` (the default) a design on the CPU keeps the copy when the float64
+matrix exceeds ``max_bytes`` and the copy fits it (``N`` from about 15 800 to 25 800 at the
+default 2 GB), where recomputing the kernel rows for every product costs ~15x more
+(``docs/rvm-benchmark.md``).  On other devices the rows are recomputed there, which is cheap.
 """
 
 from __future__ import annotations
 
 import torch
-from scipy.linalg.blas import ssymv
 from torch import Tensor
 
 from bayes_fdi.rvm.kernels import Kernel
+from bayes_fdi.rvm.screening_copy import TriangleCopy, triangle_bytes
 
 __all__ = ["DEFAULT_MAX_BYTES", "Design"]
 
@@ -38,17 +43,6 @@ __all__ = ["DEFAULT_MAX_BYTES", "Design"]
 DEFAULT_MAX_BYTES = 2_000_000_000
 #: bytes per row block when the kernel matrix is computed on the fly
 _BLOCK_BYTES = 64_000_000
-
-
-def _symv(F: Tensor, v: Tensor) -> Tensor:
-    """``F v`` for a symmetric float32 CPU matrix ``F`` by BLAS ``ssymv``.
-
-    Reads one triangle only (the upper one of the row-major ``F``): a matrix-vector
-    product is memory bound, so this is ~1.5x faster than a general ``F @ v``.
-    """
-    x = v.detach().to(dtype=torch.float32, device="cpu").contiguous().numpy()
-    # F.numpy().T is the column-major view of F^T = F: no copy
-    return torch.from_numpy(ssymv(1.0, F.numpy().T, x, lower=1))
 
 
 class Design:
@@ -66,6 +60,13 @@ class Design:
         Prepend a constant column of ones.
     max_bytes : int
         Materialise ``kernel(X, X)`` only if it needs at most this many bytes.
+    rhs : Tensor, optional
+        A right-hand side whose exact ``B^T rhs`` is computed during construction (from the
+        same kernel rows) and returned by :meth:`rhs_product`.
+    screen : bool or None
+        ``True``: keep the screening copy (float64 designs, if it fits ``max_bytes``) instead
+        of the float64 matrix; ``False``: never; ``None``: keep it on the CPU when the float64
+        matrix does not fit and the copy does (module docstring).
     """
 
     def __init__(
@@ -86,7 +87,7 @@ class Design:
         self.kernel = kernel
         self.X = X
         self.F: Tensor | None = None
-        self.F_screen: Tensor | None = None
+        self.screen_copy: TriangleCopy | None = None
         self._rhs = rhs
         self._rhs_product: Tensor | None = None
         self._norms: Tensor | None = None
@@ -105,46 +106,38 @@ class Design:
         self._F_sq: Tensor | None = None
         if kernel is not None:
             n = self.n_samples
+            rows = TriangleCopy.rows_for(n)
+            copy_fits = self.dtype == torch.float64 and triangle_bytes(n, rows) <= max_bytes
+            full_fits = n * n * itemsize <= max_bytes
             if screen is None:
-                screen = False
-            if screen and n * n * 4 <= max_bytes:
-                self._build_screening()
-            elif not screen and n * n * itemsize <= max_bytes:
+                screen = not full_fits and self.device.type == "cpu"
+            if screen and copy_fits:
+                assert X is not None
+                try:
+                    self.screen_copy = TriangleCopy(kernel, X, rows=rows, rhs=rhs)
+                except OverflowError:  # kernel values beyond float32: no copy
+                    self.screen_copy = None
+            if self.screen_copy is not None:
+                norms = self.screen_copy.norms
+                if self.bias:
+                    norms = torch.cat([norms.new_full((1,), float(n) ** 0.5), norms])
+                self._norms = norms
+                if rhs is not None:
+                    prod = self.screen_copy.rhs_product
+                    assert prod is not None
+                    if self.bias:
+                        head = rhs.reshape(n, -1).to(self.dtype).sum(0, keepdim=True)
+                        prod = torch.cat([head, prod], dim=0)
+                    self._rhs_product = prod
+            elif full_fits:
                 self.F = kernel(X, X)
         self.n_features = self.F.shape[1] if self.F is not None else self.n_samples
         self.n_basis = self.n_features + self.offset
 
-    def _build_screening(self) -> None:
-        """One blockwise pass: float32 copy, exact column norms and exact ``K^T rhs``."""
-        n = self.n_samples
-        self.F_screen = torch.empty(n, n, dtype=torch.float32, device=self.device)
-        sq = torch.zeros(n, dtype=self.dtype, device=self.device)
-        prod = None
-        if self._rhs is not None:
-            rhs = self._rhs.reshape(n, -1).to(self.dtype)
-            prod = torch.empty(n, rhs.shape[1], dtype=self.dtype, device=self.device)
-        for start in range(0, n, self._block):
-            stop = min(start + self._block, n)
-            rows = self._kernel_rows(start, stop)
-            self.F_screen[start:stop] = rows
-            if prod is not None:
-                prod[start:stop] = rows @ rhs  # K symmetric: (K^T rhs) rows
-            sq += rows.square_().sum(0)
-        norms = sq.sqrt()
-        if self.bias:
-            norms = torch.cat([norms.new_full((1,), float(n) ** 0.5), norms])
-        self._norms = norms
-        if prod is not None:
-            assert self._rhs is not None
-            head = (
-                [self._rhs.reshape(n, -1).to(self.dtype).sum(0, keepdim=True)] if self.bias else []
-            )
-            self._rhs_product = torch.cat([*head, prod], dim=0)
-
     @property
     def materialised(self) -> bool:
-        """Whether ``F`` (or its float32 screening copy) is held in memory."""
-        return self.F is not None or self.F_screen is not None
+        """Whether ``F`` (or its screening copy) is held in memory."""
+        return self.F is not None or self.screen_copy is not None
 
     def rhs_product(self, rhs: Tensor) -> Tensor:
         """Exact ``B^T rhs`` (``(N_B,)`` or ``(N_B, k)``), cached at construction if possible."""
@@ -178,18 +171,15 @@ class Design:
     def rmatmul(self, V: Tensor, *, exact: bool = True) -> Tensor:
         """``B^T V`` for an ``(N, k)`` matrix ``V``; returns ``(N_B, k)``.
 
-        ``exact=False`` may use the float32 screening copy (relative error ~1e-6).
+        ``exact=False`` may use the screening copy (error :meth:`screening_error`).
         """
         out = torch.empty(self.n_basis, V.shape[1], dtype=self.dtype, device=self.device)
         if self.bias:
             out[0] = V.sum(0)
         if self.F is not None:
             torch.matmul(self.F.T, V, out=out[self.offset :])
-        elif self.F_screen is not None and not exact:
-            if V.shape[1] == 1 and self.F_screen.device.type == "cpu":
-                out[self.offset :, 0] = _symv(self.F_screen, V[:, 0])
-            else:
-                out[self.offset :] = self.F_screen @ V.to(torch.float32)  # K symmetric
+        elif self.screen_copy is not None and not exact:
+            out[self.offset :] = self.screen_copy.matmul(V)  # K symmetric
         else:  # symmetric kernel matrix: K^T V = K V, row block by row block
             for start in range(0, self.n_samples, self._block):
                 stop = min(start + self._block, self.n_samples)
@@ -199,15 +189,17 @@ class Design:
     def sq_rmatmul(self, w: Tensor, *, exact: bool = True) -> Tensor:
         """``(B * B)^T w`` for a length-``N`` vector ``w``; returns ``(N_B,)``.
 
-        ``exact=False`` may use the float32 screening copy.
+        ``exact=False`` may use the screening copy (error :meth:`screening_error`).
         """
         out = torch.empty(self.n_basis, dtype=self.dtype, device=self.device)
         if self.bias:
             out[0] = w.sum()
-        if self.F is not None or (self.F_screen is not None and not exact):
+        if self.F is not None:
             if self._F_sq is None:
-                self._F_sq = self.F.square() if self.F is not None else self.F_screen.square()
-            out[self.offset :] = self._F_sq.T @ w.to(self._F_sq.dtype)
+                self._F_sq = self.F.square()
+            out[self.offset :] = self._F_sq.T @ w
+        elif self.screen_copy is not None and not exact:
+            out[self.offset :] = self.screen_copy.square_matmul(w[:, None])[:, 0]
         else:
             for start in range(0, self.n_samples, self._block):
                 stop = min(start + self._block, self.n_samples)
@@ -216,20 +208,26 @@ class Design:
         return out
 
     def screening_error(self) -> float:
-        """Bound on the error of ``rmatmul(v, exact=False)[i] / ||b_i||`` for a unit vector ``v``.
+        """Bound on the error of ``rmatmul(v, exact=False)[i] / ||b_i||`` for a unit vector ``v``
+        (and of ``sq_rmatmul(w, exact=False)[i]`` relative to ``sum_j b_ij^2 |w_j|``).
 
         A dot product of ``N`` terms in a precision of unit roundoff ``u`` is within
         ``N u / (1 - N u) * sum |b_ij v_j| <= N u / (1 - N u) * ||b_i|| ||v||`` of the exact one,
         whatever the summation order (Higham, *Accuracy and Stability of Numerical Algorithms*,
-        eq. 3.5): blocked, threaded and vectorised BLAS kernels all satisfy it. ``u`` is that of
-        float32 for the screening copy, of the design's dtype otherwise; a few more roundings
-        cover storing the entries and ``v`` in that precision and evaluating the kernel rows and
-        columns separately.
+        eq. 3.5): blocked, threaded and vectorised BLAS kernels all satisfy it. With the
+        screening copy the rounding of the stored entries is added
+        (:meth:`TriangleCopy.error <bayes_fdi.rvm.screening_copy.TriangleCopy.error>`); a few
+        more roundings cover storing ``v`` and evaluating the kernel rows and columns separately.
         """
-        low = torch.float32 if self.F_screen is not None else self.dtype
-        u = torch.finfo(low).eps / 2.0
+        u = torch.finfo(self.dtype).eps / 2.0
         n = self.n_samples + 8
-        return n * u / (1.0 - n * u)
+        gamma = n * u / (1.0 - n * u)
+        if self.screen_copy is not None:
+            norms = self.screen_copy.norms
+            usable = norms[norms > 0]
+            min_norm = float(usable.min()) if usable.numel() else 1.0
+            return self.screen_copy.error(min_norm) + gamma
+        return gamma
 
     def column_norms(self) -> Tensor:
         """Exact Euclidean norms of all ``N_B`` columns."""

@@ -183,6 +183,10 @@ def fast_gaussian(
     beta_tol = max(_MIN_DELTA_LOG_BETA, N * torch.finfo(dtype).eps)
 
     eps = design.screening_error()  # error bound of the cosines in B^T Phi
+    # the Gram entries among active columns are float64 products of exact columns (stored at
+    # each addition), whatever precision screens the candidates: within gamma_{N+8} (unit
+    # columns), as Design.screening_error of a float64 matrix
+    gram_eps = min(eps, rounding_gamma(N + 8, dtype))
     if start is None:
         # initial basis: largest |b^T t| among usable columns
         # (B^T t is exact: near-ties, e.g. duplicated columns, go to the lowest index)
@@ -232,7 +236,7 @@ def fast_gaussian(
         return fac, mu, resid, log_ml
 
     def context(fac: _Factor, mu: Tensor, BtPhi: Tensor) -> Posterior:
-        return posterior_context(fac, alpha, beta, BtPhi[act_t], mu, Bt_t[act_t], eps)
+        return posterior_context(fac, alpha, beta, BtPhi[act_t], mu, Bt_t[act_t], gram_eps)
 
     # B^T t of unit columns: a product of N terms in the design's dtype, within gamma_N ||t||
     bt_error = rounding_gamma(N + 8, dtype) * math.sqrt(t_sq)
