@@ -282,7 +282,7 @@ def test_screening_copy_takes_the_exact_decisions():
     # the stored entries' 2^-33 (bfloat16 remainder of a float32 value) and 2N float64 sums
     u = 2.0**-53
     # (to first order: the second-order terms are ~1e-19 of it)
-    expected = 2 * 2.0**-33 + (1 + (2 * 700 + 4) + (700 + 8)) * u
+    expected = 2 * 2.0**-33 + (1 + (700 + 4) + (700 + 8)) * u
     assert screen.screening_error() == pytest.approx(expected, rel=1e-9)
     assert exact.screening_error() == pytest.approx(708 * u, rel=1e-9)
     np.testing.assert_allclose(

@@ -32,6 +32,7 @@ default 2 GB), where recomputing the kernel rows for every product costs ~15x mo
 from __future__ import annotations
 
 import torch
+from scipy.linalg.blas import dsymv
 from torch import Tensor
 
 from bayes_fdi.rvm.kernels import Kernel
@@ -177,7 +178,20 @@ class Design:
         if self.bias:
             out[0] = V.sum(0)
         if self.F is not None:
-            torch.matmul(self.F.T, V, out=out[self.offset :])
+            F = self.F
+            if (
+                self.kernel is not None
+                and F.device.type == "cpu"
+                and V.shape[1] == 1
+                and (F.dtype == V.dtype == torch.float64)
+            ):
+                # symmetric kernel matrix: BLAS dsymv reads one triangle (a product is memory
+                # bound: ~1.7x faster than the general one); F.numpy().T is the column-major
+                # view of F^T = F, no copy
+                v = V[:, 0].detach().contiguous().numpy()
+                out[self.offset :, 0] = torch.from_numpy(dsymv(1.0, F.numpy().T, v, lower=1))
+            else:
+                torch.matmul(F.T, V, out=out[self.offset :])
         elif self.screen_copy is not None and not exact:
             out[self.offset :] = self.screen_copy.matmul(V)  # K symmetric
         else:  # symmetric kernel matrix: K^T V = K V, row block by row block

@@ -65,8 +65,11 @@ class RVR(RegressorMixin, RVMBase):
         Compute device; None uses the device of torch inputs (CPU for numpy inputs).
     max_kernel_bytes : int, default 2e9
         Materialise the training kernel matrix only up to this size (2 GB: ``N`` up to about
-        15 800 in float64); larger problems compute kernel rows in blocks (memory
-        ``O(N M)``, slower additions). Either way the fit is the same.
+        15 800 in float64). Larger problems on the CPU keep a screening copy of its upper
+        triangle within this size (6 bytes an entry: ``N`` up to about 25 800 at 2 GB;
+        :mod:`bayes_fdi.rvm.screening_copy`); beyond, or on other devices, kernel rows are
+        computed in blocks for each product (memory ``O(N M)``, slower additions). Either way
+        the fit is the same.
     random_state : int or None, default None
         Unused (the algorithm is deterministic); accepted for API compatibility.
     polish : bool, default False

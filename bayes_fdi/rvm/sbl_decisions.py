@@ -29,8 +29,8 @@ decision from factors accurate to ~1e-13 (relative) whatever the code path:
    which drift), in a form stationary in the solves (:func:`gaussian_screened_Q`; the
    factor's backward error enters to second order only), together with a rigorous bound of
    their error: that of the products ``B^T Phi`` behind them (``Design.screening_error``:
-   float64, or float32 for a screening copy), of the solves (from their computed residuals)
-   and of the sums (Higham's bounds). The actives' factors and those
+   float64, or the stored precision of a screening copy), of the solves (from their computed
+   residuals) and of the sums (Higham's bounds). The actives' factors and those
    of every addition candidate whose *optimistic* ratio -- the largest ``Q^2/S`` its screened
    factors and their bounds allow -- reaches the best verified gain are recomputed in
    residual form before the action is chosen. The action is thus the one on exact factors

@@ -141,7 +141,8 @@ def fast_gaussian(
     candidates' screening factors are carried by rank-one updates with rigorous error bounds
     (``sbl_tracking``) and the action is decided on exact factors of whatever could win
     (``sbl_verification.lazy_verified_action``), so the path of actions does not depend on the
-    BLAS code path, the thread count, the device or a float32 screening copy of the design.
+    BLAS code path, the thread count, the device or a reduced-precision screening copy of the
+    design.
 
     Parameters
     ----------

@@ -12,9 +12,10 @@ the float64 matrix), and nothing is recomputed.
 Error. An entry ``K`` is stored as ``hi = fl32(K)`` and ``lo = bf16(K - hi)``: ``hi + lo`` is
 within ``delta |K| + eta`` of ``K`` with ``delta = 2^-33`` (bfloat16 keeps 8 of the remainder's
 bits, the remainder is at most ``2^-24 |K|``) and ``eta = 2^-133`` (the subnormal ranges of both
-formats). Each product entry is a sum of at most ``2N + 4`` float64 terms in some order, so
+formats); ``hi + lo`` is exact in float64. Each product entry is a sum of ``N`` float64 terms in
+some order, so
 (Higham, *Accuracy and Stability of Numerical Algorithms*, eq. 3.5)
-``|computed (K v)_i - (K v)_i| <= (delta' + gamma_{2N+4} (1 + delta')) sum_j |K_ij v_j| +
+``|computed (K v)_i - (K v)_i| <= (delta' + gamma_{N+4} (1 + delta')) sum_j |K_ij v_j| +
 eta ||v||_1`` with ``delta' = (1 + delta)^2 (1 + u) - 1``, which also covers the squared entries
 of :meth:`TriangleCopy.square_matmul`: :meth:`TriangleCopy.error` turns it into a bound relative
 to ``||b_i|| ||v||``.
@@ -117,7 +118,7 @@ class TriangleCopy:
         ``min_norm``, and of ``|computed ((K o K) w)_i - ((K o K) w)_i| / (||b_i||^2 max|w|)``
         (module docstring; ``|K_ij| <= ||b_i||`` for a symmetric ``K``)."""
         u = torch.finfo(self.dtype).eps / 2.0
-        m = 2 * self.n + 4
+        m = self.n + 4
         gamma = m * u / (1.0 - m * u)
         store = (1.0 + _DELTA) ** 2 * (1.0 + u) - 1.0
         rel = store + gamma * (1.0 + store)
@@ -135,34 +136,20 @@ class TriangleCopy:
         n = self.n
         V = V.to(self.dtype)
         out = V.new_zeros(n, V.shape[1])
-        if square:  # (hi + lo)^2: the sum first
-            buf = V.new_empty(2, self.rows, n)
-            s = 0
-            for hi, lo in zip(self.his, self.los, strict=True):
-                r = hi.shape[0]
-                e = s + r
-                b = buf[0, :r, : n - s]
-                b.copy_(hi)
-                b.add_(buf[1, :r, : n - s].copy_(lo)).square_()
-                out[s:e].addmm_(b, V[s:])
-                if e < n:
-                    out[e:].addmm_(b[:, r:].T, V[s:e])
-                s = e
-            return out
-        # hi and lo converted into one buffer (rows [0, r) and [r, 2r)); their products are
-        # summed in float64 (2N terms an entry)
-        buf = V.new_empty(2 * self.rows, n)
+        buf = V.new_empty(2, self.rows, n)
         s = 0
         for hi, lo in zip(self.his, self.los, strict=True):
             r = hi.shape[0]
             e = s + r
-            b = buf[: 2 * r, : n - s]
-            b[:r].copy_(hi)
-            b[r:].copy_(lo)
-            out[s:e].addmm_(b[:r], V[s:]).addmm_(b[r:], V[s:])
+            b = buf[0, :r, : n - s]
+            b.copy_(hi)
+            # hi + lo is exact in float64 (lo holds the bits below hi's)
+            b.add_(buf[1, :r, : n - s].copy_(lo))
+            if square:
+                b.square_()
+            out[s:e].addmm_(b, V[s:])
             if e < n:
-                Vs = V[s:e]
-                out[e:].addmm_(b[:, r:].T, torch.cat([Vs, Vs]))
+                out[e:].addmm_(b[:, r:].T, V[s:e])
             s = e
         return out
 
