@@ -357,3 +357,26 @@ def test_bernoulli_float32_screening_takes_the_exact_decisions():
     assert screen.active.tolist() == exact.active.tolist()
     assert screen.n_iter == exact.n_iter
     assert screen.log_evidence == pytest.approx(exact.log_evidence, abs=1e-9)
+
+
+@pytest.mark.parametrize("k", [1, 2, 5, 32, 33])
+def test_thin_matmul_within_highams_bound(k):
+    """``thin_matmul`` (the transposed product for thin right-hand sides) is ``A @ W`` within
+    ``gamma_m sum |A| |W|``, on a column view of a wider buffer (as the solver's ``Phi``)."""
+    from bayes_fdi.rvm.sbl_decisions import rounding_gamma, thin_matmul
+
+    rng = np.random.default_rng(k)
+    buf = torch.tensor(rng.standard_normal((700, 64)))
+    A = buf[:, :50]  # (700, 50) view, row stride 64
+    W = torch.tensor(rng.standard_normal((50, k)))
+    got = thin_matmul(A, W)
+    assert got.shape == (700, k)
+    exact = A.numpy().astype(np.longdouble) @ W.numpy().astype(np.longdouble)
+    bound = rounding_gamma(50, torch.float64) * (A.abs() @ W.abs()).numpy()
+    assert (np.abs(got.numpy() - exact) <= bound).all()
+    # the transposed use of the solver (Phi^T B for candidate columns B)
+    B = torch.tensor(rng.standard_normal((700, k)))
+    got_t = thin_matmul(A.T, B)
+    exact_t = A.numpy().T.astype(np.longdouble) @ B.numpy().astype(np.longdouble)
+    bound_t = rounding_gamma(700, torch.float64) * (A.T.abs() @ B.abs()).numpy()
+    assert (np.abs(got_t.numpy() - exact_t) <= bound_t).all()

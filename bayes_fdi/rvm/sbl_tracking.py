@@ -39,7 +39,12 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl_decisions import gaussian_screened_Q, rounding_gamma, screened_factors
+from bayes_fdi.rvm.sbl_decisions import (
+    gaussian_screened_Q,
+    rounding_gamma,
+    screened_factors,
+    thin_matmul,
+)
 from bayes_fdi.rvm.sbl_numerics import _Factor
 
 __all__ = ["Posterior", "TrackedFactors", "posterior_context"]
@@ -485,7 +490,7 @@ class TrackedFactors:
         Cm = self.C[:, :M]
         # one pass over C o C: dS = (C o C) Delta, ||A^-1/2 Delta c||^2, ||A'^-1/2 Delta c||^2
         sq = Delta * Delta
-        prods = (Cm * Cm) @ torch.stack([Delta, sq / old.abar, sq / new.abar], dim=1)
+        prods = thin_matmul(Cm * Cm, torch.stack([Delta, sq / old.abar, sq / new.abar], dim=1))
         dS = prods[:, 0]
         dc_old = prods[:, 1].clamp_min(0.0).sqrt() * (1.0 + gM)
         dc_new = prods[:, 2].clamp_min(0.0).sqrt() * (1.0 + gM)
