@@ -18,15 +18,16 @@ triangle in 6 bytes an entry (a float32 value and a bfloat16 remainder:
 used by ``rmatmul(V, exact=False)``: the ``B^T b_i`` products that screen candidate columns in
 the fast solvers.  The products are accumulated in float64 from cache-sized blocks converted
 on the fly, so their error is the stored entries' (relative ``2^-33``) plus float64
-accumulation -- about ``5e-10`` of ``||b_i|| ||v||``, against ``~N 2^-24`` (``1e-3`` at
+accumulation -- about ``2.3e-10`` of ``||b_i|| ||v||``, against ``~N 2^-24`` (``1e-3`` at
 ``N = 20000``) had they been float32 products.  Everything that enters the model -- active
 columns, ``B^T t``, column norms and the Gram entries between active columns -- stays exact
 float64, and the solvers decide every action on exact factors within the rigorous error bound of
 those products (:meth:`Design.screening_error`), so the fit is the same as with the float64
 matrix.  With ``screen=None`` (the default) a design on the CPU keeps the copy when the float64
 matrix exceeds ``max_bytes`` and the copy fits it (``N`` from about 15 800 to 25 800 at the
-default 2 GB), where recomputing the kernel rows for every product costs ~15x more
-(``docs/rvm-benchmark.md``).  On other devices the rows are recomputed there, which is cheap.
+default 2 GB); recomputing the kernel rows for every product instead made the smooth benchmark
+fit at ``N = 20000`` ten times slower (``docs/rvm-benchmark.md``).  On other devices the rows
+are recomputed there, which is cheap.
 """
 
 from __future__ import annotations
