@@ -181,3 +181,19 @@ def test_fit_on_the_copy_is_the_same_on_another_blas_code_path_and_thread_count(
     for a in outs[1:]:
         assert a[:2] == outs[0][:2]  # basis and iteration count
         assert float(a[2]) == pytest.approx(float(outs[0][2]), abs=1e-9)
+
+
+def test_tiny_matrices_and_more_rows_than_samples():
+    """One sample, and blocks asked larger than the matrix: the products are still K v."""
+    X = torch.tensor([[0.3]], dtype=torch.float64)
+    one = TriangleCopy(RBF(1.0), X, rows=10**6)
+    assert one.rows == 1 and one.nbytes == ENTRY_BYTES
+    v = torch.tensor([[2.5]], dtype=torch.float64)
+    assert one.matmul(v).item() == 2.5  # K = [[1]]
+    X3 = torch.tensor([[0.0], [1.0], [3.0]], dtype=torch.float64)
+    K = torch.tensor(rbf(X3.numpy(), 1.0))
+    copy = TriangleCopy(RBF(1.0), X3, rows=50)
+    V = torch.tensor([[1.0, -1.0], [2.0, 0.5], [-3.0, 4.0]], dtype=torch.float64)
+    norms = torch.linalg.vector_norm(K, dim=0)
+    bound = copy.error(float(norms.min())) * norms[:, None] * torch.linalg.vector_norm(V, dim=0)
+    assert bool(((copy.matmul(V) - K @ V).abs() <= bound).all())

@@ -78,7 +78,7 @@ class TriangleCopy:
         if X.dtype != torch.float64:
             raise TypeError(f"the screening copy is for float64 designs, got {X.dtype}")
         n = X.shape[0]
-        self.n, self.rows = n, max(1, int(rows))
+        self.n, self.rows = n, max(1, min(int(rows), n))
         self.dtype, self.device = X.dtype, X.device
         self.his: list[Tensor] = []
         self.los: list[Tensor] = []
