@@ -17,28 +17,18 @@ from __future__ import annotations
 
 import difflib
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from blas_paths import EVERYTHING_ELSE, REFERENCE, blas_env
 from tiny_campaign import CAMPAIGN, STATES
 
 from bayes_fdi.experiments.campaign_cache import load_or_simulate
 from bayes_fdi.experiments.reproduce_report import render_report
 
 SEED = 3
-#: The reference: the default code paths of MKL and OpenBLAS, one thread.
-REFERENCE = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-#: Everything changed at once: MKL's AVX2 code path, OpenBLAS's Haswell kernels, two threads.
-EVERYTHING_ELSE = {
-    "MKL_CBWR": "AVX2",
-    "OPENBLAS_CORETYPE": "Haswell",
-    "OMP_NUM_THREADS": "2",
-    "MKL_NUM_THREADS": "2",
-    "OPENBLAS_NUM_THREADS": "2",
-}
 #: Keys of results.json that hold wall-clock times (or whether the cache was hit).
 _TIMING = {"seconds", "simulate_seconds", "fit_seconds", "predict_seconds", "cached"}
 
@@ -82,11 +72,9 @@ def assert_same_figures(a: Path, b: Path) -> None:
 
 def run_reproduce(out: Path, env: dict[str, str], args: list[str]) -> Path:
     """``bayes-fdi reproduce --out out ARGS`` in a fresh interpreter with ``env`` added."""
-    full = {k: v for k, v in os.environ.items() if not k.startswith(("MKL_", "OPENBLAS_", "OMP_"))}
-    full.update(env)
     cmd = [sys.executable, "-m", "bayes_fdi", "reproduce", "--out", str(out), "--no-progress"]
     proc = subprocess.run(
-        [*cmd, *args], env=full, capture_output=True, text=True, timeout=1800, check=False
+        [*cmd, *args], env=blas_env(env), capture_output=True, text=True, timeout=1800, check=False
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out

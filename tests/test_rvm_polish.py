@@ -7,15 +7,12 @@ the pool recomputed by numpy."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+from blas_paths import EVERYTHING_ELSE, REFERENCE, run_python
 from test_rvm_regression import gaussian_log_evidence
 
 from bayes_fdi.rvm import RVR, load
@@ -273,33 +270,7 @@ def test_polished_fit_is_the_same_on_another_blas_code_path_and_thread_count():
     same basis and iteration count under MKL's AVX2 path, OpenBLAS's Haswell kernels and two
     threads as on the default path with one (evidence to rounding)."""
     script = _SCRIPT.format(tests=str(Path(__file__).parent))
-    outs = []
-    for env in (
-        {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"},
-        {
-            "MKL_CBWR": "AVX2",
-            "OPENBLAS_CORETYPE": "Haswell",
-            "OMP_NUM_THREADS": "2",
-            "MKL_NUM_THREADS": "2",
-            "OPENBLAS_NUM_THREADS": "2",
-        },
-    ):
-        full = {
-            k: v for k, v in os.environ.items() if not k.startswith(("MKL_", "OPENBLAS_", "OMP_"))
-        }
-        full.update(env)
-        with tempfile.TemporaryDirectory() as cwd:
-            proc = subprocess.run(
-                [sys.executable, "-c", script],
-                env=full,
-                cwd=cwd,
-                capture_output=True,
-                text=True,
-                timeout=600,
-                check=False,
-            )
-        assert proc.returncode == 0, proc.stderr[-2000:]
-        outs.append(proc.stdout.split())
+    outs = [run_python(script, env).split() for env in (REFERENCE, EVERYTHING_ELSE)]
     a, b = outs
     assert a[:-2] == b[:-2]  # basis and iteration count
     assert float(a[-2]) == pytest.approx(float(b[-2]), rel=1e-12)

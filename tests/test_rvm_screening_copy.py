@@ -5,14 +5,11 @@ float64 matrix held in memory."""
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
-import tempfile
 
 import numpy as np
 import pytest
 import torch
+from blas_paths import EVERYTHING_ELSE, REFERENCE, run_python
 
 from bayes_fdi.rvm import RBF, RVC, RVR, Linear
 from bayes_fdi.rvm.design import Design
@@ -150,33 +147,11 @@ def test_fit_on_the_copy_is_the_same_on_another_blas_code_path_and_thread_count(
     matrix in memory: the same basis and iteration count under MKL's AVX2 path, OpenBLAS's
     Haswell kernels and two threads as on the default path with one (the evidence to rounding),
     and the same with either storage."""
-    outs = []
-    for env in (
-        {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"},
-        {
-            "MKL_CBWR": "AVX2",
-            "OPENBLAS_CORETYPE": "Haswell",
-            "OMP_NUM_THREADS": "2",
-            "MKL_NUM_THREADS": "2",
-            "OPENBLAS_NUM_THREADS": "2",
-        },
-    ):
-        full = {
-            k: v for k, v in os.environ.items() if not k.startswith(("MKL_", "OPENBLAS_", "OMP_"))
-        }
-        full.update(env)
-        with tempfile.TemporaryDirectory() as cwd:
-            proc = subprocess.run(
-                [sys.executable, "-c", _SCRIPT],
-                env=full,
-                cwd=cwd,
-                capture_output=True,
-                text=True,
-                timeout=600,
-                check=False,
-            )
-        assert proc.returncode == 0, proc.stderr[-2000:]
-        outs.extend(line.rsplit(" ", 2) for line in proc.stdout.strip().splitlines())
+    outs = [
+        line.rsplit(" ", 2)
+        for env in (REFERENCE, EVERYTHING_ELSE)
+        for line in run_python(_SCRIPT, env).strip().splitlines()
+    ]
     assert len(outs) == 4
     for a in outs[1:]:
         assert a[:2] == outs[0][:2]  # basis and iteration count

@@ -222,27 +222,33 @@ class Design:
                 out[self.offset + start : self.offset + stop] = rows.square_() @ w
         return out
 
-    def screening_error(self) -> float:
-        """Bound on the error of ``rmatmul(v, exact=False)[i] / ||b_i||`` for a unit vector ``v``
-        (and of ``sq_rmatmul(w, exact=False)[i]`` relative to ``sum_j b_ij^2 |w_j|``).
+    def product_error(self) -> float:
+        """Bound on the error of ``b_i^T v / ||b_i||`` for a unit vector ``v`` when both are
+        exact columns in the working precision (``columns``: the Gram entries among active
+        columns), and of ``rmatmul`` from a matrix held in that precision.
 
         A dot product of ``N`` terms in a precision of unit roundoff ``u`` is within
         ``N u / (1 - N u) * sum |b_ij v_j| <= N u / (1 - N u) * ||b_i|| ||v||`` of the exact one,
         whatever the summation order (Higham, *Accuracy and Stability of Numerical Algorithms*,
-        eq. 3.5): blocked, threaded and vectorised BLAS kernels all satisfy it. With the
-        screening copy the rounding of the stored entries is added
-        (:meth:`TriangleCopy.error <bayes_fdi.rvm.screening_copy.TriangleCopy.error>`); a few
-        more roundings cover storing ``v`` and evaluating the kernel rows and columns separately.
+        eq. 3.5): blocked, threaded and vectorised BLAS kernels all satisfy it. A few more
+        roundings cover storing ``v`` and evaluating the kernel rows and columns separately.
         """
         u = torch.finfo(self.dtype).eps / 2.0
         n = self.n_samples + 8
-        gamma = n * u / (1.0 - n * u)
-        if self.screen_copy is not None:
-            norms = self.screen_copy.norms
-            usable = norms[norms > 0]
-            min_norm = float(usable.min()) if usable.numel() else 1.0
-            return self.screen_copy.error(min_norm) + gamma
-        return gamma
+        return n * u / (1.0 - n * u)
+
+    def screening_error(self) -> float:
+        """Bound on the error of ``rmatmul(v, exact=False)[i] / ||b_i||`` for a unit vector ``v``
+        (and of ``sq_rmatmul(w, exact=False)[i]`` relative to ``sum_j b_ij^2 |w_j|``): that of
+        :meth:`product_error`, plus with the screening copy the rounding of its stored entries
+        (:meth:`TriangleCopy.error <bayes_fdi.rvm.screening_copy.TriangleCopy.error>`).
+        """
+        if self.screen_copy is None:
+            return self.product_error()
+        norms = self.screen_copy.norms
+        usable = norms[norms > 0]
+        min_norm = float(usable.min()) if usable.numel() else 1.0
+        return self.screen_copy.error(min_norm) + self.product_error()
 
     def column_norms(self) -> Tensor:
         """Exact Euclidean norms of all ``N_B`` columns."""

@@ -189,10 +189,9 @@ def fast_gaussian(
     beta_tol = max(_MIN_DELTA_LOG_BETA, N * torch.finfo(dtype).eps)
 
     eps = design.screening_error()  # error bound of the cosines in B^T Phi
-    # the Gram entries among active columns are products of exact columns in the design's dtype
-    # (stored at each addition), whatever precision screens the candidates: within gamma_{N+8}
-    # (unit columns), as Design.screening_error of a matrix held in that dtype
-    gram_eps = min(eps, rounding_gamma(N + 8, dtype))
+    # the Gram entries among active columns are products of exact columns (stored at each
+    # addition), whatever precision screens the candidates
+    gram_eps = design.product_error()
     if start is None:
         # initial basis: largest |b^T t| among usable columns
         # (B^T t is exact: near-ties, e.g. duplicated columns, go to the lowest index)
