@@ -276,17 +276,28 @@ def test_render_saved_reproduces_the_report(tmp_path):
     assert "Command: `python x.py` (total 9 s wall)." in bench.render_saved(path)
 
 
-def test_floor_counts_the_fits_products_and_iterations_without_changing_it():
-    """benchmarks/rvm_floor.py: one counted decision per iteration, a product for each basis
-    column ever added, the floor as the sum of its parts, the fit itself unchanged, and the
-    solver's functions restored afterwards (counts and identities only: no timing asserted)."""
+def test_floor_counts_the_fits_products_and_iterations_without_changing_it(monkeypatch):
+    """benchmarks/rvm_floor.py: one counted decision per iteration, exactly one product for the
+    first column and one per addition (additions counted separately, at the carried factors'
+    update), the fit itself unchanged, and the solver's functions restored afterwards (counts
+    only: no timing asserted)."""
     floor = _load("rvm_floor")
     import bayes_fdi.rvm.sbl_gaussian as sbl_gaussian
     from bayes_fdi.rvm import RVR
     from bayes_fdi.rvm.design import Design
+    from bayes_fdi.rvm.sbl_tracking import TrackedFactors
 
+    additions = [0]
+    add = TrackedFactors.add
+
+    def counted_add(self, *args, **kwargs):
+        additions[0] += 1
+        return add(self, *args, **kwargs)
+
+    monkeypatch.setattr(TrackedFactors, "add", counted_add)
     rmatmul, decide = Design.rmatmul, sbl_gaussian.lazy_verified_action
     r = floor.measure("smooth", 300)
+    n_add = additions[0]  # the measured fit's (the reference fit below adds its own)
     assert Design.rmatmul is rmatmul and sbl_gaussian.lazy_verified_action is decide
     data = bench.make_data(300, problem="smooth")
     ref = RVR(kernel="rbf", width=bench.PROBLEMS["smooth"].sigma, method="fast", bias=True)
@@ -294,17 +305,8 @@ def test_floor_counts_the_fits_products_and_iterations_without_changing_it():
     assert r["log_evidence"] == ref.log_evidence_
     assert r["iterations"] == ref.n_iter_ == r["decisions"]
     assert r["relevance_vectors"] == len(ref.relevance_indices_)
-    # the initial column's product, then one per addition (at most one per iteration)
-    assert r["relevance_vectors"] <= r["products"] <= r["iterations"] + 1
+    assert n_add >= r["relevance_vectors"] - 1 > 0
+    assert r["products"] == 1 + n_add
     assert r["relevance_vectors"] <= r["M_max"] and 1 <= r["mean_M"] <= r["M_max"]
-    # the ms figures are the seconds times 1e3: equal to a few roundings
-    close = dict(rel_tol=1e-12, abs_tol=0.0)
-    assert math.isclose(r["floor_products_s"], r["products"] * r["product_ms"] / 1e3, **close)
-    assert r["floor_s"] == r["floor_products_s"] + r["floor_updates_s"]
     assert r["product_mb"] == 8 * 300 * 301 / 2 / 1e6  # dsymv reads one float64 triangle
-    fastest_s = min(r["product_ms"], r["stream_ms"]) / 1e3
-    assert math.isclose(
-        r["floor_streaming_s"], r["products"] * fastest_s + r["floor_updates_s"], **close
-    )
-    assert r["floor_streaming_s"] <= r["floor_s"]
     assert math.isnan(r["target_s"])  # no target at N = 300
