@@ -27,22 +27,22 @@ from bayes_fdi.cli_arguments import UsageError
 #: command name -> (module path, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": (
-        "bayes_fdi.experiments.campaigns",
+        "bayes_fdi.campaigns.simulation",
         "simulate a campaign TOML file into a netCDF dataset",
     ),
     "plot": ("bayes_fdi.datasets.plotting", "plot the signals of chosen runs of a dataset"),
-    "reproduce": ("bayes_fdi.experiments.reproduce", "reproduce the paper's tables (the main job)"),
+    "reproduce": ("bayes_fdi.paper.reproduce", "reproduce the paper's tables (the main job)"),
     "calibration-report": (
         "bayes_fdi.calibration.report",
         "write a calibration report for a diagnoser on a test dataset",
     ),
     "benchmark": (
-        "bayes_fdi.experiments.benchmark",
+        "bayes_fdi.benchmark.harness",
         "score the online diagnoser on the DAMADICS benchmark's 44 scenarios (PICalc indices)",
     ),
     "rvm-demo": ("bayes_fdi.rvm.demo", "fit an RVM on a small sinc problem and print it"),
-    "fit": ("bayes_fdi.experiments.model_fitting", "fit an online diagnoser and save it to a file"),
-    "diagnose": ("bayes_fdi.experiments.recording_diagnosis", "diagnose recordings, 1 s at a time"),
+    "fit": ("bayes_fdi.deployment.fitting", "fit an online diagnoser and save it to a file"),
+    "diagnose": ("bayes_fdi.deployment.diagnose", "diagnose recordings, 1 s at a time"),
 }
 
 

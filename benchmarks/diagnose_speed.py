@@ -109,7 +109,7 @@ def write_days(path: Path, days: int) -> float:
 
 def model_file(args, work: Path) -> tuple[str, object]:
     """The model file to benchmark (written for the stand-in) and the loaded model."""
-    from bayes_fdi.diagnosis import persistence
+    from bayes_fdi import model_files
 
     if args.stand_in:
         sys.path.insert(0, str(ROOT / "tests"))
@@ -120,13 +120,13 @@ def model_file(args, work: Path) -> tuple[str, object]:
 
         model = StreamDouble().fit(xr.concat([load_lublin_example()], dim="run"))
         path = work / "stand-in.npz"
-        persistence.save(model, path)
+        model_files.save(model, path)
         return str(path), model
     if args.model:
-        from bayes_fdi.experiments.model_fitting import load_online_model
+        from bayes_fdi.deployment.fitting import load_online_model
 
         return args.model, load_online_model(args.model)
-    from bayes_fdi.experiments.model_fitting import default_model, default_model_path
+    from bayes_fdi.deployment.fitting import default_model, default_model_path
 
     model = default_model(progress=True)
     return str(default_model_path()), model
@@ -191,14 +191,15 @@ def bench_roundtrip(args, work: Path, model) -> dict:
     import torch
     import xarray as xr
 
+    from bayes_fdi import model_files
+    from bayes_fdi.campaigns.shipped import campaign_path
+    from bayes_fdi.campaigns.simulation import simulate_campaign
     from bayes_fdi.datasets import load_lublin_example
-    from bayes_fdi.diagnosis import FaultDiagnoser, persistence
-    from bayes_fdi.diagnosis.seva import to_frame
-    from bayes_fdi.experiments.campaigns import simulate_campaign
-    from bayes_fdi.experiments.shipped_campaigns import campaign_path
+    from bayes_fdi.diagnosis import FaultDiagnoser
+    from bayes_fdi.diagnosis.seva.windows import to_frame
 
     torch.set_num_threads(1)
-    from bayes_fdi.experiments.campaigns import load_campaign
+    from bayes_fdi.campaigns.simulation import load_campaign
 
     campaign = load_campaign(campaign_path("paper-simulated"), runs_per_state=6,
                              states=["fn", "f1", "f2", "f17", "f18"])  # fmt: skip
@@ -216,10 +217,10 @@ def bench_roundtrip(args, work: Path, model) -> dict:
     ):  # fmt: skip
         path = work / "roundtrip.npz"
         t0 = time.perf_counter()
-        persistence.save(obj, path)
+        model_files.save(obj, path)
         save_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        back = persistence.load(path)
+        back = model_files.load(path)
         load_s = time.perf_counter() - t0
         exact = True
         for a, b in zip(check(obj), check(back), strict=True):
@@ -235,8 +236,8 @@ def bench_roundtrip(args, work: Path, model) -> dict:
 
 
 def bench_simulate(args, work: Path) -> dict:
-    from bayes_fdi.experiments.distributed import cluster_client
-    from bayes_fdi.experiments.shipped_campaigns import campaign_path
+    from bayes_fdi.campaigns.shipped import campaign_path
+    from bayes_fdi.distributed import cluster_client
 
     toml = str(campaign_path(args.campaign))
     base = ["simulate", toml, "--out", str(work / "sim.nc"), "--quiet"]

@@ -9,7 +9,7 @@ Usage (repository root, after ``bayes-fdi reproduce`` has cached the campaigns):
 ``paper-*``: the paper protocol's fault-free runs (first 20 fit, the rest scored), from the
 netCDF cache (``--cache-dir``, default ``.cache/datasets``); ``hour``: the real Lublin hour,
 fitted on its first half and scored on its second. ``--width reproduce`` uses the width of
-:func:`bayes_fdi.experiments.paper_setup.select_regression_width` instead of ``NormalModels``'
+:func:`bayes_fdi.paper.setup.select_regression_width` instead of ``NormalModels``'
 default search.
 Prints coverage at 50/80/90/95 % and mean widths for raw RVR stds, one calibration factor and
 the default (five ``|dCV/dt|`` bins).
@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 
 from bayes_fdi.calibration.summaries import normal_model_summary, split_in_time
+from bayes_fdi.campaigns.cache import split_train_test
 from bayes_fdi.datasets import load_dataset, load_lublin_example
 from bayes_fdi.diagnosis import NormalModels
-from bayes_fdi.experiments.campaign_cache import split_train_test
-from bayes_fdi.experiments.paper_setup import PAPER_STATES, select_regression_width
+from bayes_fdi.paper.setup import PAPER_STATES, select_regression_width
 from bayes_fdi.rvm import RVR
 
 CONFIGS = {

@@ -68,7 +68,7 @@ def main() -> None:
     if args.model:
         model, source = OnlineDiagnoser.load(args.model), args.model
     else:
-        from bayes_fdi.experiments.online_training import fit_online_diagnoser
+        from bayes_fdi.default_diagnoser import fit_online_diagnoser
 
         model = fit_online_diagnoser(small=args.small, progress=False)
         source = f"fit_online_diagnoser(small={args.small})"

@@ -17,7 +17,7 @@ import numpy as np
 import xarray as xr
 from sklearn.base import BaseEstimator
 
-from bayes_fdi.diagnosis import persistence
+from bayes_fdi import model_files
 
 X_GROUP = ("f1", "f7", "f10")
 F_GROUP = ("f17", "f18", "f19")
@@ -40,7 +40,7 @@ def _arrays(ds: xr.Dataset) -> dict[str, np.ndarray]:
     }
 
 
-@persistence.register_persistable
+@model_files.register_persistable
 class StreamDouble(BaseEstimator):
     """``fit(normal_runs, fault_runs=None)``, ``run(recording, state=None, return_state=False)``."""
 
@@ -149,8 +149,8 @@ class StreamDouble(BaseEstimator):
         return (ds, state) if return_state else ds
 
     def save(self, path):
-        return persistence.save(self, path)
+        return model_files.save(self, path)
 
     @classmethod
     def load(cls, path):
-        return persistence.load(path, expected=cls)
+        return model_files.load(path, expected=cls)

@@ -269,7 +269,7 @@ def test_the_installed_command_prints_one_line_and_no_traceback(tmp_path):
 
 def test_output_errors_come_before_the_simulation(tmp_path, capsys, monkeypatch):
     """A bad --out is found while parsing: the (3800-run) simulation is never started."""
-    from bayes_fdi.experiments import campaigns
+    from bayes_fdi.campaigns import simulation as campaigns
 
     def must_not_run(*args, **kwargs):
         raise AssertionError("simulate_campaign was called before the output path was checked")

@@ -3,7 +3,7 @@
 Each entry builds a batch of runs (or windows) with one bad one and states the SEVA status that
 record must get, while the good records of the same batch are still diagnosed. The last two
 entries (a window with no complete sample, an infinite novelty score) failed before the online
-work on `bayes_fdi.diagnosis.seva`: the batch raised, and the record came out confident.
+work on `bayes_fdi.diagnosis.seva.windows`: the batch raised, and the record came out confident.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from sklearn.linear_model import LogisticRegression
 
 from bayes_fdi.datasets import make_dataset
 from bayes_fdi.diagnosis import FaultDiagnoser, KernelRidgeRegressor
-from bayes_fdi.diagnosis.seva import (
+from bayes_fdi.diagnosis.seva.windows import (
     NoveltyReference,
     SevaStatus,
     records_from_diagnosis,

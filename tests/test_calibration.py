@@ -445,7 +445,7 @@ def test_node_calibration_uses_the_nodes_own_scaling(rng):
     from sklearn.linear_model import LogisticRegression
 
     from bayes_fdi.calibration import node_calibration
-    from bayes_fdi.diagnosis.tree import HierarchicalClassifier
+    from bayes_fdi.diagnosis.isolation.tree import HierarchicalClassifier
 
     centres = {"a": (0.0, 0.0), "b": (0.03, 0.0), "c": (0.0, 0.03)}
     y = np.repeat(list(centres), 60)

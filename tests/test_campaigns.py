@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bayes_fdi.experiments.campaigns import (
+from bayes_fdi.campaigns.simulation import (
     Campaign,
     CampaignError,
     load_campaign,
@@ -216,8 +216,8 @@ def test_label_tables_agree_with_the_model_and_the_dataset_format():
     # campaigns keeps its own copies (it imports neither xarray nor the numba model at import
     # time); they must not drift from the tables they copy
     from bayes_fdi.actuator import FAULT_NAMES, SIGNED_FAULTS
+    from bayes_fdi.campaigns import simulation as campaigns
     from bayes_fdi.datasets.format import PROFILES, STATES
-    from bayes_fdi.experiments import campaigns
 
     assert campaigns.STATES == STATES
     assert campaigns.FAULTS == FAULT_NAMES

@@ -10,9 +10,9 @@ import scipy.io
 import xarray as xr
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
+from bayes_fdi.campaigns.simulation import load_campaign, simulate_campaign
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import load_dataset, save_dataset, validate_dataset
-from bayes_fdi.experiments.campaigns import load_campaign, simulate_campaign
 
 SIM = Path(__file__).parents[1] / "sim"
 MAT = Path(__file__).parents[1] / "bayes_fdi" / "data" / "OneHourTestData_ExampleII.mat"

@@ -14,12 +14,12 @@ import xarray as xr
 from conftest import sine_inputs
 from stream_double import StreamDouble
 
+from bayes_fdi import model_files
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import CHANNELS, make_dataset
-from bayes_fdi.diagnosis import persistence
-from bayes_fdi.experiments import model_fitting
-from bayes_fdi.experiments.recording_diagnosis import diagnose_recording, supports_chunks
-from bayes_fdi.experiments.stream_files import CSV_COLUMNS, AlarmCollector
+from bayes_fdi.deployment import fitting as model_fitting
+from bayes_fdi.deployment.diagnose import diagnose_recording, supports_chunks
+from bayes_fdi.deployment.stream_files import CSV_COLUMNS, AlarmCollector
 
 
 def recording(rng, T=1200, faults=((300, 420, "F", 0.05), (800, 860, "X", 0.06)), gap=None):
@@ -142,7 +142,7 @@ def test_alarm_collector_across_chunks():
 def _saved(model, tmp_path):
     path = tmp_path / "model.npz"
     if not path.exists():
-        persistence.save(model, path)
+        model_files.save(model, path)
     return str(path)
 
 
@@ -163,7 +163,7 @@ def test_fit_from_recordings_and_diagnose_cli(tmp_path, rng, monkeypatch, capsys
             "physical", "--out", str(model_file), "--quiet"]  # fmt: skip
     assert main(argv) == 0
     assert "StreamDouble fitted on 2 fault-free and 1 fault recording(s)" in capsys.readouterr().out
-    fitted = persistence.load(model_file)
+    fitted = model_files.load(model_file)
     assert fitted.n_fault_runs_ == 1
     out = tmp_path / "out"
     argv = ["diagnose", str(paths[1]), "--model", str(model_file), "--units", "physical",
@@ -180,7 +180,7 @@ def test_fit_from_recordings_and_diagnose_cli(tmp_path, rng, monkeypatch, capsys
 
 def _offline(tmp_path):
     from bayes_fdi.diagnosis import FaultDiagnoser, KernelRidgeRegressor, svm_classifier
-    from bayes_fdi.diagnosis.tree import HierarchicalClassifier
+    from bayes_fdi.diagnosis.isolation.tree import HierarchicalClassifier
 
     rng = np.random.default_rng(0)
     runs = xr.concat([recording(rng, 60, faults=()) for _ in range(6)], dim="run")
@@ -234,7 +234,7 @@ def _day_file(path, rng, start=57000, n=1400):
 
 
 def test_real_fault_events_of_a_day_file_are_scored(model, tmp_path, rng):
-    from bayes_fdi.experiments.performance_indices import picalc
+    from bayes_fdi.scoring.picalc import picalc
 
     day = _day_file(tmp_path / "17112001.txt", rng)
     out = tmp_path / "out"
@@ -286,7 +286,7 @@ def test_fit_from_a_shipped_campaign(tmp_path, monkeypatch, capsys):
         argv += ["--set", text]
     assert main(argv) == 0
     assert "fitted on campaign paper-simulated" in capsys.readouterr().out
-    assert persistence.load(out).n_fault_runs_ == 2
+    assert model_files.load(out).n_fault_runs_ == 2
     assert main(["fit", "--campaign", "no-such-campaign", "--out", str(out)]) == 2
     shipped = ("shipped: damadics-benchmark, online-faults-abrupt, online-faults-incipient, "
                "online-normal, paper-lublin, paper-simulated")  # fmt: skip

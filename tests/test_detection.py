@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 from scipy.linalg import solve_toeplitz
 
-from bayes_fdi.diagnosis.detection import CUSUM, GLR, detection_decision
-from bayes_fdi.diagnosis.thresholds import (
+from bayes_fdi.diagnosis.detection.detectors import CUSUM, GLR, detection_decision
+from bayes_fdi.diagnosis.detection.thresholds import (
     calibrate_threshold,
     cusum_arl,
     cusum_threshold,
     empirical_arl,
 )
-from bayes_fdi.diagnosis.whitening import ARWhitener, levinson_durbin
+from bayes_fdi.diagnosis.detection.whitening import ARWhitener, levinson_durbin
 
 
 def _hand_cusum(e, k, cap):

@@ -25,8 +25,8 @@ import pytest
 from blas_paths import EVERYTHING_ELSE, REFERENCE, blas_env
 from tiny_campaign import CAMPAIGN, STATES
 
-from bayes_fdi.experiments.campaign_cache import load_or_simulate
-from bayes_fdi.experiments.reproduce_report import render_report
+from bayes_fdi.campaigns.cache import load_or_simulate
+from bayes_fdi.paper.report import render_report
 
 SEED = 3
 #: Keys of results.json that hold wall-clock times (or whether the cache was hit).

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayes_fdi.diagnosis.tree import INERTIA_RTOL, design_tree
-from bayes_fdi.diagnosis.width_search import EVIDENCE_TIE_NATS, evidence_grid_search
+from bayes_fdi.diagnosis.isolation.tree import INERTIA_RTOL, design_tree
+from bayes_fdi.diagnosis.normal_models.width_search import EVIDENCE_TIE_NATS, evidence_grid_search
 
 CORNERS = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 

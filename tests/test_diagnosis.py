@@ -9,9 +9,13 @@ from conftest import sine_inputs
 from sklearn.linear_model import LogisticRegression
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.diagnosis import FaultDiagnoser
-from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor, svm_classifier, svm_fault_diagnoser
-from bayes_fdi.diagnosis.tree import HierarchicalClassifier
+from bayes_fdi.diagnosis import (
+    FaultDiagnoser,
+    KernelRidgeRegressor,
+    svm_classifier,
+    svm_fault_diagnoser,
+)
+from bayes_fdi.diagnosis.isolation.tree import HierarchicalClassifier
 
 NOISE = 0.005
 # Fault signatures as (X offset, F offset) after onset: distinct residual means.
@@ -141,7 +145,7 @@ def test_seva_output_statuses(data, rng):
     """The diagnoser's SEVA records: confident fn -> CLEAR, confident fault -> BLURRED,
     missing signals -> BLIND, inputs far outside training -> DAZZLED; VMV/VU from the
     normal models at the stated coverage."""
-    from bayes_fdi.diagnosis.seva import SevaStatus, to_frame
+    from bayes_fdi.diagnosis.seva.windows import SevaStatus, to_frame
 
     normal, labelled, _ = data
     # A tree of logistic regressions: confident on these well-separated residual offsets.

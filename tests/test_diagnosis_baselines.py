@@ -7,12 +7,8 @@ import pytest
 from sklearn.svm import SVC
 from sklearn.utils.estimator_checks import estimator_checks_generator
 
-from bayes_fdi.diagnosis.baselines import (
-    SMO_TOL,
-    KernelRidgeRegressor,
-    SVMClassifier,
-    svm_classifier,
-)
+from bayes_fdi.diagnosis import KernelRidgeRegressor
+from bayes_fdi.diagnosis.isolation.svm import SMO_TOL, SVMClassifier, svm_classifier
 
 
 def test_kernel_ridge_loo_matches_brute_force(rng):

@@ -7,9 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bayes_fdi.diagnosis import FaultDiagnoser
-from bayes_fdi.diagnosis.baselines import svm_fault_diagnoser
-from bayes_fdi.experiments.campaigns import load_campaign, simulate_campaign
+from bayes_fdi.campaigns.simulation import load_campaign, simulate_campaign
+from bayes_fdi.diagnosis import FaultDiagnoser, svm_fault_diagnoser
 from bayes_fdi.rvm import RVR
 
 # States whose mean residuals the paper's two features separate well in the simulator.

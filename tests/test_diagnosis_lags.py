@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.diagnosis import FaultDiagnoser, NormalModels
-from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor
+from bayes_fdi.diagnosis import FaultDiagnoser, KernelRidgeRegressor, NormalModels
 
 OFFSETS = {"fn": (0.0, 0.0), "f1": (0.04, 0.0), "f2": (0.0, -0.04)}
 

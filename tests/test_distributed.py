@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from bayes_fdi.campaigns.simulation import load_campaign, simulate_campaign
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import load_dataset
-from bayes_fdi.experiments.campaigns import load_campaign, simulate_campaign
-from bayes_fdi.experiments.distributed import cluster_client, run_tasks
+from bayes_fdi.distributed import cluster_client, run_tasks
 
 pytest.importorskip("dask.distributed")
 SIM = Path(__file__).parents[1] / "sim"

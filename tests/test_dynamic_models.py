@@ -1,4 +1,4 @@
-"""Dynamic normal models of the online diagnoser (bayes_fdi.diagnosis.dynamic_models)."""
+"""Dynamic normal models of the online diagnoser (bayes_fdi.diagnosis.normal_models.dynamic)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
-from bayes_fdi.diagnosis.dynamic_models import (
+from bayes_fdi.diagnosis.normal_models.dynamic import (
     RAIL_TOL,
     DynamicNormalModels,
     dynamic_inputs,

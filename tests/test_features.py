@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bayes_fdi.diagnosis.features import (
+from bayes_fdi.diagnosis.isolation.features import (
     DEFAULT_FEATURES,
     FEATURES,
     extract_features,

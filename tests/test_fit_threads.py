@@ -9,7 +9,7 @@ import pytest
 import torch
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from bayes_fdi.diagnosis.tree import HierarchicalClassifier
+from bayes_fdi.diagnosis.isolation.tree import HierarchicalClassifier
 from bayes_fdi.rvm import RVC, RVR
 from bayes_fdi.rvm.threads import fit_threads, get_fit_threads, limit_fit_threads, set_fit_threads
 

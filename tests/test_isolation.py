@@ -1,12 +1,13 @@
-"""Isolation features, groups, novelty and the fault isolator (bayes_fdi.diagnosis.isolation),
-and the compiled predictors they use (bayes_fdi.diagnosis.lean_predictors)."""
+"""Isolation features, groups, novelty and the fault isolator
+(bayes_fdi.diagnosis.isolation.isolator), and the compiled predictors they use
+(bayes_fdi.diagnosis.normal_models.compiled)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from bayes_fdi.diagnosis.isolation import (
+from bayes_fdi.diagnosis.isolation.isolator import (
     INPUT_REFERENCE_SECONDS,
     ISOLATION_FEATURES,
     SLOPE_RIDGE,
@@ -16,8 +17,8 @@ from bayes_fdi.diagnosis.isolation import (
     isolation_features,
     pairwise_confusion,
 )
-from bayes_fdi.diagnosis.lean_predictors import LeanRVR, LeanTree
-from bayes_fdi.diagnosis.tree import HierarchicalClassifier
+from bayes_fdi.diagnosis.isolation.tree import HierarchicalClassifier
+from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR, LeanTree
 from bayes_fdi.rvm import RVC, RVR
 
 
@@ -62,7 +63,7 @@ def test_features_equal_direct_window_statistics(rng):
     np.testing.assert_allclose(feats[320], _reference_features(320, 300, cols, ref),
                                rtol=1e-9, atol=1e-12)  # fmt: skip
     # continuing from a carried state equals processing the whole run
-    from bayes_fdi.diagnosis.isolation import new_feature_state
+    from bayes_fdi.diagnosis.isolation.isolator import new_feature_state
 
     st = new_feature_state()
     first = isolation_features(dd[:200], *(c[:200] for c in cols), state=st)
@@ -71,7 +72,7 @@ def test_features_equal_direct_window_statistics(rng):
 
 
 def test_groups_equal_the_paper_pipelines_find_groups(rng):
-    from bayes_fdi.experiments.reproduce import find_groups
+    from bayes_fdi.paper.reproduce import find_groups
 
     states = [f"f{i}" for i in range(1, 9)]
     for _ in range(20):

@@ -1,5 +1,5 @@
-"""The online diagnoser (bayes_fdi.diagnosis.online): the decision stream's contract, update
-equal to run, gaps, detection only."""
+"""The online diagnoser (bayes_fdi.diagnosis.online.diagnoser): the decision stream's contract,
+update equal to run, gaps, detection only."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from sklearn.base import clone
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.diagnosis import OnlineDiagnoser
-from bayes_fdi.diagnosis.dynamic_models import DynamicNormalModels
-from bayes_fdi.diagnosis.seva import SevaRecord, SevaStatus
+from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
+from bayes_fdi.diagnosis.seva.windows import SevaRecord, SevaStatus
 
 CHANNELS = ("CV", "P1", "P2", "T1", "X", "F")
 
@@ -249,7 +249,7 @@ def test_normal_runs_as_a_list_of_datasets_of_different_durations(recording):
 
 
 def test_onset_inputs_novel_holds_the_envelope_check_of_the_pre_detection_average():
-    from bayes_fdi.diagnosis.online_state import onset_inputs_novel
+    from bayes_fdi.diagnosis.online.state import onset_inputs_novel
 
     low, high = np.zeros(4), np.full(4, 0.4)
     dd = np.array([0, 0, 0, 1, 1, 1, 0, 0, 1, 1], dtype=bool)

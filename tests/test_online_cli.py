@@ -10,11 +10,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from bayes_fdi.benchmark.scenarios import SCENARIOS
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import load_lublin_example
+from bayes_fdi.deployment import fitting as model_fitting
 from bayes_fdi.diagnosis import OnlineDiagnoser
-from bayes_fdi.experiments import model_fitting
-from bayes_fdi.experiments.scenarios import SCENARIOS
 
 
 @pytest.fixture(scope="module")

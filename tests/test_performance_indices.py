@@ -7,7 +7,7 @@ t_hor = 1500, so the fault-free part holds 600 s, the faulty part 600 s, the zon
 import numpy as np
 import pytest
 
-from bayes_fdi.experiments import PICALC_KEYS, UNDETERMINED, picalc
+from bayes_fdi.scoring import PICALC_KEYS, UNDETERMINED, picalc
 
 T = np.arange(0.0, 1500.0)
 ZONE = {"t_on": 300, "t_from": 900, "t_hor": 1500}

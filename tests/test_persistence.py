@@ -11,6 +11,7 @@ import pytest
 import xarray as xr
 from conftest import sine_inputs
 
+from bayes_fdi import model_files
 from bayes_fdi.calibration import DirichletScaler, TemperatureScaler
 from bayes_fdi.datasets import make_dataset
 from bayes_fdi.diagnosis import (
@@ -18,11 +19,10 @@ from bayes_fdi.diagnosis import (
     HierarchicalClassifier,
     KernelRidgeRegressor,
     NormalModels,
-    persistence,
     svm_classifier,
     svm_fault_diagnoser,
 )
-from bayes_fdi.diagnosis.seva import to_frame
+from bayes_fdi.diagnosis.seva.windows import to_frame
 from bayes_fdi.rvm import RBF, RVC, RVR
 
 OFFSETS = {"fn": (0, 0), "f1": (0.04, 0), "f2": (0, -0.04), "f3": (0.03, 0.03)}
@@ -105,8 +105,8 @@ def test_shared_objects_stay_shared(svm_diagnoser, tmp_path):
 def test_components_and_recalibrators_round_trip(data, rvm_diagnoser, tmp_path):
     _, labelled, test = data
     nm = rvm_diagnoser.normal_models_
-    persistence.save(nm, tmp_path / "nm.npz")
-    back = persistence.load(tmp_path / "nm.npz", expected=NormalModels)
+    model_files.save(nm, tmp_path / "nm.npz")
+    back = model_files.load(tmp_path / "nm.npz", expected=NormalModels)
     xr.testing.assert_identical(back.residuals(test), nm.residuals(test))
 
     proba = rvm_diagnoser.diagnose(labelled)["proba"].values
@@ -114,8 +114,8 @@ def test_components_and_recalibrators_round_trip(data, rvm_diagnoser, tmp_path):
     for scaler in (TemperatureScaler(), DirichletScaler(reg_lambda=1e-2, reg_mu=1e-2)):
         scaler.fit(proba, y)
         path = tmp_path / f"{type(scaler).__name__}.npz"
-        persistence.save(scaler, path)
-        again = persistence.load(path, expected=type(scaler))
+        model_files.save(scaler, path)
+        again = model_files.load(path, expected=type(scaler))
         np.testing.assert_array_equal(again.transform(proba), scaler.transform(proba))
 
 
@@ -130,8 +130,8 @@ def test_rvm_with_composite_kernel_and_float32(tmp_path, rng):
         (tree, lambda m: m.predict_proba(X)),
     ):
         path = tmp_path / "m.npz"
-        persistence.save(obj, path)
-        back = persistence.load(path)
+        model_files.save(obj, path)
+        back = model_files.load(path)
         for u, v in zip(np.atleast_1d(check(back)), np.atleast_1d(check(obj)), strict=True):
             np.testing.assert_array_equal(u, v)
 
@@ -141,13 +141,13 @@ def test_file_is_plain_npz_without_pickle(rvm_diagnoser, tmp_path):
     rvm_diagnoser.save(path)
     with np.load(path, allow_pickle=False) as z:  # readable with numpy alone, no pickle
         meta = json.loads(str(z["metadata"]))
-        assert meta["format"] == persistence.FORMAT_NAME
-        assert meta["format_version"] == persistence.FORMAT_VERSION
-        assert meta["root_class"] == "bayes_fdi.diagnosis.diagnoser:FaultDiagnoser"
+        assert meta["format"] == model_files.FORMAT_NAME
+        assert meta["format_version"] == model_files.FORMAT_VERSION
+        assert meta["root_class"] == "bayes_fdi.diagnosis.fault_diagnoser:FaultDiagnoser"
         assert set(z.files) == {"metadata", *meta["arrays"]}
         for key, spec in meta["arrays"].items():
             assert z[key].dtype.str == spec["dtype"] and list(z[key].shape) == spec["shape"]
-    assert persistence.read_metadata(path)["root_class"] == meta["root_class"]
+    assert model_files.read_metadata(path)["root_class"] == meta["root_class"]
 
 
 def test_atomic_write_leaves_no_partial_file(rvm_diagnoser, tmp_path, monkeypatch):
@@ -253,7 +253,7 @@ def test_foreign_newer_and_mismatched_files(saved, tmp_path, rng):
 
     meta = _meta(saved)
     newer = tmp_path / "newer.npz"
-    meta_newer = dict(meta, format_version=persistence.FORMAT_VERSION + 1)
+    meta_newer = dict(meta, format_version=model_files.FORMAT_VERSION + 1)
     _rewrite(
         saved,
         newer,
@@ -263,7 +263,7 @@ def test_foreign_newer_and_mismatched_files(saved, tmp_path, rng):
         FaultDiagnoser.load(newer)
 
     with pytest.raises(ValueError, match="holds a FaultDiagnoser, not a NormalModels"):
-        persistence.load(saved, expected=NormalModels)
+        model_files.load(saved, expected=NormalModels)
 
 
 def test_missing_array_and_forbidden_class(saved, tmp_path):
@@ -277,7 +277,7 @@ def test_missing_array_and_forbidden_class(saved, tmp_path):
     path = tmp_path / "evil.npz"
     _rewrite(saved, path, lambda n, b: _metadata_member(evil) if n == "metadata.npy" else b)
     with pytest.raises(ValueError, match="'os:system' is not allowed"):
-        persistence.load(path)
+        model_files.load(path)
 
     inner = json.loads(json.dumps(meta).replace('"bayes_fdi.rvm.kernels:RBF"', '"os:system"'))
     sneaky = dict(meta, root={"__object__": meta["root_class"], "state": {"x": {
@@ -287,7 +287,7 @@ def test_missing_array_and_forbidden_class(saved, tmp_path):
             saved, path, lambda n, b, v=variant: _metadata_member(v) if n == "metadata.npy" else b
         )
         with pytest.raises(ValueError, match="is not allowed"):
-            persistence.load(path)
+            model_files.load(path)
 
 
 def test_size_limit_is_checked_before_decompressing(saved, tmp_path):
@@ -311,7 +311,7 @@ def test_size_limit_is_checked_before_decompressing(saved, tmp_path):
 def test_enums_tuples_sets_and_odd_dict_keys(tmp_path):
     """Every JSON encoding of the format, through a generic object of the model layers."""
     from bayes_fdi.diagnosis import SevaStatus
-    from bayes_fdi.diagnosis.interval_scaling import StdScaler
+    from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
 
     obj = StdScaler()
     obj.extra_ = {
@@ -327,8 +327,8 @@ def test_enums_tuples_sets_and_odd_dict_keys(tmp_path):
         "fortran": np.asfortranarray(np.arange(6.0).reshape(2, 3)),
     }
     obj.extra_["same"] = obj.extra_["fortran"]  # one array, referenced twice
-    persistence.save(obj, tmp_path / "x.npz")
-    back = persistence.load(tmp_path / "x.npz", expected=StdScaler).extra_
+    model_files.save(obj, tmp_path / "x.npz")
+    back = model_files.load(tmp_path / "x.npz", expected=StdScaler).extra_
     assert back["status"] is SevaStatus.BLURRED
     assert back["tuple"] == (1, 2.5, "x") and back["set"] == {1, 2, 3}
     assert back["frozen"] == frozenset({"a"}) and isinstance(back["frozen"], frozenset)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from sklearn.metrics import confusion_matrix
 
-from bayes_fdi.experiments.reproduce_report import (
+from bayes_fdi.paper.report import (
     PAPER_ACCURACY,
     PAPER_NODE_VECTORS,
     comparison_table,

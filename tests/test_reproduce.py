@@ -10,7 +10,7 @@ import pytest
 from sklearn.metrics import brier_score_loss
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.experiments.reproduce import (
+from bayes_fdi.paper.reproduce import (
     classification_metrics,
     configure_parser,
     evaluate_dataset,
@@ -265,7 +265,7 @@ def test_pairwise_separability_matches_sklearn_loo(rng):
 def test_paired_comparison_by_hand():
     from scipy.stats import binom
 
-    from bayes_fdi.experiments.reproduce import paired_comparison
+    from bayes_fdi.paper.reproduce import paired_comparison
 
     y = ["a"] * 10
     a = ["a"] * 7 + ["b"] * 3  # right on runs 0-6

@@ -9,12 +9,12 @@ import pytest
 from tiny_campaign import CAMPAIGN, STATES
 
 from bayes_fdi.cli import main
-from bayes_fdi.experiments.reproduce_report import confusion_table
+from bayes_fdi.paper.report import confusion_table
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
-    from bayes_fdi.experiments.reproduce import reproduce
+    from bayes_fdi.paper.reproduce import reproduce
 
     tmp = tmp_path_factory.mktemp("reproduce")
     toml = tmp / "tiny.toml"
@@ -112,7 +112,7 @@ def test_single_threaded_limits_and_restores():
     import torch
     from threadpoolctl import threadpool_info
 
-    from bayes_fdi.experiments.reproduce import single_threaded
+    from bayes_fdi.paper.reproduce import single_threaded
 
     before = torch.get_num_threads()
     with single_threaded():

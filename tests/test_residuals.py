@@ -13,12 +13,12 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 
 from bayes_fdi.datasets import make_dataset
 from bayes_fdi.diagnosis import (
+    KernelRidgeRegressor,
     NegativePressureDropWarning,
     NormalModels,
     genetic_width_search,
     model_inputs,
 )
-from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor
 
 NOISE = 0.005
 

@@ -225,7 +225,7 @@ def hand_inputs(ds, lag2=False):
 def test_width_searches_and_predictions_use_the_lagged_inputs():
     """Evidence search, GA and predict all see ``3 + len(lags)`` inputs; predictions equal an
     independent fit of the same regressor on hand-built lagged inputs."""
-    from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor
+    from bayes_fdi.diagnosis import KernelRidgeRegressor
 
     rng = np.random.default_rng(13)
     train, test = first_order_plant(3, rng, T=40), first_order_plant(2, rng, T=40)
@@ -252,7 +252,7 @@ def test_width_searches_and_predictions_use_the_lagged_inputs():
 
 
 def test_default_normal_models_are_the_static_paper_models():
-    from bayes_fdi.diagnosis.baselines import KernelRidgeRegressor
+    from bayes_fdi.diagnosis import KernelRidgeRegressor
 
     rng = np.random.default_rng(14)
     train, test = first_order_plant(3, rng, T=50), first_order_plant(1, rng, T=50)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bayes_fdi.actuator import NOISE_STD, benchmark_inputs, simulate
-from bayes_fdi.experiments.scenarios import (
+from bayes_fdi.benchmark.scenarios import (
     BENCHMARK_SEED,
     FAULT_FREE_SEED,
     SCENARIOS,
@@ -71,7 +71,7 @@ def test_no_training_campaign_draws_the_benchmarks_noise_streams():
     # simulate_campaign(seed=s) draws its noise from a seed derived from s (a 32-bit hash), not
     # from s itself: none of the derived noise seeds of the training seeds 0..999 may be a
     # benchmark or fault-free seed, or a training run could share a benchmark run's noise
-    from bayes_fdi.experiments.campaigns import _derived_seeds
+    from bayes_fdi.campaigns.simulation import _derived_seeds
 
     reserved = set(benchmark_seeds(1000)) | {FAULT_FREE_SEED}
     derived = {_derived_seeds(s)[1] for s in range(1000)}
@@ -136,7 +136,7 @@ def test_fault_free_hours_cover_warmup_plus_the_budget():
 def test_the_campaign_file_lists_the_same_scenarios():
     from pathlib import Path
 
-    from bayes_fdi.experiments.campaigns import load_campaign
+    from bayes_fdi.campaigns.simulation import load_campaign
 
     c = load_campaign(Path(__file__).parents[1] / "sim" / "damadics-benchmark.toml")
     faulty = [s for s in c.scenarios if s.state != "fn"]

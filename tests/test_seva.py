@@ -1,4 +1,4 @@
-"""Tests of the SEVA output (bayes_fdi.diagnosis.seva) on constructed diagnoses."""
+"""Tests of the SEVA output (bayes_fdi.diagnosis.seva.windows) on constructed diagnoses."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 import xarray as xr
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.diagnosis.seva import (
+from bayes_fdi.diagnosis.seva.windows import (
     ClassDistribution,
     NoveltyReference,
     SevaRecord,

@@ -8,8 +8,13 @@ from sklearn.linear_model import LogisticRegression
 from sklearn.preprocessing import StandardScaler
 from sklearn.utils.estimator_checks import estimator_checks_generator
 
-from bayes_fdi.diagnosis.baselines import svm_classifier
-from bayes_fdi.diagnosis.tree import PAPER_TREE, HierarchicalClassifier, _leaves, design_tree
+from bayes_fdi.diagnosis import svm_classifier
+from bayes_fdi.diagnosis.isolation.tree import (
+    PAPER_TREE,
+    HierarchicalClassifier,
+    _leaves,
+    design_tree,
+)
 
 
 def blobs(centres: dict, n: int, rng: np.random.Generator, scale: float = 0.1):

@@ -3,7 +3,7 @@
 :func:`interval_coverage`, :func:`pit_values`, :func:`pit_histogram`, :func:`plot_pit_histogram`,
 :func:`crps_gaussian` for predictive distributions ``N(mean, std**2)``; the recalibration of
 the standard deviations, :class:`StdScaler`, lives with the normal models that use it
-(`bayes_fdi.diagnosis.interval_scaling`) and is re-exported here.
+(`bayes_fdi.diagnosis.normal_models.std_scaler`) and is re-exported here.
 
 Written by hand: the PIT and the closed-form Gaussian CRPS are a few lines of scipy.stats
 (no maintained library in the dependencies offers them for Gaussian predictions).
@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy import stats
 
-from bayes_fdi.diagnosis.interval_scaling import StdScaler, check_gaussian
+from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler, check_gaussian
 
 __all__ = [
     "DEFAULT_LEVELS",

@@ -321,7 +321,7 @@ def _build_diagnoser(method: str, seed: int) -> Any:
         raise RuntimeError(f"bayes_fdi.diagnosis is not available: {err}") from None
     if method == "rvm":
         return FaultDiagnoser(random_state=seed)
-    from bayes_fdi.diagnosis.baselines import svm_fault_diagnoser
+    from bayes_fdi.diagnosis import svm_fault_diagnoser
 
     return svm_fault_diagnoser(random_state=seed)
 

@@ -180,7 +180,7 @@ def time_split_summary(
     normal_model
         An unfitted model with ``fit(runs) -> self`` and ``predict(runs) -> Dataset`` of
         ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std`` (e.g.
-        ``bayes_fdi.diagnosis.normal_models.NormalModels``).
+        ``bayes_fdi.diagnosis.normal_models.static.NormalModels``).
     runs
         Fault-free runs.
     fraction

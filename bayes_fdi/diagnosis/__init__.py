@@ -1,51 +1,52 @@
-"""Fault diagnosis: normal models, residuals, features, the isolation tree and the SEVA output.
+"""Fault diagnosis of an actuator, by concept, shared by the offline and the online diagnoser.
 
-- `bayes_fdi.diagnosis.model_inputs`: the normal models' inputs ``(CV, sqrt(P1 - P2), T1)`` and
-  optional delayed commands.
-- `bayes_fdi.diagnosis.width_search`: the kernel-width searches (summed evidence over a grid; the
-  paper's GA).
-- `bayes_fdi.diagnosis.normal_models`: `NormalModels`, the fault-free RVR models ``g1``, ``g2``
-  of ``X`` and ``F`` and their residuals.
-- `bayes_fdi.diagnosis.interval_scaling`: recalibration of their predictive standard deviations.
-- `bayes_fdi.diagnosis.interval_calibration`: the cross-fitted factors per command-speed bin
-  that `NormalModels` applies to them.
-- `bayes_fdi.diagnosis.features`: residual features (a registry).
-- `bayes_fdi.diagnosis.tree`: the k-means designed binary tree of classifiers.
-- `bayes_fdi.diagnosis.baselines`: the SVM baseline through the same interfaces.
-- `bayes_fdi.diagnosis.diagnoser`: `FaultDiagnoser`, the paper's offline pipeline.
-- `bayes_fdi.diagnosis.seva`: the self-validating (SEVA) records of a diagnosis
-  (`bayes_fdi.diagnosis.seva_record`: the record and its conversions;
-  `bayes_fdi.diagnosis.seva_rules`: thresholds, screening and status rules;
-  `bayes_fdi.diagnosis.novelty`: the nearest-neighbour novelty reference).
-- `bayes_fdi.diagnosis.persistence`: model files of fitted diagnosers, without pickle
-  (`bayes_fdi.diagnosis.model_codec`: the object tree as JSON and arrays;
-  `bayes_fdi.diagnosis.persistable`: the classes a file may hold).
+- `bayes_fdi.diagnosis.normal_models`: fault-free models of X and F (the residual generators).
+- `bayes_fdi.diagnosis.detection`: whitening, sequential tests and thresholds (online).
+- `bayes_fdi.diagnosis.isolation`: residual features, the k-means tree of RVM (or SVM)
+  classifiers, the online isolator with its isolability groups and novelty.
+- `bayes_fdi.diagnosis.seva`: the self-validating output (records, statuses, rules).
+- `bayes_fdi.diagnosis.fault_diagnoser`: `FaultDiagnoser`, the paper's offline pipeline (one
+  diagnosis per run or window) and its SVM baseline `svm_fault_diagnoser`.
+- `bayes_fdi.diagnosis.online`: `OnlineDiagnoser`, the 1 Hz diagnoser (detection, isolation
+  and SEVA status every second, ``run`` over a recording or ``update`` per sample).
+
+Which diagnoser when: `FaultDiagnoser` labels whole runs (or windows) the way the paper does,
+for studies on labelled datasets; `OnlineDiagnoser` is the field device, second by second.
+
+May import `bayes_fdi.rvm`, `bayes_fdi.datasets`, `bayes_fdi.model_files` and the foundation;
+never `bayes_fdi.calibration` (which builds on it) or an application.
 """
 
-from bayes_fdi.diagnosis.baselines import (
-    KernelRidgeRegressor,
-    SVMClassifier,
-    svm_classifier,
-    svm_fault_diagnoser,
-)
-from bayes_fdi.diagnosis.diagnoser import FaultDiagnoser
-from bayes_fdi.diagnosis.features import (
+from bayes_fdi.diagnosis.fault_diagnoser import FaultDiagnoser, svm_fault_diagnoser
+from bayes_fdi.diagnosis.isolation import (
     DEFAULT_FEATURES,
     FEATURES,
+    PAPER_TREE,
+    HierarchicalClassifier,
+    SVMClassifier,
+    TreeNode,
+    design_tree,
     extract_features,
     register_feature,
+    svm_classifier,
     window_bounds,
 )
-from bayes_fdi.diagnosis.interval_scaling import StdScaler
-from bayes_fdi.diagnosis.model_inputs import (
+from bayes_fdi.diagnosis.normal_models import (
     MODEL_INPUTS,
+    WIDTH_GRID,
+    DynamicNormalModels,
+    EvidenceGridResult,
+    GAResult,
+    KernelRidgeRegressor,
     NegativePressureDropWarning,
+    NormalModels,
+    StdScaler,
+    evidence_grid_search,
+    genetic_width_search,
     input_names,
     model_inputs,
 )
-from bayes_fdi.diagnosis.normal_models import NormalModels
-from bayes_fdi.diagnosis.online import OnlineDiagnoser
-from bayes_fdi.diagnosis.online_state import StreamState
+from bayes_fdi.diagnosis.online import OnlineDiagnoser, StreamState
 from bayes_fdi.diagnosis.seva import (
     ClassDistribution,
     NoveltyReference,
@@ -53,14 +54,6 @@ from bayes_fdi.diagnosis.seva import (
     SevaStatus,
     SevaThresholds,
     seva_records,
-)
-from bayes_fdi.diagnosis.tree import PAPER_TREE, HierarchicalClassifier, TreeNode, design_tree
-from bayes_fdi.diagnosis.width_search import (
-    WIDTH_GRID,
-    EvidenceGridResult,
-    GAResult,
-    evidence_grid_search,
-    genetic_width_search,
 )
 
 __all__ = [
@@ -70,6 +63,7 @@ __all__ = [
     "PAPER_TREE",
     "WIDTH_GRID",
     "ClassDistribution",
+    "DynamicNormalModels",
     "EvidenceGridResult",
     "FaultDiagnoser",
     "GAResult",

@@ -2,7 +2,8 @@
 
 Each fixture is a model file as 0.1.0 saved it, beside the output it gave on a fixed recording
 (``*.expected.nc``): the loading test checks that today's bayes_fdi reads the file and gives
-the same output. Run from the repository root: ``python tests/data/model_files_0.1.0/make_fixtures.py``.
+the same output. Run from the repository root:
+``python tests/data/model_files_0.1.0/make_fixtures.py``.
 """
 
 from __future__ import annotations
@@ -10,13 +11,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from bayes_fdi.diagnosis.diagnoser import FaultDiagnoser
+from bayes_fdi.diagnosis.dynamic_models import DynamicNormalModels
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.calibration import TemperatureScaler
 from bayes_fdi.datasets import make_dataset
 from bayes_fdi.diagnosis import OnlineDiagnoser, svm_fault_diagnoser
-from bayes_fdi.diagnosis.diagnoser import FaultDiagnoser
-from bayes_fdi.diagnosis.dynamic_models import DynamicNormalModels
 from bayes_fdi.rvm import RVR
 
 HERE = Path(__file__).parent
@@ -50,8 +51,14 @@ def main() -> None:
     normal = simulate(benchmark_inputs(3, 300, seed=1, vary=True), seed=1)
     specs = [Fault(f, s, 80.0) for f in ("f1", "f18") for s in (0.5, 0.7, 0.9, 1.0, 0.6)]
     faults = simulate(benchmark_inputs(len(specs), 240, seed=2, vary=True), specs, seed=2)
-    models = DynamicNormalModels(x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=150,
-                                 max_train_samples=200, calibration_folds=2, random_state=0)
+    models = DynamicNormalModels(
+        x_widths=(8.0,),
+        f_widths=(0.1,),
+        evidence_max_samples=150,
+        max_train_samples=200,
+        calibration_folds=2,
+        random_state=0,
+    )
     diag = OnlineDiagnoser(models, calibrator=TemperatureScaler(), max_signatures_per_fault=12)
     diag.fit(normal, faults)
     rec = online_recording()

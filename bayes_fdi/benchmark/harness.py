@@ -1,0 +1,589 @@
+"""The DAMADICS benchmark (Step I) for the online diagnoser: ``bayes-fdi benchmark --out DIR``.
+
+:func:`run_benchmark` takes a fitted online diagnoser (the contract of
+:class:`bayes_fdi.diagnosis.OnlineDiagnoser`: ``run(recording)`` returns the 1 Hz decision
+stream; ``sklearn.base.clone`` + ``fit(normal_runs)`` gives a fresh detector) and
+
+1. simulates the 44 Step-I scenarios (:mod:`bayes_fdi.benchmark.scenarios`) with N noise
+   seeds, each up to its own ``t_hor``, in batches of equal horizon (bounded memory; the model
+   runs once per scenario, each seed only draws its noise);
+2. runs the diagnoser on every batch (it sees the six channels only, no labels), derives the
+   benchmark's decision signals DD, PID, CID from the stream and the truth
+   (:func:`decision_signals`) and computes PICalc's indices
+   (:func:`bayes_fdi.scoring.picalc`);
+3. measures what the faults do to the measured signals against the noise
+   (:func:`fault_effects`), the group-level calibration of the per-second isolation
+   probabilities, the false alarms of simulated fault-free hours and of the second half of the
+   real Lublin hour (detector refitted on its first half);
+4. writes ``DIR/benchmark.json``, ``DIR/benchmark.md`` (:mod:`.benchmark_report`), one timeline
+   figure per scenario (first seed) and a reliability diagram.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import xarray as xr
+
+from bayes_fdi.actuator import NOISE_STD, benchmark_inputs, simulate
+from bayes_fdi.benchmark.scenarios import (
+    SCENARIOS,
+    BenchmarkScenario,
+    benchmark_seeds,
+    fault_free_hours,
+    simulate_scenario,
+)
+from bayes_fdi.datasets import CHANNELS
+from bayes_fdi.diagnosis.online.timeline import plot_timeline
+from bayes_fdi.scoring.picalc import picalc
+
+__all__ = [
+    "CALIBRATION_SECONDS_PER_RUN",
+    "CONFIDENT",
+    "DecisionSignals",
+    "configure_parser",
+    "decision_signals",
+    "fault_effects",
+    "rising_edges",
+    "run_benchmark",
+    "run_from_cli",
+]
+
+#: Each run contributes at most this many detected faulty seconds (evenly spaced) to the
+#: calibration sample, so the day-long ramps (84 600 faulty s) do not outweigh the abrupt
+#: faults (600 faulty s).
+CALIBRATION_SECONDS_PER_RUN = 600
+#: A group probability above this is "confident" (the isolation target counts confident wrong
+#: groups).
+CONFIDENT = 0.9
+#: Samples per call of ``diagnoser.run`` (runs of equal horizon are batched up to this).
+MAX_BATCH_SAMPLES = 300_000
+_TRUTH_COORDS = ("state", "strength", "onset", "profile", "ramp")
+_MEASURED = ("X", "F", "P1", "P2", "T1")
+
+
+class DecisionSignals(NamedTuple):
+    """The benchmark's decision signals of one run, per second (see :func:`decision_signals`)."""
+
+    dd: np.ndarray
+    pid: np.ndarray
+    cid: np.ndarray
+    indicated: np.ndarray
+    group_sizes: np.ndarray
+    true_group: int | None
+
+
+def rising_edges(high: Any) -> int:
+    """Number of rising edges of a 0/1 stream (a stream high at its first sample counts one)."""
+    h = np.asarray(high, dtype=bool)
+    return int(h[:1].sum() + (h[1:] & ~h[:-1]).sum())
+
+
+def _high(values: Any) -> np.ndarray:
+    """A decision as bool; NaN (no decision, e.g. BLIND) is low, as in :func:`picalc`."""
+    a = np.asarray(values)
+    return a.astype(bool) if a.dtype == bool else np.nan_to_num(a.astype(float)) != 0
+
+
+def decision_signals(stream: xr.Dataset, fault: str) -> DecisionSignals:
+    """DD, PID, CID and the indicated groups of one run, given its true fault.
+
+    Following the benchmark's definitions (``ONLINE_CONTRACT.md``): ``PID = indicated[:, g]``
+    for the group ``g`` holding ``fault`` and ``CID`` = the number of other groups indicated.
+    A fault of DGN0 (the stream's ``undetectable`` attribute) has ``PID = not DD`` and an
+    extra DGN0 column (``not DD``, holding the undetectable faults plus the OK state) in
+    ``indicated`` for ``dacc``. A fault in no group and not in DGN0 is never isolated
+    (``PID`` always low, ``true_group`` None).
+    """
+    if "run" in stream.dims:
+        raise ValueError("decision_signals: pass the stream of one run (no 'run' dimension)")
+    groups = json.loads(stream.attrs["groups"])
+    undetectable = list(json.loads(stream.attrs.get("undetectable", "[]")))
+    labels = [str(g) for g in stream["group"].values]
+    dd = _high(stream["DD"].values)
+    ind = _high(stream["indicated"].transpose("time", "group").values)
+    sizes = np.array([len(groups[g]) for g in labels], dtype=np.int64)
+    true_group = next((i for i, g in enumerate(labels) if fault in groups[g]), None)
+    n_named = ind.sum(axis=1)
+    if fault in undetectable:
+        pid = ~dd
+        ind = np.concatenate([ind, pid[:, None]], axis=1)
+        sizes = np.append(sizes, len(undetectable) + 1)
+        return DecisionSignals(dd, pid, n_named, ind, sizes, None)
+    if true_group is None:
+        return DecisionSignals(dd, np.zeros_like(dd), n_named, ind, sizes, None)
+    pid = ind[:, true_group]
+    return DecisionSignals(dd, pid, n_named - pid, ind, sizes, true_group)
+
+
+def _strip_truth(ds: xr.Dataset) -> xr.Dataset:
+    """The six channels only: the diagnoser must not see the labels."""
+    return ds[list(CHANNELS)].drop_vars([c for c in _TRUTH_COORDS if c in ds.coords])
+
+
+# ----------------------------------------------------------------------------------------------
+# what the faults do to the measurements
+# ----------------------------------------------------------------------------------------------
+def fault_effects(scenarios: Sequence[BenchmarkScenario]) -> list[dict[str, Any]]:
+    """The effect of each scenario's fault on the measured signals, against the sensor noise.
+
+    Noise-free simulations with and without the fault (same inputs; clipped to the sensors'
+    range as the measurements are) are compared over the faulty part ``[t_from, t_hor)``. Per
+    channel: the RMS and the largest absolute difference in units of the measurement noise
+    :data:`~bayes_fdi.actuator.NOISE_STD`. ``deflection`` is ``sqrt(sum_t sum_c (e_c(t) /
+    sigma)^2)`` over X, F, P1, P2, T1: the separation that an ideal detector knowing the exact
+    noise-free signal with and without the fault (a matched filter) would see against white
+    noise, an upper bound for any method using these signals; ``oracle_time`` is the first
+    second after ``t_from`` at which its running value reaches 5 (``None`` if never).
+    """
+    out: list[dict[str, Any]] = []
+    by_horizon: dict[float, list[BenchmarkScenario]] = {}
+    for s in scenarios:
+        by_horizon.setdefault(s.t_hor, []).append(s)
+    for t_hor, group in by_horizon.items():
+        duration = round(t_hor)
+        inputs = benchmark_inputs(n_runs=len(group) + 1, duration=duration, vary=False)
+        clean = simulate(inputs, [None] + [s.fault_spec() for s in group], noise=False)
+        for r, s in enumerate(group, start=1):
+            faulty = np.arange(duration) >= s.t_from
+            e = (
+                np.stack(
+                    [clean[c].values[r, faulty] - clean[c].values[0, faulty] for c in _MEASURED]
+                )
+                / NOISE_STD
+            )
+            running = np.sqrt(np.cumsum((e**2).sum(axis=0)))
+            reach = np.flatnonzero(running >= 5.0)
+            out.append(
+                {
+                    "scenario": s.name,
+                    "rms": {c: float(np.sqrt(np.mean(e[i] ** 2))) for i, c in enumerate(_MEASURED)},
+                    "max": {c: float(np.max(np.abs(e[i]))) for i, c in enumerate(_MEASURED)},
+                    "deflection": float(running[-1]),
+                    "oracle_time": float(reach[0]) if reach.size else None,
+                }
+            )
+    order = {s.name: i for i, s in enumerate(scenarios)}
+    return sorted(out, key=lambda d: order[d["scenario"]])
+
+
+# ----------------------------------------------------------------------------------------------
+# the runner
+# ----------------------------------------------------------------------------------------------
+def _batches(scenarios, seeds, max_samples):
+    """Lists of (scenario, seeds) whose runs share a horizon, at most ``max_samples`` each."""
+    by_horizon: dict[float, list[tuple[BenchmarkScenario, int]]] = {}
+    for s in scenarios:
+        by_horizon.setdefault(s.t_hor, []).extend((s, seed) for seed in seeds)
+    for t_hor, pairs in by_horizon.items():
+        per_batch = max(1, int(max_samples // t_hor))
+        for i in range(0, len(pairs), per_batch):
+            chunk = pairs[i : i + per_batch]
+            grouped: dict[str, tuple[BenchmarkScenario, list[int]]] = {}
+            for s, seed in chunk:
+                grouped.setdefault(s.name, (s, []))[1].append(seed)
+            yield list(grouped.values())
+
+
+class _Simulations:
+    """Each scenario simulated once with all its seeds, kept until its last run is taken."""
+
+    def __init__(self, scenarios: Sequence[BenchmarkScenario], seeds: Sequence[int]) -> None:
+        self.seeds = list(seeds)
+        self.left = {s.name: len(self.seeds) for s in scenarios}
+        self.cache: dict[str, xr.Dataset] = {}
+
+    def take(self, scenario: BenchmarkScenario, seeds: Sequence[int]) -> xr.Dataset:
+        if scenario.name not in self.cache:
+            self.cache[scenario.name] = simulate_scenario(scenario, self.seeds)
+        runs = self.cache[scenario.name].sel(run=list(seeds))
+        self.left[scenario.name] -= len(seeds)
+        if self.left[scenario.name] == 0:
+            del self.cache[scenario.name]
+        return runs
+
+
+class _Collector:
+    """Accumulates per-run indices, calibration samples and counts over the batches."""
+
+    def __init__(self, seed: int) -> None:
+        self.rows: list[dict[str, Any]] = []
+        self.proba: list[np.ndarray] = []
+        self.true: list[np.ndarray] = []
+        self.cluster: list[np.ndarray] = []
+        self.labels: list[str] | None = None
+        self.attrs: dict[str, Any] = {}
+        self.faulty_seconds = 0
+        self.confident_wrong = 0
+        self.model_std: dict[str, list[float]] = {"X": [], "F": []}
+        self.rng = np.random.default_rng(seed)
+
+    def add(self, scenario: BenchmarkScenario, seed: int, one: xr.Dataset) -> dict[str, Any]:
+        t = np.asarray(one["time"].values, dtype=np.float64)
+        sig = decision_signals(one, scenario.fault)
+        indices = picalc(
+            t,
+            sig.dd,
+            sig.pid,
+            sig.cid,
+            t_on=scenario.t_on,
+            t_from=scenario.t_from,
+            t_hor=scenario.t_hor,
+            strength=scenario.strength_at(t),
+            indicated=sig.indicated,
+            group_sizes=sig.group_sizes,
+        )
+        row = {
+            "fault": scenario.fault,
+            "mode": scenario.mode,
+            "size": scenario.size,
+            "seed": int(seed),
+            "indices": indices,
+        }
+        self.rows.append(row)
+        labels = [str(g) for g in one["group"].values]
+        if self.labels is None:
+            self.labels = labels
+            self.attrs = {k: one.attrs.get(k) for k in ("groups", "undetectable")}
+        elif labels != self.labels:
+            raise ValueError("run_benchmark: the stream's groups changed between runs")
+        faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
+        proba = one["group_proba"].transpose("time", "group").values
+        known = np.isfinite(proba).all(axis=1)
+        filled = np.where(known[:, None], proba, 0.0)  # undefined rows are never confident
+        top, pred = filled.max(axis=1), filled.argmax(axis=1)
+        wrong = top > CONFIDENT
+        if sig.true_group is not None:
+            wrong &= pred != sig.true_group
+        self.faulty_seconds += int(faulty.sum())
+        self.confident_wrong += int((wrong & faulty).sum())
+        fault_free = (t >= scenario.t_on) & (t < scenario.t_from)
+        for c in ("X", "F"):
+            std = one[f"{c}_hat_std"].values[fault_free]
+            if np.isfinite(std).any():
+                self.model_std[c].append(float(np.nanmedian(std)))
+        keep = np.flatnonzero(faulty & sig.dd & known)
+        if sig.true_group is not None and keep.size:
+            if keep.size > CALIBRATION_SECONDS_PER_RUN:
+                pos = np.linspace(0, keep.size - 1, CALIBRATION_SECONDS_PER_RUN)
+                keep = keep[np.round(pos).astype(np.int64)]
+            self.proba.append(proba[keep])
+            self.true.append(np.full(keep.size, sig.true_group))
+            self.cluster.append(np.full(keep.size, len(self.rows) - 1))
+        return row
+
+
+def _calibration(col: _Collector, n_bootstrap: int, seed: int, figure: Path | None):
+    """Top-label ECE of the group probabilities with a run-level (cluster) bootstrap interval."""
+    from bayes_fdi.calibration import expected_calibration_error, reliability_diagram
+
+    if not col.proba:
+        return {"n_seconds": 0, "note": "no detected faulty second of an isolable fault"}
+    proba = np.concatenate(col.proba)
+    labels = np.asarray(col.labels)
+    y = labels[np.concatenate(col.true)]
+    cluster = np.concatenate(col.cluster)
+    res = expected_calibration_error(y, proba, classes=labels, n_bins=15)
+    # seconds of one run are strongly correlated: resample whole runs, not seconds
+    runs = np.unique(cluster)
+    members = [np.flatnonzero(cluster == r) for r in runs]
+    rng = np.random.default_rng(seed)
+    boots = np.empty(n_bootstrap)
+    for b in range(n_bootstrap):
+        take = np.concatenate([members[i] for i in rng.integers(0, runs.size, runs.size)])
+        boots[b] = expected_calibration_error(y[take], proba[take], classes=labels, n_bins=15).value
+    lo = hi = float("nan")
+    if n_bootstrap:
+        q_lo, q_hi = np.quantile(boots, [0.025, 0.975])
+        lo, hi = max(0.0, 2 * res.value - q_hi), max(0.0, 2 * res.value - q_lo)  # basic interval
+    res = res._replace(ci_low=float(lo), ci_high=float(hi))
+    if figure is not None:
+        import matplotlib.pyplot as plt
+
+        from bayes_fdi.diagnosis.online.timeline import save_figure
+
+        fig, ax = plt.subplots(figsize=(5, 5))
+        reliability_diagram(
+            res,
+            ax=ax,
+            title=f"group-level top-label ECE = {res.value:.3f} "
+            f"[{lo:.3f}, {hi:.3f}] (runs resampled)\n{len(y)} s of {runs.size} runs",
+        )
+        save_figure(fig, figure, dpi=110)
+    return {
+        "n_seconds": len(y),
+        "n_runs": int(runs.size),
+        "ece": res.value,
+        "ci_low": res.ci_low,
+        "ci_high": res.ci_high,
+        "noise_floor": res.noise_floor,
+        "mce": res.mce,
+        "accuracy": float(np.mean(labels[np.argmax(proba, axis=1)] == y)),
+        "mean_confidence": float(np.mean(np.max(proba, axis=1))),
+        "bins": {
+            "edges": res.bin_edges,
+            "counts": res.bin_counts,
+            "confidence": res.bin_confidence,
+            "accuracy": res.bin_accuracy,
+        },
+        "n_bootstrap": int(n_bootstrap),
+    }
+
+
+def _fault_free(diagnoser: Any, hours: float) -> dict[str, Any]:
+    ds = fault_free_hours(hours)
+    stream = diagnoser.run(_strip_truth(ds)).isel(run=0)
+    counted = stream["time"].values >= ds.attrs["warmup"]
+    dd = _high(stream["DD"].values)[counted]
+    status = np.asarray(stream["status"].values).astype(str)[counted]
+    alarms = rising_edges(dd)
+    return {
+        "hours": float(hours),
+        "seconds": int(counted.sum()),
+        "seed": int(ds.run.values[0]),
+        "alarms": alarms,
+        "alarms_per_8h": alarms * 8.0 / hours,
+        "r_fd": float(dd.mean()),
+        "clear_share": float(np.mean(status == "CLEAR")),
+    }
+
+
+def _real_hour(diagnoser: Any) -> dict[str, Any]:
+    """Refit on the first half of the shipped Lublin hour (normal runs only); run the second."""
+    from sklearn.base import clone
+
+    from bayes_fdi.datasets import load_lublin_example
+
+    hour = load_lublin_example()
+    half = hour.sizes["time"] // 2
+    fresh = clone(diagnoser).fit(hour.isel(time=slice(0, half)))
+    stream = fresh.run(_strip_truth(hour.isel(time=slice(half, None)))).isel(run=0)
+    dd = _high(stream["DD"].values)
+    status = np.asarray(stream["status"].values).astype(str)
+    return {
+        "seconds": int(dd.size),
+        "alarms": rising_edges(dd),
+        "clear_share": float(np.mean(status == "CLEAR")),
+        "r_fd": float(dd.mean()),
+        "status_counts": {str(s): int(np.sum(status == s)) for s in sorted(set(status))},
+    }
+
+
+def run_benchmark(
+    diagnoser: Any,
+    out: str | os.PathLike,
+    *,
+    n_seeds: int = 10,
+    scenarios: Sequence[BenchmarkScenario] | None = None,
+    hours: float = 8.0,
+    real_hour: bool = True,
+    figures: bool = True,
+    n_bootstrap: int = 200,
+    max_batch_samples: int = MAX_BATCH_SAMPLES,
+    progress: bool = True,
+    settings: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Run the benchmark with a fitted online diagnoser and write the results into ``out``.
+
+    Parameters
+    ----------
+    diagnoser
+        A fitted online diagnoser (``run(recording)`` returns the decision stream of
+        ``ONLINE_CONTRACT.md``; for the real hour it is cloned and refitted with
+        ``fit(normal_runs)``).
+    out
+        Output folder (created): ``benchmark.json``, ``benchmark.md``, ``timelines/*.png``,
+        ``reliability.png``.
+    n_seeds
+        Noise seeds per scenario (:func:`~bayes_fdi.benchmark.scenarios.benchmark_seeds`).
+    scenarios
+        Default: all 44 (:data:`~bayes_fdi.benchmark.scenarios.SCENARIOS`); a subset or
+        :meth:`~bayes_fdi.benchmark.scenarios.BenchmarkScenario.truncated` ones for quick runs.
+    hours
+        Simulated fault-free hours for the false-alarm budget (after a 300-s warm-up).
+    real_hour, figures
+        Whether to evaluate the real Lublin hour and draw the figures.
+    n_bootstrap
+        Run-level bootstrap resamples of the calibration interval.
+    max_batch_samples
+        Samples per call of ``diagnoser.run``.
+    progress
+        Progress bar on stderr.
+    settings
+        Extra provenance stored under ``"settings"`` (e.g. how the diagnoser was trained).
+
+    Returns
+    -------
+    dict
+        What ``benchmark.json`` holds: ``"scenarios"`` (one row per scenario and seed:
+        ``fault``, ``mode``, ``size``, ``seed``, ``indices``), ``"real_hour"`` (``seconds``,
+        ``alarms``, ``clear_share``), ``"fault_free"``, ``"calibration"``, ``"effects"``,
+        ``"confident_wrong"``, ``"model_std"``, ``"timing"``, ``"settings"``.
+    """
+    from bayes_fdi.benchmark.report import write_report
+
+    wall0 = time.perf_counter()
+    scenarios = list(SCENARIOS if scenarios is None else scenarios)
+    if not scenarios:
+        raise ValueError("run_benchmark: no scenarios")
+    seeds = benchmark_seeds(n_seeds)
+    out = Path(out)
+    (out / "timelines").mkdir(parents=True, exist_ok=True)
+    col = _Collector(seed=0)
+    sim_cpu = run_cpu = 0.0
+    samples = 0
+    batches = list(_batches(scenarios, seeds, max_batch_samples))
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(scenarios) * len(seeds), desc="benchmark", unit="run")
+    figures_written: dict[str, str] = {}
+    simulations = _Simulations(scenarios, seeds)
+    try:
+        for batch in batches:
+            c0 = time.process_time()
+            parts = [simulations.take(s, run_seeds) for s, run_seeds in batch]
+            recording = xr.concat(parts, dim="run", combine_attrs="drop_conflicts")
+            n_runs = recording.sizes["run"]
+            recording = recording.assign_coords(run=np.arange(n_runs))
+            c1 = time.process_time()
+            stream = diagnoser.run(_strip_truth(recording))
+            c2 = time.process_time()
+            sim_cpu += c1 - c0
+            run_cpu += c2 - c1
+            samples += n_runs * recording.sizes["time"]
+            r = 0
+            for s, run_seeds in batch:
+                for seed in run_seeds:
+                    one = stream.isel(run=r)
+                    col.add(s, seed, one)
+                    if figures and seed == seeds[0]:
+                        truth = {
+                            "fault": s.fault,
+                            "onset": s.t_from,
+                            "label": s.name,
+                            "strength": s.strength_at(one["time"].values),
+                        }
+                        path = out / "timelines" / f"{s.slug}.png"
+                        plot_timeline(one, recording.isel(run=r), truth=truth, path=path)
+                        figures_written[s.name] = f"timelines/{s.slug}.png"
+                    r += 1
+                    if bar is not None:
+                        bar.update(1)
+            del stream, recording, parts
+    finally:
+        if bar is not None:
+            bar.close()
+    c0 = time.process_time()
+    results: dict[str, Any] = {
+        "scenarios": col.rows,
+        "real_hour": _real_hour(diagnoser) if real_hour else None,
+        "fault_free": _fault_free(diagnoser, hours),
+    }
+    extra_cpu = time.process_time() - c0
+    results["calibration"] = _calibration(
+        col, n_bootstrap, seed=0, figure=out / "reliability.png" if figures else None
+    )
+    results["confident_wrong"] = {
+        "seconds": col.confident_wrong,
+        "faulty_seconds": col.faulty_seconds,
+        "share": col.confident_wrong / max(col.faulty_seconds, 1),
+    }
+    results["model_std"] = {c: float(np.median(v)) if v else None for c, v in col.model_std.items()}
+    results["effects"] = fault_effects(scenarios)
+    results["scenario_table"] = [
+        {
+            "name": s.name,
+            "fault": s.fault,
+            "mode": s.mode,
+            "size": s.size,
+            "strength": s.strength,
+            "direction": s.direction,
+            "t_on": s.t_on,
+            "t_from": s.t_from,
+            "t_fd": s.t_fd,
+            "t_hor": s.t_hor,
+        }
+        for s in scenarios
+    ]
+    results["figures"] = figures_written
+    results["groups"] = json.loads(col.attrs.get("groups") or "{}")
+    results["undetectable"] = json.loads(col.attrs.get("undetectable") or "[]")
+    results["timing"] = {
+        "simulation_cpu_s": sim_cpu,
+        "run_cpu_s": run_cpu,
+        "run_samples": samples,
+        "run_samples_per_cpu_s": samples / run_cpu if run_cpu > 0 else None,
+        "fault_free_and_real_hour_cpu_s": extra_cpu,
+        "wall_s": time.perf_counter() - wall0,
+    }
+    results["settings"] = {
+        "n_seeds": int(n_seeds),
+        "seeds": list(seeds),
+        "hours": hours,
+        "n_scenarios": len(scenarios),
+        "full_benchmark": _is_full(scenarios),
+        **dict(settings or {}),
+    }
+    write_report(results, out)
+    return results
+
+
+def _is_full(scenarios: Sequence[BenchmarkScenario]) -> bool:
+    return list(scenarios) == list(SCENARIOS)
+
+
+# ----------------------------------------------------------------------------------------------
+# command line
+# ----------------------------------------------------------------------------------------------
+def configure_parser(parser: argparse.ArgumentParser) -> None:
+    """Options of ``bayes-fdi benchmark``."""
+    parser.add_argument("--out", required=True, help="output folder (created)")
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        default=None,
+        help="noise seeds per scenario (default 10; 2 with --small)",
+    )
+    parser.add_argument(
+        "--small",
+        action="store_true",
+        help="quick version: small training, 2 seeds, horizons cut at 2400 s, "
+        "1 fault-free hour (not the benchmark's numbers)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def run_from_cli(args: argparse.Namespace) -> int:
+    """Fit the online diagnoser on its training campaigns, run the benchmark, write the report."""
+    from bayes_fdi.default_diagnoser import fit_online_diagnoser
+
+    n_seeds = args.seeds if args.seeds is not None else (2 if args.small else 10)
+    t0 = time.perf_counter()
+    diagnoser = fit_online_diagnoser(seed=0, small=args.small, progress=not args.quiet)
+    fit_s = time.perf_counter() - t0
+    scenarios = [s.truncated(2400) for s in SCENARIOS] if args.small else None
+    results = run_benchmark(
+        diagnoser,
+        args.out,
+        n_seeds=n_seeds,
+        scenarios=scenarios,
+        hours=1.0 if args.small else 8.0,
+        progress=not args.quiet,
+        settings={"small": bool(args.small), "fit_wall_s": fit_s, "training_seed": 0},
+    )
+    total = time.perf_counter() - t0
+    sys.stderr.write(
+        f"benchmark: {len(results['scenarios'])} runs in {total:.0f} s "
+        f"(fit {fit_s:.0f} s); report {Path(args.out) / 'benchmark.md'}\n"
+    )
+    return 0

@@ -1,0 +1,51 @@
+"""Normal (fault-free) models of the actuator's outputs X and F: the residual generators.
+
+- `bayes_fdi.diagnosis.normal_models.inputs`: the inputs ``(CV, sqrt(P1 - P2), T1)`` and
+  optional delayed commands.
+- `bayes_fdi.diagnosis.normal_models.width_search`: the kernel-width searches (summed evidence
+  over a grid; the paper's GA).
+- `bayes_fdi.diagnosis.normal_models.static`: `NormalModels`, the paper's static RVR models of
+  the offline diagnoser.
+- `bayes_fdi.diagnosis.normal_models.dynamic`: `DynamicNormalModels`, the online diagnoser's
+  models (position from the command's dynamics, flow from the predicted position).
+- `bayes_fdi.diagnosis.normal_models.interval_calibration` and `.std_scaler`: honest
+  predictive standard deviations (cross-fitted factors per command-speed bin).
+- `bayes_fdi.diagnosis.normal_models.kernel_ridge`: the SVM baseline's kernel ridge models.
+- `bayes_fdi.diagnosis.normal_models.compiled`: compiled one-sample predictors of fitted RVRs.
+
+May import `bayes_fdi.rvm`, `bayes_fdi.datasets` and the foundation.
+"""
+
+from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
+from bayes_fdi.diagnosis.normal_models.inputs import (
+    MODEL_INPUTS,
+    NegativePressureDropWarning,
+    input_names,
+    model_inputs,
+)
+from bayes_fdi.diagnosis.normal_models.kernel_ridge import KernelRidgeRegressor
+from bayes_fdi.diagnosis.normal_models.static import NormalModels
+from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
+from bayes_fdi.diagnosis.normal_models.width_search import (
+    WIDTH_GRID,
+    EvidenceGridResult,
+    GAResult,
+    evidence_grid_search,
+    genetic_width_search,
+)
+
+__all__ = [
+    "MODEL_INPUTS",
+    "WIDTH_GRID",
+    "DynamicNormalModels",
+    "EvidenceGridResult",
+    "GAResult",
+    "KernelRidgeRegressor",
+    "NegativePressureDropWarning",
+    "NormalModels",
+    "StdScaler",
+    "evidence_grid_search",
+    "genetic_width_search",
+    "input_names",
+    "model_inputs",
+]

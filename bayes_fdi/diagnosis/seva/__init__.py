@@ -1,0 +1,35 @@
+"""The self-validating (SEVA) output: records, statuses and the rules that set them.
+
+- `bayes_fdi.diagnosis.seva.record`: the immutable `SevaRecord`, `SevaStatus` (CLEAR, BLURRED,
+  DAZZLED, BLIND), `ClassDistribution` and their conversions (data frame, xarray, JSON).
+- `bayes_fdi.diagnosis.seva.rules`: thresholds, measurement screening and the status rules.
+- `bayes_fdi.diagnosis.seva.novelty`: whether the inputs are novel (nearest-neighbour ratio).
+- `bayes_fdi.diagnosis.seva.windows`: the records of the offline diagnoser's runs or windows.
+
+May import `bayes_fdi.datasets`, `bayes_fdi.diagnosis.isolation` (features) and the foundation.
+"""
+
+from bayes_fdi.diagnosis.seva.novelty import NoveltyReference
+from bayes_fdi.diagnosis.seva.record import (
+    ClassDistribution,
+    SevaRecord,
+    SevaStatus,
+    to_frame,
+    to_json,
+    to_xarray,
+)
+from bayes_fdi.diagnosis.seva.rules import SevaThresholds
+from bayes_fdi.diagnosis.seva.windows import records_from_diagnosis, seva_records
+
+__all__ = [
+    "ClassDistribution",
+    "NoveltyReference",
+    "SevaRecord",
+    "SevaStatus",
+    "SevaThresholds",
+    "records_from_diagnosis",
+    "seva_records",
+    "to_frame",
+    "to_json",
+    "to_xarray",
+]
