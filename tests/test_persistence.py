@@ -143,7 +143,7 @@ def test_file_is_plain_npz_without_pickle(rvm_diagnoser, tmp_path):
         meta = json.loads(str(z["metadata"]))
         assert meta["format"] == model_files.FORMAT_NAME
         assert meta["format_version"] == model_files.FORMAT_VERSION
-        assert meta["root_class"] == "bayes_fdi.diagnosis.fault_diagnoser:FaultDiagnoser"
+        assert meta["root_class"] == "FaultDiagnoser"
         assert set(z.files) == {"metadata", *meta["arrays"]}
         for key, spec in meta["arrays"].items():
             assert z[key].dtype.str == spec["dtype"] and list(z[key].shape) == spec["shape"]
@@ -279,7 +279,7 @@ def test_missing_array_and_forbidden_class(saved, tmp_path):
     with pytest.raises(ValueError, match="'os:system' is not allowed"):
         model_files.load(path)
 
-    inner = json.loads(json.dumps(meta).replace('"bayes_fdi.rvm.kernels:RBF"', '"os:system"'))
+    inner = json.loads(json.dumps(meta).replace('"rvm.RBF"', '"os:system"'))
     sneaky = dict(meta, root={"__object__": meta["root_class"], "state": {"x": {
         "__object__": "subprocess:Popen", "state": {}}}})  # fmt: skip
     for variant in (inner, sneaky):

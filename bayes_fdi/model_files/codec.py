@@ -16,14 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from bayes_fdi.model_files.registry import (
-    class_name,
-    is_namedtuple,
-    is_persistable,
-    resolve_class,
-)
+from bayes_fdi.model_files.registry import is_namedtuple, resolve_class, stable_name
 
-__all__ = ["ModelDecoder", "ModelEncoder"]
+__all__ = ["MAX_DEPTH", "ModelDecoder", "ModelEncoder"]
+
+#: Deepest nesting of values a file may hold (a fitted diagnoser nests about 20 levels).
+MAX_DEPTH = 200
 
 
 # ----------------------------------------------------------------------------------------------
@@ -51,10 +49,12 @@ class ModelEncoder:
 
     def encode(self, value: Any, where: str) -> Any:
         if isinstance(value, enum.Enum):  # before str/int: a StrEnum is a str
-            cls = type(value)
-            if not is_persistable(cls):
-                raise ValueError(f"{where}: enums of type {cls.__qualname__} cannot be saved")
-            return {"__enum__": class_name(cls), "value": self.encode(value.value, where)}
+            name = stable_name(type(value))
+            if name is None:
+                raise ValueError(
+                    f"{where}: enums of type {type(value).__qualname__} cannot be saved"
+                )
+            return {"__enum__": name, "value": self.encode(value.value, where)}
         if value is None or isinstance(value, bool | str):
             return value
         if isinstance(value, int) and type(value) is int:
@@ -129,13 +129,13 @@ class ModelEncoder:
             self._remember(value)
             state = {"data": np.asarray(value.data), "leafsize": int(value.leafsize)}
             return {"__kdtree__": self.encode(state, f"{where}.tree")}
-        if not is_persistable(cls):
+        name = stable_name(cls)
+        if name is None:
             raise ValueError(
                 f"{where}: objects of type {cls.__module__}.{cls.__qualname__} cannot be saved "
-                "(not a persistable class; see bayes_fdi.model_files.format)"
+                "(not a registered class; see bayes_fdi.model_files.registry)"
             )
         self._remember(value)
-        name = class_name(cls)
         if is_namedtuple(cls):
             fields = {f: self.encode(getattr(value, f), f"{where}.{f}") for f in cls._fields}
             return {"__namedtuple__": name, "fields": {"__dict__": fields}}
@@ -161,12 +161,23 @@ def _is_kdtree(value: Any) -> bool:
 class ModelDecoder:
     """Rebuilds an object tree from its JSON (`decode`), reading the arrays from ``archive``."""
 
-    def __init__(self, archive: zipfile.ZipFile, specs: dict, source: str, device: Any) -> None:
+    def __init__(
+        self,
+        archive: zipfile.ZipFile,
+        specs: dict,
+        source: str,
+        device: Any,
+        format_version: int,
+        current_version: int,
+    ) -> None:
         self.archive = archive
         self.specs = specs
         self.source = source
         self.device = device
+        self.format_version = format_version
+        self.current_version = current_version
         self.refs: list[Any] = []
+        self.depth = 0
 
     def _fail(self, message: str) -> ValueError:
         return ValueError(f"{self.source} is corrupt: {message}")
@@ -187,15 +198,29 @@ class ModelDecoder:
     def decode(self, node: Any) -> Any:
         if node is None or isinstance(node, bool | int | float | str):
             return node
-        if isinstance(node, list):
-            return [self.decode(v) for v in node]
-        if not isinstance(node, dict) or len(node) == 0:
-            raise self._fail(f"unexpected JSON value {node!r:.80}")
-        tag = next(iter(node))
-        handler = _HANDLERS.get(tag)
-        if handler is None:
-            raise self._fail(f"unknown tag {tag!r}")
-        return handler(self, node)
+        self.depth += 1
+        try:
+            if self.depth > MAX_DEPTH:
+                raise self._fail(f"values nested deeper than {MAX_DEPTH} levels")
+            if isinstance(node, list):
+                return [self.decode(v) for v in node]
+            if not isinstance(node, dict) or len(node) == 0:
+                raise self._fail(f"unexpected JSON value {node!r:.80}")
+            tag = next(iter(node))
+            handler = _HANDLERS.get(tag)
+            if handler is None:
+                raise self._fail(f"unknown tag {tag!r}")
+            return handler(self, node)
+        finally:
+            self.depth -= 1
+
+    def _upgraded(self, cls: type, data: dict) -> dict:
+        """``data`` (an object's state or a named tuple's fields) in today's layout: a class
+        whose saved layout changed defines ``upgrade_model_file(data, format_version)``."""
+        upgrade = getattr(cls, "upgrade_model_file", None)
+        if upgrade is None or self.format_version >= self.current_version:
+            return data
+        return upgrade(data, self.format_version)
 
     def _float(self, node: dict) -> float:
         return {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}[node["__float__"]]
@@ -283,6 +308,8 @@ class ModelDecoder:
         slot = len(self.refs)
         self.refs.append(None)
         fields = self.decode(node["fields"])
+        if isinstance(fields, dict):
+            fields = self._upgraded(cls, fields)
         if not isinstance(fields, dict) or set(fields) != set(cls._fields):
             raise self._fail(f"fields of {node['__namedtuple__']} do not match the class")
         value = cls(**fields)
@@ -296,7 +323,8 @@ class ModelDecoder:
         state = node.get("state")
         if not isinstance(state, dict):
             raise self._fail(f"object {node['__object__']} has no state")
-        value.__dict__.update({str(k): self.decode(v) for k, v in state.items()})
+        decoded = {str(k): self.decode(v) for k, v in state.items()}
+        value.__dict__.update(self._upgraded(cls, decoded))
         return value
 
 

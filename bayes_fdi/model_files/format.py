@@ -15,7 +15,7 @@ File format (format name ``"bayes_fdi.model"``, :data:`FORMAT_VERSION`)
 -----------------------------------------------------------------------
 * ``metadata.npy`` -- a 0-d unicode array holding one JSON object: ``format``,
   ``format_version``, ``bayes_fdi_version``, ``library_versions`` (numpy, scipy, scikit-learn,
-  torch at save time), ``root_class`` (``"module:QualName"`` of the saved object), ``arrays``
+  torch at save time), ``root_class`` (the stable name of the saved object's class), ``arrays``
   (``{"a<k>": {"dtype": ..., "shape": [...]}}`` for every array member) and ``root``, the
   object tree encoded as below.
 * ``a0.npy``, ``a1.npy``, ... -- the arrays (numeric, boolean or fixed-width unicode; never
@@ -40,25 +40,30 @@ numpy array                         ``{"__array__": "a<k>"}``; an object array o
 torch tensor                        ``{"__tensor__": "a<k>", "device": "cpu"}``
 torch dtype                         ``{"__torch_dtype__": "float64"}``
 torch device                        ``{"__torch_device__": "cpu"}``
-object of a persistable class       ``{"__object__": "module:QualName", "state": {attr: value}}``
+object of a persistable class       ``{"__object__": "StableName", "state": {attr: value}}``
                                     (its ``__dict__``: parameters and fitted attributes)
-named tuple                         ``{"__namedtuple__": "module:QualName", "fields": {..}}``
-enumeration member                  ``{"__enum__": "module:QualName", "value": ...}``
+named tuple                         ``{"__namedtuple__": "StableName", "fields": {..}}``
+enumeration member                  ``{"__enum__": "StableName", "value": ...}``
 scipy ``cKDTree``                   ``{"__kdtree__": {"data": .., "leafsize": ..}}`` (rebuilt)
 an object or array seen before      ``{"__ref__": n}`` (the n-th object or array encoded), so
                                     objects shared inside the model stay shared after loading
 ==================================  ================================================================
 
-Persistable classes: every class defined in the model layers (:data:`MODEL_PACKAGES`:
-``bayes_fdi.rvm``, ``bayes_fdi.diagnosis``, ``bayes_fdi.calibration``: estimators, detectors,
-kernels, scalers, recalibrators, result tuples), the estimators (``BaseEstimator`` subclasses)
-and named tuples defined elsewhere in ``bayes_fdi``, the classes registered with
-`register_persistable` (a plug-in's, registered in the running process) and the scikit-learn
-classes of :data:`SKLEARN_CLASSES`. A saved object's state is its ``__dict__``
-(constructor parameters and fitted attributes), so a new class needs nothing more than that.
-A file naming any other class is refused. Objects holding something else (a user-supplied
-callable kernel, a ``numpy.random.Generator`` as ``random_state``) cannot be saved: `save`
-raises a `ValueError` naming the attribute.
+Persistable classes: the classes of the registry (`bayes_fdi.model_files.registry`), each stored
+under a stable name that does not change when the class moves inside the package: the
+diagnosers and their parts (normal models, whitening filters, detectors, isolators, trees,
+scalers, recalibrators, result tuples), the RVMs and their kernels, a few scikit-learn classes of
+the baselines, and a plug-in's classes registered with `register_persistable` in the running
+process. A saved object's state is its ``__dict__`` (constructor parameters and fitted
+attributes). A file naming any other class is refused, and loading imports only the modules the
+registry names, never one named by a file. Objects holding something else (a user-supplied
+callable kernel, a ``numpy.random.Generator`` as ``random_state``) cannot be saved: `save` raises
+a `ValueError` naming the attribute.
+
+Across releases: files of format version 1 (bayes_fdi 0.1.0) named classes by ``module:QualName``
+and load through the registry's table of those names; a class whose saved layout has changed
+since defines ``upgrade_model_file(data, format_version)``, which the loader calls on the saved
+state (or fields) of a file of an older version.
 
 Safety checks on reading, before anything is decompressed: the file must be a zip archive whose
 members are exactly ``metadata.npy`` and the arrays the metadata lists; each member's
@@ -73,9 +78,8 @@ model fitted on a GPU). Files are written atomically: a temporary file in the de
 flushed to disk, then renamed over the destination.
 
 This module writes and reads the files; the encoding of the object tree is
-`bayes_fdi.model_files.codec` and the rules on classes `bayes_fdi.model_files.registry`
-(:data:`MODEL_PACKAGES`, :data:`SKLEARN_CLASSES` and `register_persistable` are importable from
-here too).
+`bayes_fdi.model_files.codec` and the classes a file may hold `bayes_fdi.model_files.registry`
+(`register_persistable` is importable from here too).
 """
 
 from __future__ import annotations
@@ -92,21 +96,13 @@ import numpy as np
 
 from bayes_fdi.atomic import atomic_path
 from bayes_fdi.model_files.codec import ModelDecoder, ModelEncoder
-from bayes_fdi.model_files.registry import (
-    MODEL_PACKAGES,
-    SKLEARN_CLASSES,
-    class_name,
-    register_persistable,
-    resolve_class,
-)
+from bayes_fdi.model_files.registry import register_persistable, resolve_class, stable_name
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "MAX_METADATA_BYTES",
-    "MODEL_PACKAGES",
-    "SKLEARN_CLASSES",
     "load",
     "read_metadata",
     "register_persistable",
@@ -114,7 +110,8 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
-FORMAT_VERSION = 1
+#: 2: classes named by their stable registered names; 1 (bayes_fdi 0.1.0): by ``module:QualName``.
+FORMAT_VERSION = 2
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.
@@ -171,7 +168,7 @@ def save(obj: Any, path: str | os.PathLike[str]) -> str:
         "format_version": FORMAT_VERSION,
         "bayes_fdi_version": _bayes_fdi_version(),
         "library_versions": _versions(),
-        "root_class": class_name(type(obj)),
+        "root_class": stable_name(type(obj)),
         "arrays": {
             k: {"dtype": a.dtype.str, "shape": list(a.shape)} for k, a in encoder.arrays.items()
         },
@@ -216,6 +213,8 @@ def _open_checked(path: str | os.PathLike[str], max_bytes: int) -> tuple[zipfile
             with archive.open("metadata.npy") as handle:
                 text = str(np.lib.format.read_array(handle, allow_pickle=False))
             meta = json.loads(text)
+        except RecursionError:
+            raise ValueError(f"{source} is corrupt: metadata nested too deeply to read") from None
         except (ValueError, zipfile.BadZipFile, EOFError, OSError) as exc:
             raise ValueError(f"{source} is corrupt: unreadable metadata ({exc})") from None
         _check_header(meta, source)
@@ -316,7 +315,9 @@ def load(
                 f"{' or '.join(c.__qualname__ for c in names)}"
             )
         _warn_versions(meta, source)
-        decoder = ModelDecoder(archive, meta["arrays"], source, device)
+        decoder = ModelDecoder(
+            archive, meta["arrays"], source, device, meta["format_version"], FORMAT_VERSION
+        )
         try:
             obj = decoder.decode(meta.get("root"))
         except (KeyError, TypeError, IndexError, zipfile.BadZipFile, EOFError) as exc:

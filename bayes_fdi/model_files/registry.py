@@ -1,10 +1,17 @@
-"""Persistable classes: which classes a model file may hold, and the lookup of their names.
+"""Persisted classes: the stable names under which model files store classes, and the allow-list.
 
-A saved object's class is named ``"module:QualName"`` (`class_name`). `is_persistable` says whether
-`bayes_fdi.model_files.format.save` may write an instance (the rules are the module docstring
-of `bayes_fdi.model_files.format`, "Persistable classes"); `resolve_class` turns a name read
-from a file back into its class, importing only ``bayes_fdi`` modules and the classes of
-:data:`SKLEARN_CLASSES` or registered with `register_persistable`, and refuses any other.
+A model file names the class of every object it holds by a *stable name* (``"OnlineDiagnoser"``,
+``"rvm.RVR"``, ``"sklearn.SVC"``): :data:`PERSISTED` maps each stable name to where the class
+lives now (``"module:QualName"``, preferably a package's public face), so moving a class inside
+the package changes one line here and no model file. Files written by bayes_fdi 0.1.0 named
+classes by their ``"module:QualName"`` at the time; :data:`LEGACY_NAMES` maps those spellings to
+the stable names, so those files still load.
+
+The table is an allow-list. Loading imports only the modules this table names, never a module
+named by a file, and constructs only registered classes: a file naming anything else (say
+``bayes_fdi.__main__``) is refused before any import. A plug-in's class is registered in the
+running process with `register_persistable` (in the process that saves and in the one that
+loads).
 """
 
 from __future__ import annotations
@@ -13,55 +20,125 @@ import importlib
 from typing import Any
 
 __all__ = [
-    "MODEL_PACKAGES",
-    "SKLEARN_CLASSES",
-    "class_name",
+    "LEGACY_NAMES",
+    "PERSISTED",
     "is_namedtuple",
     "is_persistable",
     "register_persistable",
     "resolve_class",
+    "stable_name",
 ]
 
-#: scikit-learn / scipy classes that may appear inside a saved model (``module:QualName``).
-SKLEARN_CLASSES: frozenset[str] = frozenset(
-    {
-        "sklearn.preprocessing._data:StandardScaler",
-        "sklearn.svm._classes:SVC",
-        "sklearn.calibration:CalibratedClassifierCV",
-        "sklearn.calibration:_CalibratedClassifier",
-        "sklearn.calibration:_SigmoidCalibration",
-        "sklearn.isotonic:IsotonicRegression",
-        "sklearn.linear_model._logistic:LogisticRegression",
-    }
-)
-#: Packages of the model layers: any class defined there may be saved (estimators, detectors,
-#: kernels, scalers, recalibrators, result tuples).
-MODEL_PACKAGES: tuple[str, ...] = (
-    "bayes_fdi.rvm.",
-    "bayes_fdi.diagnosis.",
-    "bayes_fdi.calibration.",
-)
-#: Classes registered by `register_persistable` (``module:QualName``), e.g. a plug-in's.
-_REGISTERED: set[str] = set()
+#: Stable name -> ``"module:QualName"`` of the class today.
+PERSISTED: dict[str, str] = {
+    # the diagnosers and their parts
+    "FaultDiagnoser": "bayes_fdi.diagnosis:FaultDiagnoser",
+    "OnlineDiagnoser": "bayes_fdi.diagnosis:OnlineDiagnoser",
+    "StreamState": "bayes_fdi.diagnosis:StreamState",
+    "NormalModels": "bayes_fdi.diagnosis.normal_models:NormalModels",
+    "DynamicNormalModels": "bayes_fdi.diagnosis.normal_models:DynamicNormalModels",
+    "KernelRidgeRegressor": "bayes_fdi.diagnosis.normal_models:KernelRidgeRegressor",
+    "StdScaler": "bayes_fdi.diagnosis.normal_models:StdScaler",
+    "CrossFitScales": "bayes_fdi.diagnosis.normal_models.interval_calibration:CrossFitScales",
+    "EvidenceGridResult": "bayes_fdi.diagnosis.normal_models:EvidenceGridResult",
+    "GAResult": "bayes_fdi.diagnosis.normal_models:GAResult",
+    "LeanRVR": "bayes_fdi.diagnosis.normal_models.compiled:LeanRVR",
+    "LeanTree": "bayes_fdi.diagnosis.normal_models.compiled:LeanTree",
+    "ARWhitener": "bayes_fdi.diagnosis.detection:ARWhitener",
+    "CUSUM": "bayes_fdi.diagnosis.detection:CUSUM",
+    "GLR": "bayes_fdi.diagnosis.detection:GLR",
+    "HierarchicalClassifier": "bayes_fdi.diagnosis.isolation:HierarchicalClassifier",
+    "TreeNode": "bayes_fdi.diagnosis.isolation:TreeNode",
+    "SVMClassifier": "bayes_fdi.diagnosis.isolation:SVMClassifier",
+    "FaultIsolator": "bayes_fdi.diagnosis.isolation:FaultIsolator",
+    "ClassNovelty": "bayes_fdi.diagnosis.isolation.isolator:ClassNovelty",
+    "NoveltyReference": "bayes_fdi.diagnosis.seva:NoveltyReference",
+    "SevaThresholds": "bayes_fdi.diagnosis.seva:SevaThresholds",
+    "SevaStatus": "bayes_fdi.diagnosis.seva:SevaStatus",
+    "SevaRecord": "bayes_fdi.diagnosis.seva:SevaRecord",
+    "ClassDistribution": "bayes_fdi.diagnosis.seva:ClassDistribution",
+    # recalibrators
+    "TemperatureScaler": "bayes_fdi.calibration:TemperatureScaler",
+    "DirichletScaler": "bayes_fdi.calibration:DirichletScaler",
+    "NodeCalibration": "bayes_fdi.calibration:NodeCalibration",
+    # relevance vector machines
+    "rvm.RVR": "bayes_fdi.rvm:RVR",
+    "rvm.RVC": "bayes_fdi.rvm:RVC",
+    "rvm.RBF": "bayes_fdi.rvm:RBF",
+    "rvm.Linear": "bayes_fdi.rvm:Linear",
+    "rvm.Polynomial": "bayes_fdi.rvm:Polynomial",
+    "rvm.Product": "bayes_fdi.rvm:Product",
+    "rvm.Scaled": "bayes_fdi.rvm:Scaled",
+    "rvm.Sum": "bayes_fdi.rvm:Sum",
+    "rvm.SBLResult": "bayes_fdi.rvm:SBLResult",
+    "rvm.Polish": "bayes_fdi.rvm.sbl_polish:Polish",
+    "rvm.WidthSearch": "bayes_fdi.rvm.width:WidthSearch",
+    # scikit-learn classes found inside the baselines and recalibrators (public import paths)
+    "sklearn.StandardScaler": "sklearn.preprocessing:StandardScaler",
+    "sklearn.SVC": "sklearn.svm:SVC",
+    "sklearn.CalibratedClassifierCV": "sklearn.calibration:CalibratedClassifierCV",
+    "sklearn._CalibratedClassifier": "sklearn.calibration:_CalibratedClassifier",
+    "sklearn._SigmoidCalibration": "sklearn.calibration:_SigmoidCalibration",
+    "sklearn.IsotonicRegression": "sklearn.isotonic:IsotonicRegression",
+    "sklearn.LogisticRegression": "sklearn.linear_model:LogisticRegression",
+}
 
+#: ``"module:QualName"`` spellings of bayes_fdi 0.1.0 (format version 1) -> stable name.
+LEGACY_NAMES: dict[str, str] = {
+    "bayes_fdi.diagnosis.diagnoser:FaultDiagnoser": "FaultDiagnoser",
+    "bayes_fdi.diagnosis.online:OnlineDiagnoser": "OnlineDiagnoser",
+    "bayes_fdi.diagnosis.online_state:StreamState": "StreamState",
+    "bayes_fdi.diagnosis.normal_models:NormalModels": "NormalModels",
+    "bayes_fdi.diagnosis.dynamic_models:DynamicNormalModels": "DynamicNormalModels",
+    "bayes_fdi.diagnosis.baselines:KernelRidgeRegressor": "KernelRidgeRegressor",
+    "bayes_fdi.diagnosis.interval_scaling:StdScaler": "StdScaler",
+    "bayes_fdi.diagnosis.interval_calibration:CrossFitScales": "CrossFitScales",
+    "bayes_fdi.diagnosis.width_search:EvidenceGridResult": "EvidenceGridResult",
+    "bayes_fdi.diagnosis.width_search:GAResult": "GAResult",
+    "bayes_fdi.diagnosis.lean_predictors:LeanRVR": "LeanRVR",
+    "bayes_fdi.diagnosis.lean_predictors:LeanTree": "LeanTree",
+    "bayes_fdi.diagnosis.whitening:ARWhitener": "ARWhitener",
+    "bayes_fdi.diagnosis.detection:CUSUM": "CUSUM",
+    "bayes_fdi.diagnosis.detection:GLR": "GLR",
+    "bayes_fdi.diagnosis.tree:HierarchicalClassifier": "HierarchicalClassifier",
+    "bayes_fdi.diagnosis.tree:TreeNode": "TreeNode",
+    "bayes_fdi.diagnosis.baselines:SVMClassifier": "SVMClassifier",
+    "bayes_fdi.diagnosis.isolation:FaultIsolator": "FaultIsolator",
+    "bayes_fdi.diagnosis.isolation:ClassNovelty": "ClassNovelty",
+    "bayes_fdi.diagnosis.novelty:NoveltyReference": "NoveltyReference",
+    "bayes_fdi.diagnosis.seva_rules:SevaThresholds": "SevaThresholds",
+    "bayes_fdi.diagnosis.seva_record:SevaStatus": "SevaStatus",
+    "bayes_fdi.diagnosis.seva_record:SevaRecord": "SevaRecord",
+    "bayes_fdi.diagnosis.seva_record:ClassDistribution": "ClassDistribution",
+    "bayes_fdi.calibration.recalibration:TemperatureScaler": "TemperatureScaler",
+    "bayes_fdi.calibration.recalibration:DirichletScaler": "DirichletScaler",
+    "bayes_fdi.calibration.nodes:NodeCalibration": "NodeCalibration",
+    "bayes_fdi.rvm.regression:RVR": "rvm.RVR",
+    "bayes_fdi.rvm.classification:RVC": "rvm.RVC",
+    "bayes_fdi.rvm.kernels:RBF": "rvm.RBF",
+    "bayes_fdi.rvm.kernels:Linear": "rvm.Linear",
+    "bayes_fdi.rvm.kernels:Polynomial": "rvm.Polynomial",
+    "bayes_fdi.rvm.kernels:Product": "rvm.Product",
+    "bayes_fdi.rvm.kernels:Scaled": "rvm.Scaled",
+    "bayes_fdi.rvm.kernels:Sum": "rvm.Sum",
+    "bayes_fdi.rvm.sbl_numerics:SBLResult": "rvm.SBLResult",
+    "bayes_fdi.rvm.sbl_polish:Polish": "rvm.Polish",
+    "bayes_fdi.rvm.width:WidthSearch": "rvm.WidthSearch",
+    "sklearn.preprocessing._data:StandardScaler": "sklearn.StandardScaler",
+    "sklearn.svm._classes:SVC": "sklearn.SVC",
+    "sklearn.calibration:CalibratedClassifierCV": "sklearn.CalibratedClassifierCV",
+    "sklearn.calibration:_CalibratedClassifier": "sklearn._CalibratedClassifier",
+    "sklearn.calibration:_SigmoidCalibration": "sklearn._SigmoidCalibration",
+    "sklearn.isotonic:IsotonicRegression": "sklearn.IsotonicRegression",
+    "sklearn.linear_model._logistic:LogisticRegression": "sklearn.LogisticRegression",
+}
 
-def register_persistable(cls: type) -> type:
-    """Allow instances of ``cls`` (a class with a ``__dict__``) in saved models; returns ``cls``.
-
-    Usable as a class decorator. The classes of the model layers and the estimators and named
-    tuples defined in ``bayes_fdi`` need no registration. A class defined elsewhere (a plug-in)
-    must be registered in the process that saves and in the one that loads (its module is
-    imported by the loader only because it was registered).
-    """
-    if not isinstance(cls, type):
-        raise ValueError(f"register_persistable expects a class, got {cls!r}")
-    _REGISTERED.add(class_name(cls))
-    return cls
-
-
-def class_name(cls: type) -> str:
-    """``"module:QualName"`` of ``cls``: how model files name classes."""
-    return f"{cls.__module__}:{cls.__qualname__}"
+#: Classes registered in this process by `register_persistable`: stable name -> class.
+_PLUGINS: dict[str, type] = {}
+#: Classes of the table already imported: stable name -> class (filled on first use).
+_RESOLVED: dict[str, type] = {}
+#: The table's classes -> their stable names (filled by the first `stable_name`).
+_BY_CLASS: dict[type, str] = {}
 
 
 def is_namedtuple(cls: type) -> bool:
@@ -69,34 +146,69 @@ def is_namedtuple(cls: type) -> bool:
     return issubclass(cls, tuple) and hasattr(cls, "_fields")
 
 
-def is_persistable(cls: type) -> bool:
-    """Whether instances of ``cls`` may be saved (the rules of the module docstring)."""
-    name = class_name(cls)
-    if name in SKLEARN_CLASSES or name in _REGISTERED:
-        return True
-    if cls.__module__.startswith(MODEL_PACKAGES):
-        return True
-    if not cls.__module__.startswith("bayes_fdi."):
-        return False
-    from sklearn.base import BaseEstimator
+def _import(location: str) -> type:
+    module_name, qualname = location.split(":")
+    obj: Any = importlib.import_module(module_name)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    return obj
 
-    return is_namedtuple(cls) or issubclass(cls, BaseEstimator)
+
+def _lookup(name: str) -> type | None:
+    """The class registered under stable ``name`` (None when there is none)."""
+    if name in _PLUGINS:
+        return _PLUGINS[name]
+    if name not in PERSISTED:
+        return None
+    if name not in _RESOLVED:
+        _RESOLVED[name] = _import(PERSISTED[name])
+    return _RESOLVED[name]
+
+
+def stable_name(cls: type) -> str | None:
+    """The stable name under which files store ``cls``, or None when it is not persistable.
+
+    The first call imports the modules of :data:`PERSISTED` (to know their classes).
+    """
+    for name, known in _PLUGINS.items():
+        if known is cls:
+            return name
+    if not _BY_CLASS:
+        _BY_CLASS.update({_lookup(name): name for name in PERSISTED})
+    return _BY_CLASS.get(cls)
+
+
+def is_persistable(cls: type) -> bool:
+    """Whether instances of ``cls`` may be saved (``cls`` is registered)."""
+    return stable_name(cls) is not None
+
+
+def register_persistable(cls: type, name: str | None = None) -> type:
+    """Allow instances of ``cls`` (a plug-in's class with a ``__dict__``, or a named tuple) in
+    model files, under the stable ``name`` (default ``"plugin.<module>.<QualName>"``).
+
+    Usable as a class decorator; returns ``cls``. Register it in the process that saves and in the
+    one that loads.
+    """
+    if not isinstance(cls, type):
+        raise ValueError(f"register_persistable expects a class, got {cls!r}")
+    name = name or f"plugin.{cls.__module__}.{cls.__qualname__}"
+    if name in PERSISTED or (name in _PLUGINS and _PLUGINS[name] is not cls):
+        raise ValueError(f"the model-file name {name!r} is already taken by another class")
+    _PLUGINS[name] = cls
+    return cls
 
 
 def resolve_class(name: Any, source: str) -> type:
-    """The class a file names, if it is persistable (imports only ``bayes_fdi`` modules)."""
-    if not isinstance(name, str) or name.count(":") != 1:
+    """The class a file names (a stable name, or a 0.1.0 ``"module:QualName"`` spelling).
+
+    Nothing the file names is imported: only the modules of :data:`PERSISTED`. A name that is not
+    registered raises a `ValueError` naming ``source`` (the file).
+    """
+    if not isinstance(name, str):
         raise ValueError(f"{source}: invalid class name {name!r}")
-    module_name, qualname = name.split(":")
-    trusted = name in SKLEARN_CLASSES or name in _REGISTERED or module_name.startswith("bayes_fdi.")
-    if not trusted:
+    stable = LEGACY_NAMES.get(name, name)
+    cls = _lookup(stable)
+    if cls is None:
         raise ValueError(f"{source}: class {name!r} is not allowed in a bayes_fdi model file")
-    try:
-        obj: Any = importlib.import_module(module_name)
-        for part in qualname.split("."):
-            obj = getattr(obj, part)
-    except (ImportError, AttributeError) as exc:
-        raise ValueError(f"{source}: class {name!r} does not exist in this bayes_fdi") from exc
-    if not isinstance(obj, type) or class_name(obj) != name or not is_persistable(obj):
-        raise ValueError(f"{source}: class {name!r} is not allowed in a bayes_fdi model file")
-    return obj
+    return cls

@@ -11,14 +11,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from bayes_fdi.diagnosis.diagnoser import FaultDiagnoser
-from bayes_fdi.diagnosis.dynamic_models import DynamicNormalModels
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
-from bayes_fdi.calibration import TemperatureScaler
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.diagnosis import OnlineDiagnoser, svm_fault_diagnoser
-from bayes_fdi.rvm import RVR
 
 HERE = Path(__file__).parent
 
@@ -47,6 +42,14 @@ def offline_runs(rng, states, n_per, T=80):
 
 
 def main() -> None:
+    # the module paths of bayes_fdi 0.1.0
+    from bayes_fdi.diagnosis.diagnoser import FaultDiagnoser
+    from bayes_fdi.diagnosis.dynamic_models import DynamicNormalModels
+
+    from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.diagnosis import OnlineDiagnoser, svm_fault_diagnoser
+    from bayes_fdi.rvm import RVR
+
     # the online diagnoser, with isolation and a temperature calibrator, mid-stream
     normal = simulate(benchmark_inputs(3, 300, seed=1, vary=True), seed=1)
     specs = [Fault(f, s, 80.0) for f in ("f1", "f18") for s in (0.5, 0.7, 0.9, 1.0, 0.6)]
