@@ -1,11 +1,19 @@
-"""``results.json`` of the reproduction: plain JSON values only (no NaN, no numpy types)."""
+"""Report helpers shared by every report of the package: Markdown tables, numbers, JSON.
+
+- `markdown_table`, `format_percent`, `format_number`: the text of a report's tables;
+- `to_jsonable`, `write_json`: results as plain JSON values (no NaN, no numpy types), written
+  atomically.
+
+Figures are written with `bayes_fdi.atomic.save_figure`. Foundation code: imports nothing of the
+package but `bayes_fdi.atomic`.
+"""
 
 from __future__ import annotations
 
 import json
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +22,9 @@ import numpy as np
 from bayes_fdi.atomic import write_text
 
 __all__ = [
+    "format_number",
+    "format_percent",
+    "markdown_table",
     "to_jsonable",
     "write_json",
 ]
@@ -48,3 +59,47 @@ def to_jsonable(obj: Any) -> Any:
 def write_json(results: Mapping[str, Any], path: str | os.PathLike) -> Path:
     """Write ``results`` as indented JSON (see :func:`to_jsonable`) and return the path."""
     return write_text(path, json.dumps(to_jsonable(results), indent=2, sort_keys=False) + "\n")
+
+
+def format_percent(value: float, digits: int = 2) -> str:
+    """Format a ratio in ``[0, 1]`` as a percentage (``0.9824 -> '98.24%'``); NaN as ``'–'``."""
+    if value is None or not math.isfinite(float(value)):
+        return "–"
+    return f"{100.0 * float(value):.{digits}f}%"
+
+
+def format_number(value: Any, fmt: str = ".4f") -> str:
+    """``value`` formatted with ``fmt``; None, NaN and infinities as ``'–'``."""
+    if value is None or (isinstance(value, float | np.floating) and not math.isfinite(value)):
+        return "–"
+    return format(value, fmt)
+
+
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """Render a GitHub-flavoured Markdown table.
+
+    Parameters
+    ----------
+    header
+        Column titles.
+    rows
+        One sequence per row, each as long as ``header``; cells are converted with ``str``.
+
+    Returns
+    -------
+    str
+        The table, one line per row, ending with a newline.
+    """
+    header = [str(h) for h in header]
+    if not header:
+        raise ValueError("a table needs at least one column")
+    for i, row in enumerate(rows):
+        if len(row) != len(header):
+            raise ValueError(f"row {i} has {len(row)} cells, the header has {len(header)}")
+
+    def line(cells: Sequence[Any]) -> str:
+        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+
+    out = [line(header), "|" + "|".join("---" for _ in header) + "|"]
+    out.extend(line(row) for row in rows)
+    return "\n".join(out) + "\n"

@@ -9,10 +9,11 @@ import xarray as xr
 from online_double import OnlineDouble
 
 from bayes_fdi.actuator import benchmark_inputs, simulate
-from bayes_fdi.benchmark.harness import decision_signals, rising_edges, run_benchmark
+from bayes_fdi.benchmark.harness import run_benchmark
 from bayes_fdi.benchmark.scenarios import SCENARIOS, simulate_scenario
 from bayes_fdi.diagnosis.online.timeline import plot_timeline
 from bayes_fdi.scoring import picalc
+from bayes_fdi.scoring.decision_signals import decision_signals, rising_edges
 
 BY_NAME = {s.name: s for s in SCENARIOS}
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from bayes_fdi.calibration import recalibrator_selection, summaries
 from bayes_fdi.calibration import report as cr
 from bayes_fdi.calibration.recalibration import LOG_LOSS_RTOL
 from bayes_fdi.datasets import make_dataset, save_dataset
@@ -251,7 +252,7 @@ def test_window_labels_follow_onset():
             "window_end": ("window", [100.0, 200.0, 300.0]),
         },
     )
-    y, p, f = cr._samples(diag, runs)
+    y, p, f = summaries.labelled_rows(diag, runs)
     # run 0 (f1, onset 150): window ending at 99 is fn, at 199 and 299 is f1
     assert y.tolist() == ["fn", "f1", "f1", "fn", "fn", "fn"]
     assert p.shape == (6, 3) and f is None
@@ -289,10 +290,10 @@ def test_time_split_summary_of_a_correct_gaussian_model(rng):
             "F": 0.5 * cv + 0.2 + 0.03 * rng.normal(size=cv.shape),
         }
     )
-    first, second = cr.split_in_time(runs, 0.5)
+    first, second = summaries.split_in_time(runs, 0.5)
     assert first.sizes["time"] == second.sizes["time"] == n_t // 2
     assert second["time"].values[0] == n_t // 2
-    res = cr.time_split_summary(_GaussianNormalModel(), runs)
+    res = summaries.time_split_summary(_GaussianNormalModel(), runs)
     assert res["split_time"] == n_t // 2 and res["n_fit_samples"] == n_t // 2
     for name, s in (("X", 0.01), ("F", 0.03)):
         for c in res[name]["coverage"].values():
@@ -301,7 +302,7 @@ def test_time_split_summary_of_a_correct_gaussian_model(rng):
         # 10 000 CRPS values of relative sd ~0.8: the mean's relative sd 0.008; 0.03 = 3.7 sd
         assert res[name]["crps"] == pytest.approx(s / np.sqrt(np.pi), rel=0.03)
     with pytest.raises(ValueError, match="fraction"):
-        cr.split_in_time(runs, 1.0)
+        summaries.split_in_time(runs, 1.0)
 
 
 def test_recalibrate_cross_fits_every_run_out_of_fold(rng):
@@ -314,7 +315,9 @@ def test_recalibrate_cross_fits_every_run_out_of_fold(rng):
     y = np.array(CLASSES)[(rng.random(n)[:, None] > np.cumsum(p_true, 1)).sum(1).clip(max=k - 1)]
     hot = np.exp(np.log(p_true) / 0.5)
     hot /= hot.sum(axis=1, keepdims=True)
-    out, info = cr.recalibrate(y, hot, CLASSES, n_folds=3, methods=("temperature",), seed=4)
+    out, info = recalibrator_selection.recalibrate(
+        y, hot, CLASSES, n_folds=3, methods=("temperature",), seed=4
+    )
     y_idx = np.array([CLASSES.index(v) for v in y])
     folds = fold_indices(y_idx, 3, 4)
     assert sorted(np.concatenate(folds).tolist()) == list(range(n))
@@ -327,9 +330,9 @@ def test_recalibrate_cross_fits_every_run_out_of_fold(rng):
         assert fit["selected"] == "temperature" and fit["scored"] == fold.size
     np.testing.assert_array_equal(out["after"], out["temperature"])
     with pytest.raises(ValueError, match="n_folds"):
-        cr.recalibrate(y, hot, CLASSES, n_folds=1)
+        recalibrator_selection.recalibrate(y, hot, CLASSES, n_folds=1)
     with pytest.raises(ValueError, match="unknown recalibrator"):
-        cr.recalibrate(y, hot, CLASSES, methods=("platt",))
+        recalibrator_selection.recalibrate(y, hot, CLASSES, methods=("platt",))
 
 
 def test_recalibrate_selects_dirichlet_for_a_dirichlet_distortion(rng):
@@ -338,7 +341,7 @@ def test_recalibrate_selects_dirichlet_for_a_dirichlet_distortion(rng):
     p_true = rng.dirichlet(np.full(k, 0.5), size=n)
     y = np.array(CLASSES)[(rng.random(n)[:, None] > np.cumsum(p_true, 1)).sum(1).clip(max=k - 1)]
     p_obs = p_true[:, [1, 0, 2]]
-    out, info = cr.recalibrate(y, p_obs, CLASSES, n_folds=2, seed=0)
+    out, info = recalibrator_selection.recalibrate(y, p_obs, CLASSES, n_folds=2, seed=0)
     assert [f["selected"] for f in info["fits"]] == ["dirichlet", "dirichlet"]
     acc = {m: np.mean(np.array(CLASSES)[q.argmax(1)] == y) for m, q in out.items()}
     acc_true = np.mean(np.array(CLASSES)[p_true.argmax(1)] == y)
@@ -363,7 +366,7 @@ def test_recalibrate_ties_go_to_the_simplest_method(rng, monkeypatch):
     for delta, want in ((-0.1 * LOG_LOSS_RTOL, "temperature"), (-10 * LOG_LOSS_RTOL, "vector")):
         scores = {"temperature": base, "vector": base * (1 + delta), "dirichlet": base}
         monkeypatch.setattr(rs, "cross_val_log_loss", lambda est, *a, s=scores, **kw: s[_name(est)])
-        _, info = cr.recalibrate(y, p, CLASSES, n_folds=2, seed=0)
+        _, info = recalibrator_selection.recalibrate(y, p, CLASSES, n_folds=2, seed=0)
         assert [f["selected"] for f in info["fits"]] == [want, want]
 
 

@@ -18,7 +18,7 @@ from bayes_fdi import model_files
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import CHANNELS, make_dataset
 from bayes_fdi.deployment import fitting as model_fitting
-from bayes_fdi.deployment.diagnose import diagnose_recording, supports_chunks
+from bayes_fdi.deployment.recording import diagnose_recording, supports_chunks
 from bayes_fdi.deployment.stream_files import CSV_COLUMNS, AlarmCollector
 
 

@@ -9,22 +9,18 @@ import numpy as np
 import pytest
 from sklearn.metrics import confusion_matrix
 
-from bayes_fdi.paper.report import (
+from bayes_fdi.paper.report_figures import plot_features, plot_residuals
+from bayes_fdi.paper.report_tables import (
     PAPER_ACCURACY,
     PAPER_NODE_VECTORS,
     comparison_table,
     confusion_table,
-    format_percent,
     groups_table,
-    markdown_table,
     node_table,
     per_state_table,
-    plot_features,
-    plot_residuals,
-    to_jsonable,
     tree_text,
-    write_json,
 )
+from bayes_fdi.reporting import format_percent, markdown_table, to_jsonable, write_json
 
 # The paper's Figure 20 tree (Section 4.2), breadth first: RVM1 .. RVM9.
 PAPER_TREE = [

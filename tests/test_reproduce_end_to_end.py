@@ -9,7 +9,7 @@ import pytest
 from tiny_campaign import CAMPAIGN, STATES
 
 from bayes_fdi.cli import main
-from bayes_fdi.paper.report import confusion_table
+from bayes_fdi.paper.report_tables import confusion_table
 
 
 @pytest.fixture(scope="module")

@@ -180,7 +180,7 @@ def test_no_calibration_keeps_the_regressor_std_and_default_is_cross_fit(rng):
     raw = NormalModels(BayesianRidge(), interval_calibration=None).fit(train)
     assert raw.interval_calibration_ is None and "calibration" not in raw.fit_seconds_
     assert not hasattr(raw, "calibration_fold_")
-    from bayes_fdi.diagnosis.normal_models import inputs as model_inputs
+    from bayes_fdi.diagnosis import model_inputs
 
     U, _ = model_inputs(train)
     _, std = raw.regressors_["X"].predict(U, return_std=True)

@@ -9,13 +9,13 @@ stream; ``sklearn.base.clone`` + ``fit(normal_runs)`` gives a fresh detector) an
    runs once per scenario, each seed only draws its noise);
 2. runs the diagnoser on every batch (it sees the six channels only, no labels), derives the
    benchmark's decision signals DD, PID, CID from the stream and the truth
-   (:func:`decision_signals`) and computes PICalc's indices
+   (`bayes_fdi.scoring.decision_signals`) and computes PICalc's indices
    (:func:`bayes_fdi.scoring.picalc`);
 3. measures what the faults do to the measured signals against the noise
-   (:func:`fault_effects`), the group-level calibration of the per-second isolation
+   (`bayes_fdi.benchmark.effects`), the group-level calibration of the per-second isolation
    probabilities, the false alarms of simulated fault-free hours and of the second half of the
    real Lublin hour (detector refitted on its first half);
-4. writes ``DIR/benchmark.json``, ``DIR/benchmark.md`` (:mod:`.benchmark_report`), one timeline
+4. writes ``DIR/benchmark.json``, ``DIR/benchmark.md`` (`bayes_fdi.benchmark.report`), one timeline
    figure per scenario (first seed) and a reliability diagram.
 """
 
@@ -28,12 +28,12 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.actuator import NOISE_STD, benchmark_inputs, simulate
+from bayes_fdi.benchmark.effects import fault_effects
 from bayes_fdi.benchmark.scenarios import (
     SCENARIOS,
     BenchmarkScenario,
@@ -43,16 +43,13 @@ from bayes_fdi.benchmark.scenarios import (
 )
 from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis.online.timeline import plot_timeline
+from bayes_fdi.scoring.decision_signals import decision_high, decision_signals, rising_edges
 from bayes_fdi.scoring.picalc import picalc
 
 __all__ = [
     "CALIBRATION_SECONDS_PER_RUN",
     "CONFIDENT",
-    "DecisionSignals",
     "configure_parser",
-    "decision_signals",
-    "fault_effects",
-    "rising_edges",
     "run_benchmark",
     "run_from_cli",
 ]
@@ -67,112 +64,11 @@ CONFIDENT = 0.9
 #: Samples per call of ``diagnoser.run`` (runs of equal horizon are batched up to this).
 MAX_BATCH_SAMPLES = 300_000
 _TRUTH_COORDS = ("state", "strength", "onset", "profile", "ramp")
-_MEASURED = ("X", "F", "P1", "P2", "T1")
-
-
-class DecisionSignals(NamedTuple):
-    """The benchmark's decision signals of one run, per second (see :func:`decision_signals`)."""
-
-    dd: np.ndarray
-    pid: np.ndarray
-    cid: np.ndarray
-    indicated: np.ndarray
-    group_sizes: np.ndarray
-    true_group: int | None
-
-
-def rising_edges(high: Any) -> int:
-    """Number of rising edges of a 0/1 stream (a stream high at its first sample counts one)."""
-    h = np.asarray(high, dtype=bool)
-    return int(h[:1].sum() + (h[1:] & ~h[:-1]).sum())
-
-
-def _high(values: Any) -> np.ndarray:
-    """A decision as bool; NaN (no decision, e.g. BLIND) is low, as in :func:`picalc`."""
-    a = np.asarray(values)
-    return a.astype(bool) if a.dtype == bool else np.nan_to_num(a.astype(float)) != 0
-
-
-def decision_signals(stream: xr.Dataset, fault: str) -> DecisionSignals:
-    """DD, PID, CID and the indicated groups of one run, given its true fault.
-
-    Following the benchmark's definitions (``ONLINE_CONTRACT.md``): ``PID = indicated[:, g]``
-    for the group ``g`` holding ``fault`` and ``CID`` = the number of other groups indicated.
-    A fault of DGN0 (the stream's ``undetectable`` attribute) has ``PID = not DD`` and an
-    extra DGN0 column (``not DD``, holding the undetectable faults plus the OK state) in
-    ``indicated`` for ``dacc``. A fault in no group and not in DGN0 is never isolated
-    (``PID`` always low, ``true_group`` None).
-    """
-    if "run" in stream.dims:
-        raise ValueError("decision_signals: pass the stream of one run (no 'run' dimension)")
-    groups = json.loads(stream.attrs["groups"])
-    undetectable = list(json.loads(stream.attrs.get("undetectable", "[]")))
-    labels = [str(g) for g in stream["group"].values]
-    dd = _high(stream["DD"].values)
-    ind = _high(stream["indicated"].transpose("time", "group").values)
-    sizes = np.array([len(groups[g]) for g in labels], dtype=np.int64)
-    true_group = next((i for i, g in enumerate(labels) if fault in groups[g]), None)
-    n_named = ind.sum(axis=1)
-    if fault in undetectable:
-        pid = ~dd
-        ind = np.concatenate([ind, pid[:, None]], axis=1)
-        sizes = np.append(sizes, len(undetectable) + 1)
-        return DecisionSignals(dd, pid, n_named, ind, sizes, None)
-    if true_group is None:
-        return DecisionSignals(dd, np.zeros_like(dd), n_named, ind, sizes, None)
-    pid = ind[:, true_group]
-    return DecisionSignals(dd, pid, n_named - pid, ind, sizes, true_group)
 
 
 def _strip_truth(ds: xr.Dataset) -> xr.Dataset:
     """The six channels only: the diagnoser must not see the labels."""
     return ds[list(CHANNELS)].drop_vars([c for c in _TRUTH_COORDS if c in ds.coords])
-
-
-# ----------------------------------------------------------------------------------------------
-# what the faults do to the measurements
-# ----------------------------------------------------------------------------------------------
-def fault_effects(scenarios: Sequence[BenchmarkScenario]) -> list[dict[str, Any]]:
-    """The effect of each scenario's fault on the measured signals, against the sensor noise.
-
-    Noise-free simulations with and without the fault (same inputs; clipped to the sensors'
-    range as the measurements are) are compared over the faulty part ``[t_from, t_hor)``. Per
-    channel: the RMS and the largest absolute difference in units of the measurement noise
-    :data:`~bayes_fdi.actuator.NOISE_STD`. ``deflection`` is ``sqrt(sum_t sum_c (e_c(t) /
-    sigma)^2)`` over X, F, P1, P2, T1: the separation that an ideal detector knowing the exact
-    noise-free signal with and without the fault (a matched filter) would see against white
-    noise, an upper bound for any method using these signals; ``oracle_time`` is the first
-    second after ``t_from`` at which its running value reaches 5 (``None`` if never).
-    """
-    out: list[dict[str, Any]] = []
-    by_horizon: dict[float, list[BenchmarkScenario]] = {}
-    for s in scenarios:
-        by_horizon.setdefault(s.t_hor, []).append(s)
-    for t_hor, group in by_horizon.items():
-        duration = round(t_hor)
-        inputs = benchmark_inputs(n_runs=len(group) + 1, duration=duration, vary=False)
-        clean = simulate(inputs, [None] + [s.fault_spec() for s in group], noise=False)
-        for r, s in enumerate(group, start=1):
-            faulty = np.arange(duration) >= s.t_from
-            e = (
-                np.stack(
-                    [clean[c].values[r, faulty] - clean[c].values[0, faulty] for c in _MEASURED]
-                )
-                / NOISE_STD
-            )
-            running = np.sqrt(np.cumsum((e**2).sum(axis=0)))
-            reach = np.flatnonzero(running >= 5.0)
-            out.append(
-                {
-                    "scenario": s.name,
-                    "rms": {c: float(np.sqrt(np.mean(e[i] ** 2))) for i, c in enumerate(_MEASURED)},
-                    "max": {c: float(np.max(np.abs(e[i]))) for i, c in enumerate(_MEASURED)},
-                    "deflection": float(running[-1]),
-                    "oracle_time": float(reach[0]) if reach.size else None,
-                }
-            )
-    order = {s.name: i for i, s in enumerate(scenarios)}
-    return sorted(out, key=lambda d: order[d["scenario"]])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -308,7 +204,7 @@ def _calibration(col: _Collector, n_bootstrap: int, seed: int, figure: Path | No
     if figure is not None:
         import matplotlib.pyplot as plt
 
-        from bayes_fdi.diagnosis.online.timeline import save_figure
+        from bayes_fdi.atomic import save_figure
 
         fig, ax = plt.subplots(figsize=(5, 5))
         reliability_diagram(
@@ -342,7 +238,7 @@ def _fault_free(diagnoser: Any, hours: float) -> dict[str, Any]:
     ds = fault_free_hours(hours)
     stream = diagnoser.run(_strip_truth(ds)).isel(run=0)
     counted = stream["time"].values >= ds.attrs["warmup"]
-    dd = _high(stream["DD"].values)[counted]
+    dd = decision_high(stream["DD"].values)[counted]
     status = np.asarray(stream["status"].values).astype(str)[counted]
     alarms = rising_edges(dd)
     return {
@@ -366,7 +262,7 @@ def _real_hour(diagnoser: Any) -> dict[str, Any]:
     half = hour.sizes["time"] // 2
     fresh = clone(diagnoser).fit(hour.isel(time=slice(0, half)))
     stream = fresh.run(_strip_truth(hour.isel(time=slice(half, None)))).isel(run=0)
-    dd = _high(stream["DD"].values)
+    dd = decision_high(stream["DD"].values)
     status = np.asarray(stream["status"].values).astype(str)
     return {
         "seconds": int(dd.size),
@@ -397,7 +293,7 @@ def run_benchmark(
     ----------
     diagnoser
         A fitted online diagnoser (``run(recording)`` returns the decision stream of
-        ``ONLINE_CONTRACT.md``; for the real hour it is cloned and refitted with
+        `bayes_fdi.diagnosis.OnlineDiagnoser.run`; for the real hour it is cloned and refitted with
         ``fit(normal_runs)``).
     out
         Output folder (created): ``benchmark.json``, ``benchmark.md``, ``timelines/*.png``,

@@ -13,7 +13,6 @@ side (from ``shared/reference/damadics-benchmark-protocol.md`` §1.5).
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -23,7 +22,7 @@ import numpy as np
 
 from bayes_fdi.actuator import FAULT_TABLE, NOISE_STD
 from bayes_fdi.atomic import write_text
-from bayes_fdi.paper.report import markdown_table, to_jsonable
+from bayes_fdi.reporting import format_number, markdown_table, to_jsonable
 from bayes_fdi.scoring.picalc import PICALC_KEYS
 
 __all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "render_report", "summarise", "write_report"]
@@ -370,7 +369,7 @@ def _groups_table(results: Mapping[str, Any]) -> str:
 
 
 def _num(v: Any, fmt: str = ".3f") -> str:
-    return "–" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
+    return format_number(v, fmt)
 
 
 def render_report(results: Mapping[str, Any]) -> str:

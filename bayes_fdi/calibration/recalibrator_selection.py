@@ -21,6 +21,7 @@ from bayes_fdi.calibration.recalibration import (
 
 __all__ = [
     "RECALIBRATORS",
+    "RECALIBRATOR_LABELS",
     "make_recalibrator",
     "recalibrate",
 ]
@@ -30,7 +31,8 @@ __all__ = [
 RECALIBRATORS: tuple[str, ...] = ("temperature", "vector", "dirichlet")
 
 
-_RECAL_LABELS = {"temperature": "temperature", "vector": "vector", "dirichlet": "Dirichlet"}
+#: Display names of the recalibrators in reports.
+RECALIBRATOR_LABELS = {"temperature": "temperature", "vector": "vector", "dirichlet": "Dirichlet"}
 
 
 def make_recalibrator(name: str, classes: Any, seed: int = 0) -> Any:

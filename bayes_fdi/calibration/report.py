@@ -24,8 +24,7 @@ fit, the recalibrator of lowest cross-validated log loss on that fit's fitting r
 (:func:`recalibrate`).
 
 The parts: `bayes_fdi.calibration.summaries` (the numbers), `.recalibrator_selection`
-(:func:`recalibrate`) and `.report_markdown` (the text); their public names are importable from
-here too.
+(:func:`recalibrate`) and `.report_markdown` (the text).
 """
 
 from __future__ import annotations
@@ -43,32 +42,23 @@ from bayes_fdi.calibration.intervals import plot_pit_histogram
 from bayes_fdi.calibration.metrics import expected_calibration_error, reliability_diagram
 from bayes_fdi.calibration.nodes import node_calibration
 from bayes_fdi.calibration.recalibrator_selection import (
-    _RECAL_LABELS,
+    RECALIBRATOR_LABELS,
     RECALIBRATORS,
-    make_recalibrator,
     recalibrate,
 )
-from bayes_fdi.calibration.report_markdown import _fmt_ece, _markdown
+from bayes_fdi.calibration.report_markdown import format_ece, render_markdown
 from bayes_fdi.calibration.summaries import (
-    _samples,
-    _strip_private,
     classification_summary,
+    labelled_rows,
     normal_model_summary,
-    split_in_time,
-    time_split_summary,
+    public_values,
 )
 
 __all__ = [
-    "RECALIBRATORS",
-    "classification_summary",
     "configure_parser",
-    "make_recalibrator",
-    "normal_model_summary",
-    "recalibrate",
     "run_from_cli",
-    "split_in_time",
-    "time_split_summary",
     "write_calibration_report",
+    "write_report_with_summary",
 ]
 
 
@@ -117,7 +107,7 @@ def write_calibration_report(
     pathlib.Path
         Path of ``report.md``.
     """
-    return _write_report(
+    return write_report_with_summary(
         diagnoser,
         test_runs,
         out_dir,
@@ -131,7 +121,7 @@ def write_calibration_report(
     )[0]
 
 
-def _write_report(
+def write_report_with_summary(
     diagnoser: Any,
     test_runs: xr.Dataset,
     out_dir: str | Path,
@@ -158,7 +148,7 @@ def _write_report(
 
     diag = diagnoser.diagnose(test_runs)
     classes = np.asarray([str(c) for c in diag["class"].values])
-    y_samples, proba, feats_all = _samples(diag, test_runs)
+    y_samples, proba, feats_all = labelled_rows(diag, test_runs)
     known = np.isin(y_samples, classes)
     y, p = y_samples[known], proba[known]
     if y.size < 2:
@@ -179,7 +169,7 @@ def _write_report(
     if calibration_runs is not None:
         if "state" not in calibration_runs.coords:
             raise ValueError("calibration_runs must carry the per-run coordinate 'state'")
-        ycal, pcal, _ = _samples(diagnoser.diagnose(calibration_runs), calibration_runs)
+        ycal, pcal, _ = labelled_rows(diagnoser.diagnose(calibration_runs), calibration_runs)
         kcal = np.isin(ycal, classes)
         if kcal.sum() < 1:
             raise ValueError("no calibration run has a state the diagnoser knows")
@@ -236,9 +226,9 @@ def _write_report(
     sel = sorted(set(recal["selected"]))
     for ax, k in zip(axes[0], shown, strict=True):
         mark = " (selected)" if k in sel else ""
-        label = "before" if k == "before" else f"{_RECAL_LABELS[k]}{mark}"
+        label = "before" if k == "before" else f"{RECALIBRATOR_LABELS[k]}{mark}"
         reliability_diagram(summaries[k]["_results"][0], ax=ax,
-                            title=f"{label}: ECE {_fmt_ece(summaries[k]['ece'])}")  # fmt: skip
+                            title=f"{label}: ECE {format_ece(summaries[k]['ece'])}")  # fmt: skip
     fig.suptitle("Whole tree, top-label reliability (equal-width bins)", fontsize=10)
     fig.tight_layout()
     save_figure(fig, fig_dir / "reliability_whole_tree.png", dpi=120)
@@ -286,9 +276,9 @@ def _write_report(
     results["n_fault_free_runs"] = int(fn.size)
 
     # ---- write
-    clean = _strip_private(results)
+    clean = public_values(results)
     write_text(out / "calibration.json", json.dumps(clean, indent=2))
-    report = write_text(out / "report.md", _markdown(clean, node_note))
+    report = write_text(out / "report.md", render_markdown(clean, node_note))
     return report, clean
 
 

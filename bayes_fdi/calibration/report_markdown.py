@@ -7,27 +7,25 @@ from typing import Any
 
 import numpy as np
 
-from bayes_fdi.calibration.recalibrator_selection import _RECAL_LABELS
+from bayes_fdi.calibration.recalibrator_selection import RECALIBRATOR_LABELS
+from bayes_fdi.reporting import format_number
 
-__all__ = []
-
-
-def _num(v: float | None) -> str:
-    return "–" if v is None or not np.isfinite(v) else f"{v:.4f}"
+__all__ = ["format_ece", "render_markdown"]
 
 
-def _fmt_ece(e: dict[str, Any]) -> str:
+def format_ece(e: dict[str, Any]) -> str:
     """``plug-in (bias-corrected [basic CI])``, or just the plug-in without bootstrap."""
     if e["ci_low"] is None or not np.isfinite(e["ci_low"]):
         return f"{e['value']:.4f}"
-    return f"{e['value']:.4f} ({_num(e['debiased'])} [{e['ci_low']:.4f}, {e['ci_high']:.4f}])"
+    debiased = format_number(e["debiased"])
+    return f"{e['value']:.4f} ({debiased} [{e['ci_low']:.4f}, {e['ci_high']:.4f}])"
 
 
-def _markdown(r: dict[str, Any], node_note: str) -> str:
+def render_markdown(r: dict[str, Any], node_note: str) -> str:
     wt = r["whole_tree"]
     rc = r["recalibration"]
     cols = ["before", *rc["methods"], "after"]
-    names = {"before": "before", "after": "after (selected)", **_RECAL_LABELS}
+    names = {"before": "before", "after": "after (selected)", **RECALIBRATOR_LABELS}
     head = "| metric | " + " | ".join(names[c] for c in cols) + " |"
     rule = "|---" * (len(cols) + 1) + "|"
 
@@ -36,7 +34,7 @@ def _markdown(r: dict[str, Any], node_note: str) -> str:
 
     fit_lines = []
     for i, f in enumerate(rc["fits"]):
-        cvs = ", ".join(f"{_RECAL_LABELS[m]} {v:.4f}" for m, v in f["cv_log_loss"].items())
+        cvs = ", ".join(f"{RECALIBRATOR_LABELS[m]} {v:.4f}" for m, v in f["cv_log_loss"].items())
         extra = []
         if "temperature" in f:
             extra.append(f"T = {f['temperature']['temperature']:.3f}")
@@ -45,10 +43,10 @@ def _markdown(r: dict[str, Any], node_note: str) -> str:
                 d = f[m]
                 lam = f"λ = {d['reg_lambda']:.3g}, " if m == "dirichlet" else ""
                 fb = f", fell back: {d['fallback']}" if d["fallback"] else ""
-                extra.append(f"{_RECAL_LABELS[m]} {lam}μ = {d['reg_mu']:.3g}{fb}")
+                extra.append(f"{RECALIBRATOR_LABELS[m]} {lam}μ = {d['reg_mu']:.3g}{fb}")
         fit_lines.append(
             f"- fit {i + 1}: {f['n_fit']} fitting runs, {f['scored']} scored; "
-            f"selected **{_RECAL_LABELS[f['selected']]}** ({f['why']}"
+            f"selected **{RECALIBRATOR_LABELS[f['selected']]}** ({f['why']}"
             + (f": {cvs}" if cvs else "")
             + "); "
             + "; ".join(extra)
@@ -62,7 +60,7 @@ def _markdown(r: dict[str, Any], node_note: str) -> str:
         kind = "equal width" if b["strategy"] == "uniform" else "equal mass"
         bin_lines.append(
             f"| {b['n_bins']} bins, {kind} | "
-            + " | ".join(_fmt_ece(b[c]) for c in cols)
+            + " | ".join(format_ece(b[c]) for c in cols)
             + f" | {b['before']['noise_floor']:.4f} / {b['after']['noise_floor']:.4f} |"
         )
     lines = [
@@ -96,9 +94,9 @@ def _markdown(r: dict[str, Any], node_note: str) -> str:
         head,
         rule,
         row("accuracy", lambda s: f"{s['accuracy']:.4f}"),
-        row("top-label ECE (equal width)", lambda s: _fmt_ece(s["ece"])),
-        row("top-label ECE (equal mass)", lambda s: _fmt_ece(s["ece_quantile"])),
-        row("classwise ECE", lambda s: _fmt_ece(s["ece_classwise"])),
+        row("top-label ECE (equal width)", lambda s: format_ece(s["ece"])),
+        row("top-label ECE (equal mass)", lambda s: format_ece(s["ece_quantile"])),
+        row("classwise ECE", lambda s: format_ece(s["ece_classwise"])),
         row("noise floor of top-label ECE", lambda s: f"{s['ece']['noise_floor']:.4f}"),
         row("MCE (top-label)", lambda s: f"{s['ece']['mce']:.4f}"),
         row("log loss", lambda s: f"{s['log_loss']:.4f}"),

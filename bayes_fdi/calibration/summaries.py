@@ -25,7 +25,9 @@ from bayes_fdi.calibration.metrics import ECEResult, brier, expected_calibration
 
 __all__ = [
     "classification_summary",
+    "labelled_rows",
     "normal_model_summary",
+    "public_values",
     "split_in_time",
     "time_split_summary",
 ]
@@ -197,14 +199,14 @@ def time_split_summary(
     first, second = split_in_time(runs, fraction)
     model = normal_model.fit(first)
     summary = normal_model_summary(model.predict(second), second, levels=levels)
-    out = _strip_private(summary)
+    out = public_values(summary)
     out["fraction"] = float(fraction)
     out["n_fit_samples"] = int(first.sizes["run"] * first.sizes["time"])
     out["split_time"] = float(second["time"].values[0])
     return out
 
 
-def _samples(
+def labelled_rows(
     diag: xr.Dataset, runs: xr.Dataset
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """True labels, class distributions and features, one row per run (or run and window).
@@ -240,13 +242,14 @@ def _samples(
     return y, proba, feats
 
 
-def _strip_private(d: Any) -> Any:
+def public_values(d: Any) -> Any:
+    """``d`` without its private (``_``-prefixed) keys, as plain JSON values (NaN as None)."""
     if isinstance(d, dict):
-        return {k: _strip_private(v) for k, v in d.items() if not str(k).startswith("_")}
+        return {k: public_values(v) for k, v in d.items() if not str(k).startswith("_")}
     if isinstance(d, list | tuple):
-        return [_strip_private(v) for v in d]
+        return [public_values(v) for v in d]
     if isinstance(d, float) and not math.isfinite(d):
         return None
     if isinstance(d, np.generic):
-        return _strip_private(d.item())
+        return public_values(d.item())
     return d

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import tomllib
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -230,7 +231,8 @@ def simulate_campaign(
 # ----------------------------------------------------------------------------------------------
 # command line
 # ----------------------------------------------------------------------------------------------
-def _parse_set(text: str) -> tuple[str, Any]:
+def parse_override(text: str) -> tuple[str, Any]:
+    """``"KEY=VALUE"`` (``--set``) as ``(key, value)``: the value read as TOML, else as text."""
     if "=" not in text:
         raise CampaignError(f"--set expects KEY=VALUE, got {text!r}")
     key, value = (part.strip() for part in text.split("=", 1))
@@ -239,6 +241,23 @@ def _parse_set(text: str) -> tuple[str, Any]:
     except tomllib.TOMLDecodeError:
         parsed = value  # a bare word, e.g. --set source=lublin-example
     return key, parsed
+
+
+def load_with_overrides(path: Any, overrides: Sequence[str]) -> Campaign:
+    """`load_campaign` of ``path`` with ``--set KEY=VALUE`` overrides; a bad file or override
+    raises a `UsageError` naming it."""
+    try:
+        return load_campaign(path, **dict(parse_override(text) for text in overrides))
+    except CampaignError as exc:
+        raise UsageError(str(exc)) from exc
+
+
+def add_override_argument(parser: Any, help_text: str) -> None:
+    """The ``--set KEY=VALUE`` option (repeatable) of the commands that read a campaign."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        help=help_text,
+    )  # fmt: skip
 
 
 def _seed_argument(text: str) -> int:
@@ -264,13 +283,9 @@ def configure_parser(parser) -> None:
     parser.add_argument(
         "--seed", type=_seed_argument, default=None, help="override the campaign's seed"
     )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a campaign key before validation, e.g. --set runs_per_state=5 "
+    add_override_argument(
+        parser,
+        "override a campaign key before validation, e.g. --set runs_per_state=5 "
         "--set faults.strength=[0.6,0.9] (bare keys are [campaign] keys; repeatable)",
     )
     parser.add_argument(
@@ -287,11 +302,7 @@ def run_from_cli(args) -> int:
 
     from bayes_fdi.datasets import save_dataset
 
-    try:
-        overrides = dict(_parse_set(s) for s in args.overrides)
-        campaign = load_campaign(args.campaign, **overrides)
-    except CampaignError as exc:
-        raise UsageError(str(exc)) from exc
+    campaign = load_with_overrides(args.campaign, args.overrides)
     check_campaign_memory(campaign)
     t0 = time.perf_counter()
     ds = simulate_campaign(

@@ -337,6 +337,7 @@ def read_for_fitting(path: str, options: Mapping[str, Any]) -> xr.Dataset:
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     """Add the arguments of ``bayes-fdi fit``."""
+    from bayes_fdi.campaigns.simulation import add_override_argument
     from bayes_fdi.distributed import add_cluster_arguments
 
     source = parser.add_mutually_exclusive_group(required=True)
@@ -375,13 +376,8 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         type=output_file(".npz"),
         help="model file to write (.npz), written atomically",
     )
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="with --campaign: override a campaign key, as bayes-fdi simulate --set",
+    add_override_argument(
+        parser, "with --campaign: override a campaign key, as bayes-fdi simulate --set"
     )
     parser.add_argument("--seed", type=int, default=None, help="seed of the simulation")
     parser.add_argument(
@@ -405,13 +401,9 @@ def run_from_cli(args: argparse.Namespace) -> int:
         model = fit(seed=0 if args.seed is None else args.seed, small=args.small, progress=progress)
         what = "the default training campaigns" + (" (small)" if args.small else "")
     elif args.campaign:
-        from bayes_fdi.campaigns.simulation import CampaignError, _parse_set, load_campaign
+        from bayes_fdi.campaigns.simulation import load_with_overrides
 
-        try:
-            overrides = dict(_parse_set(text) for text in args.overrides)
-            campaign = load_campaign(args.campaign, **overrides)
-        except CampaignError as exc:
-            raise UsageError(str(exc)) from exc
+        campaign = load_with_overrides(args.campaign, args.overrides)
         model = fit_from_campaign(campaign, seed=args.seed, progress=progress,
                                   workers=args.workers, scheduler=args.scheduler)  # fmt: skip
         what = f"campaign {campaign.name}"

@@ -77,12 +77,12 @@ def calibration_headlines(
     from sklearn.base import clone
 
     from bayes_fdi.calibration.recalibrator_selection import RECALIBRATORS
-    from bayes_fdi.calibration.report import _write_report
+    from bayes_fdi.calibration.report import write_report_with_summary
     from bayes_fdi.calibration.summaries import split_in_time, time_split_summary
 
     out = Path(out_dir)
     with single_threaded():
-        path, cal = _write_report(
+        path, cal = write_report_with_summary(
             diagnoser,
             test_runs,
             out,

@@ -15,6 +15,8 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.campaigns.cache import N_TRAIN, split_train_test
+from bayes_fdi.diagnosis.isolation.tree import n_vectors
+from bayes_fdi.paper.report_tables import tree_text
 from bayes_fdi.paper.scores import classification_metrics, paired_comparison
 from bayes_fdi.paper.separability import (
     PAPER_GROUPS,
@@ -27,12 +29,10 @@ from bayes_fdi.paper.separability import (
 from bayes_fdi.paper.setup import (
     ALL_STATES,
     PAPER_STATES,
-    _fit_tree,
-    _n_vectors,
-    _tree,
-    _tree_text,
+    fit_tree,
     select_regression_width,
     single_threaded,
+    tree_classifier,
     tree_nodes,
 )
 
@@ -54,7 +54,7 @@ def _method_result(
     proba = proba[:, [fitted.index(c) for c in classes]]
     out = classification_metrics(y_test, proba, classes)
     out["nodes"] = tree_nodes(clf, prefix)
-    out["tree"] = _tree_text(out["nodes"], prefix)
+    out["tree"] = tree_text(out["nodes"], prefix=prefix)
     out["fit_seconds"] = float(fit_s)
     out["predict_seconds"] = float(predict_s)
     return out
@@ -198,7 +198,7 @@ def _evaluate_dataset(
 
         diagnoser = FaultDiagnoser(
             regressor=RVR(kernel="rbf", width=width),
-            classifier=_tree("rvm", seed),
+            classifier=tree_classifier("rvm", seed),
             random_state=seed,
             input_lags=tuple(input_lags),
         )
@@ -245,9 +245,9 @@ def _evaluate_dataset(
     say("SVM tree on the same features")
 
     def make_svm() -> Any:
-        return _tree("svm", seed)
+        return tree_classifier("svm", seed)
 
-    svm, _, proba_svm, fit_s, pred_s = _fit_tree(make_svm, X_tr, y_tr, X_te)
+    svm, _, proba_svm, fit_s, pred_s = fit_tree(make_svm, X_tr, y_tr, X_te)
     results["svm"] = _method_result(svm, y_te, proba_svm, fit_s, pred_s, "SVM")
     results["paired"] = paired_comparison(
         y_te,
@@ -264,7 +264,7 @@ def _evaluate_dataset(
     results["normal_models"] = {
         **regression,
         "input_lags": [float(v) for v in diag.normal_models_.input_lags_],
-        "relevance_vectors": {k: _n_vectors(r) for k, r in diag.normal_models_.regressors_.items()},
+        "relevance_vectors": {k: n_vectors(r) for k, r in diag.normal_models_.regressors_.items()},
         "noise_std": {
             k: float(r.beta_**-0.5)
             for k, r in diag.normal_models_.regressors_.items()
@@ -303,10 +303,10 @@ def _evaluate_dataset(
             say(f"RVM and SVM trees on all {len(every)} states")
 
             def make_rvm() -> Any:
-                return _tree("rvm", seed)
+                return tree_classifier("rvm", seed)
 
             for method, make, prefix in (("rvm", make_rvm, "RVM"), ("svm", make_svm, "SVM")):
-                clf, _, p, fit_s, pred_s = _fit_tree(make, feats_train_all, y_train_all, feats_test)
+                clf, _, p, fit_s, pred_s = fit_tree(make, feats_train_all, y_train_all, feats_test)
                 m = _method_result(clf, y_test_all, p, fit_s, pred_s, prefix)
                 m.update(group_metrics(y_test_all, p, [str(c) for c in clf.classes_], groups))
                 block[method] = m

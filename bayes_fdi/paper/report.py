@@ -5,8 +5,7 @@ dictionaries :func:`bayes_fdi.paper.reproduce.reproduce` builds — and renders 
 parts live in `bayes_fdi.paper.report_tables` (tables laid out like the paper's),
 `bayes_fdi.paper.report_figures` (residual and feature figures),
 `bayes_fdi.paper.report_sections` (calibration headlines, dynamic normal models) and
-`bayes_fdi.reporting` (``results.json``); their public names are importable from
-here too.
+`bayes_fdi.reporting` (Markdown tables, ``results.json``).
 """
 
 from __future__ import annotations
@@ -16,48 +15,26 @@ from typing import Any
 
 import numpy as np
 
-from bayes_fdi.paper.report_figures import plot_features, plot_residuals
 from bayes_fdi.paper.report_sections import (
-    _display_path,
-    _normal_models_text,
-    _num,
-    _why_below,
     calibration_table,
+    display_path,
     dynamic_section,
+    normal_models_text,
+    why_below,
 )
 from bayes_fdi.paper.report_tables import (
     PAPER_ACCURACY,
     PAPER_NODE_VECTORS,
     comparison_table,
     confusion_table,
-    format_percent,
     groups_table,
-    markdown_table,
     node_table,
     per_state_table,
     tree_text,
 )
-from bayes_fdi.reporting import to_jsonable, write_json
+from bayes_fdi.reporting import format_number, format_percent, markdown_table
 
-__all__ = [
-    "PAPER_ACCURACY",
-    "PAPER_NODE_VECTORS",
-    "calibration_table",
-    "comparison_table",
-    "confusion_table",
-    "dynamic_section",
-    "format_percent",
-    "groups_table",
-    "markdown_table",
-    "node_table",
-    "per_state_table",
-    "plot_features",
-    "plot_residuals",
-    "render_report",
-    "to_jsonable",
-    "tree_text",
-    "write_json",
-]
+__all__ = ["render_report"]
 
 
 def render_report(results: Mapping[str, Any]) -> str:
@@ -84,7 +61,7 @@ def render_report(results: Mapping[str, Any]) -> str:
             if results.get("small")
             else ""
         )
-        + f", {_num(results.get('seconds'), '.0f')} s in total.",
+        + f", {format_number(results.get('seconds'), '.0f')} s in total.",
         "",
         "Protocol (the paper's Section 5): per state, the first "
         f"{results.get('n_train_per_state', 20)} runs fit the normal models (fault-free runs) "
@@ -162,16 +139,16 @@ def render_report(results: Mapping[str, Any]) -> str:
         info = d.get("campaign", {})
         split = d.get("split", {})
         md += [
-            f"Campaign `{_display_path(info.get('campaign_file') or name)}` "
+            f"Campaign `{display_path(info.get('campaign_file') or name)}` "
             f"(sha256 {str(info.get('campaign_sha256', ''))[:16]}…), "
             + (
                 "loaded from the cache"
                 if info.get("cached")
-                else f"simulated in {_num(info.get('simulate_seconds'), '.0f')} s"
+                else f"simulated in {format_number(info.get('simulate_seconds'), '.0f')} s"
             )
             + f". Normal models: {split.get('normal_model_runs', '?')} fault-free runs, "
             f"{split.get('normal_model_samples', '?')} samples"
-            + _normal_models_text(d.get("normal_models", {}))
+            + normal_models_text(d.get("normal_models", {}))
             + ".",
             "",
             "### Fault strengths used",
@@ -201,9 +178,10 @@ def render_report(results: Mapping[str, Any]) -> str:
                 f"### {prefix}: identification results of the test runs (as Tables {table})",
                 "",
                 confusion_table(m["confusion"]["matrix"], m["confusion"]["classes"]),
-                f"Log loss {_num(m['log_loss'])}, Brier {_num(m['brier'])}, ECE {_num(m['ece'])}; "
-                f"fit {_num(m['fit_seconds'], '.2f')} s, "
-                f"predict {_num(m['predict_seconds'], '.3f')} s.",
+                f"Log loss {format_number(m['log_loss'])}, Brier {format_number(m['brier'])}, "
+                f"ECE {format_number(m['ece'])}; "
+                f"fit {format_number(m['fit_seconds'], '.2f')} s, "
+                f"predict {format_number(m['predict_seconds'], '.3f')} s.",
                 "",
                 f"### {prefix} nodes",
                 "",
@@ -222,7 +200,7 @@ def render_report(results: Mapping[str, Any]) -> str:
             ]
         target = PAPER_ACCURACY.get(name, {}).get("rvm")
         if target is not None:
-            why = _why_below(name, d["rvm"], d.get("all_states"), target)
+            why = why_below(name, d["rvm"], d.get("all_states"), target)
             md += ["### States identified below the paper's overall ratio (RVM)", ""]
             md += why if why else ["None: every state reaches it."]
             md += [""]
@@ -251,9 +229,9 @@ def render_report(results: Mapping[str, Any]) -> str:
                     f"accuracy {format_percent(m['accuracy'])}, on the separable states "
                     f"{format_percent(m['separable_accuracy'])}, group-level accuracy "
                     f"{format_percent(m['group_accuracy'])}, mean probability on the true "
-                    f"state's group {_num(m['group_mass'], '.3f')}; "
-                    f"log loss {_num(m['log_loss'])}, "
-                    f"ECE {_num(m['ece'])}.",
+                    f"state's group {format_number(m['group_mass'], '.3f')}; "
+                    f"log loss {format_number(m['log_loss'])}, "
+                    f"ECE {format_number(m['ece'])}.",
                     "",
                 ]
             if "rvm" in block:
@@ -284,7 +262,8 @@ def render_report(results: Mapping[str, Any]) -> str:
         timing = d.get("timing", {})
         if timing:
             md += [
-                "Timing (s): " + ", ".join(f"{k} {_num(v, '.2f')}" for k, v in timing.items()),
+                "Timing (s): "
+                + ", ".join(f"{k} {format_number(v, '.2f')}" for k, v in timing.items()),
                 "",
             ]
     return "\n".join(md).rstrip() + "\n"

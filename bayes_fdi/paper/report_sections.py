@@ -7,7 +7,6 @@ small formatters the report shares.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -15,21 +14,19 @@ from typing import Any
 
 import numpy as np
 
-from bayes_fdi.paper.report_tables import confusion_table, format_percent, markdown_table
+from bayes_fdi.paper.report_tables import confusion_table
+from bayes_fdi.reporting import format_number, format_percent, markdown_table
 
 __all__ = [
     "calibration_table",
+    "display_path",
     "dynamic_section",
+    "normal_models_text",
+    "why_below",
 ]
 
 
-def _num(value: Any, fmt: str = ".4f") -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "–"
-    return format(value, fmt)
-
-
-def _why_below(
+def why_below(
     name: str, method: Mapping[str, Any], all_states: Mapping[str, Any] | None, target: float
 ) -> list[str]:
     """Lines explaining the states identified below ``target``: whom they are confused with."""
@@ -63,7 +60,7 @@ def _why_below(
     return lines
 
 
-def _display_path(path: str | os.PathLike) -> str:
+def display_path(path: str | os.PathLike) -> str:
     """``path`` relative to the working folder when inside it (reports do not leak home paths)."""
     p = Path(path)
     try:
@@ -74,8 +71,9 @@ def _display_path(path: str | os.PathLike) -> str:
 
 def _ece_text(e: Mapping[str, Any]) -> str:
     return (
-        f"{_num(e.get('value'), '.3f')} [{_num(e.get('ci_low'), '.3f')}, "
-        f"{_num(e.get('ci_high'), '.3f')}] (floor {_num(e.get('noise_floor'), '.3f')})"
+        f"{format_number(e.get('value'), '.3f')} [{format_number(e.get('ci_low'), '.3f')}, "
+        f"{format_number(e.get('ci_high'), '.3f')}] "
+        f"(floor {format_number(e.get('noise_floor'), '.3f')})"
     )
 
 
@@ -115,7 +113,8 @@ def calibration_table(datasets: Mapping[str, Mapping[str, Any]]) -> str:
                 _ece_text(c["after"]["ece"]),
                 f"{format_percent(c['before']['accuracy'])} → "
                 f"{format_percent(c['after']['accuracy'])}",
-                f"{_num(c['before']['log_loss'])} → {_num(c['after']['log_loss'])}",
+                f"{format_number(c['before']['log_loss'])} → "
+                f"{format_number(c['after']['log_loss'])}",
                 ", ".join(c.get("selected", [])) or "–",
                 _ece_text(five["after"]) if five else "–",
                 _coverage_text(c.get("coverage", {})),
@@ -148,7 +147,7 @@ def _vectors(m: Mapping[str, Any]) -> str:
 def _model_size(nm: Mapping[str, Any]) -> str:
     rv, noise = nm.get("relevance_vectors", {}), nm.get("noise_std", {})
     return " / ".join(
-        f"{k}: {rv[k]} RVs, std {_num(noise.get(k), '.4f')}" for k in ("X", "F") if k in rv
+        f"{k}: {rv[k]} RVs, std {format_number(noise.get(k), '.4f')}" for k in ("X", "F") if k in rv
     )
 
 
@@ -199,7 +198,7 @@ def dynamic_section(results: Mapping[str, Any]) -> list[str]:
                     _vectors(svm),
                     format_percent(block["rvm"]["separable_accuracy"]) if "rvm" in block else "–",
                     format_percent(block["rvm"]["group_accuracy"]) if "rvm" in block else "–",
-                    _num(cal.get("after", {}).get("ece", {}).get("value"), ".3f"),
+                    format_number(cal.get("after", {}).get("ece", {}).get("value"), ".3f"),
                 ]
             )
     header = [
@@ -255,7 +254,7 @@ def dynamic_section(results: Mapping[str, Any]) -> list[str]:
     return md
 
 
-def _normal_models_text(nm: Mapping[str, Any]) -> str:
+def normal_models_text(nm: Mapping[str, Any]) -> str:
     if not nm:
         return ""
     out = []

@@ -13,20 +13,19 @@ Every function is pure: plain results in, Markdown out.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+
+from bayes_fdi.reporting import format_percent, markdown_table
 
 __all__ = [
     "PAPER_ACCURACY",
     "PAPER_NODE_VECTORS",
     "comparison_table",
     "confusion_table",
-    "format_percent",
     "groups_table",
-    "markdown_table",
     "node_table",
     "per_state_table",
     "tree_text",
@@ -91,43 +90,6 @@ PAPER_NODE_VECTORS: dict[str, dict[str, list[tuple[int, int]]]] = {
         ],
     },
 }
-
-
-def format_percent(value: float, digits: int = 2) -> str:
-    """Format a ratio in ``[0, 1]`` as a percentage (``0.9824 -> '98.24%'``); NaN as ``'–'``."""
-    if value is None or not math.isfinite(float(value)):
-        return "–"
-    return f"{100.0 * float(value):.{digits}f}%"
-
-
-def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    """Render a GitHub-flavoured Markdown table.
-
-    Parameters
-    ----------
-    header
-        Column titles.
-    rows
-        One sequence per row, each as long as ``header``; cells are converted with ``str``.
-
-    Returns
-    -------
-    str
-        The table, one line per row, ending with a newline.
-    """
-    header = [str(h) for h in header]
-    if not header:
-        raise ValueError("a table needs at least one column")
-    for i, row in enumerate(rows):
-        if len(row) != len(header):
-            raise ValueError(f"row {i} has {len(row)} cells, the header has {len(header)}")
-
-    def line(cells: Sequence[Any]) -> str:
-        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
-
-    out = [line(header), "|" + "|".join("---" for _ in header) + "|"]
-    out.extend(line(row) for row in rows)
-    return "\n".join(out) + "\n"
 
 
 def _confusion_array(confusion: Any, classes: Sequence[str]) -> np.ndarray:

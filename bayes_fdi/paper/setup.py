@@ -17,6 +17,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.datasets import STATES
+from bayes_fdi.diagnosis.isolation.tree import n_vectors
 
 __all__ = [
     "ALL_STATES",
@@ -25,9 +26,11 @@ __all__ = [
     "PAPER_STATES",
     "REGRESSION_WIDTHS",
     "REGRESSION_WIDTH_SAMPLES",
+    "fit_tree",
     "node_classifier",
     "select_regression_width",
     "single_threaded",
+    "tree_classifier",
     "tree_nodes",
 ]
 
@@ -167,19 +170,11 @@ def node_classifier(kind: str = "rvm", *, width: float = NODE_WIDTH) -> Any:
     raise ValueError(f"kind must be 'rvm' or 'svm', got {kind!r}")
 
 
-def _tree(kind: str, seed: int) -> Any:
+def tree_classifier(kind: str, seed: int) -> Any:
+    """An unfitted tree of `node_classifier` nodes (``"rvm"`` or ``"svm"``), scaled per node."""
     from bayes_fdi.diagnosis.isolation.tree import HierarchicalClassifier
 
     return HierarchicalClassifier(node_classifier(kind), node_scaling=True, random_state=seed)
-
-
-def _n_vectors(est: Any) -> int | None:
-    final = est.steps[-1][1] if hasattr(est, "steps") else est
-    for attr in ("relevance_vectors_", "support_vectors_"):
-        vec = getattr(final, attr, None)
-        if vec is not None:
-            return int(np.shape(vec)[0])
-    return None
 
 
 def tree_nodes(clf: Any, prefix: str) -> list[dict[str, Any]]:
@@ -191,7 +186,7 @@ def tree_nodes(clf: Any, prefix: str) -> list[dict[str, Any]]:
     """
     out = []
     for node in clf.nodes_:
-        n_vec = node.n_vectors if node.n_vectors is not None else _n_vectors(node.estimator)
+        n_vec = node.n_vectors if node.n_vectors is not None else n_vectors(node.estimator)
         out.append(
             {
                 "name": f"{prefix}{node.index + 1}",
@@ -205,14 +200,7 @@ def tree_nodes(clf: Any, prefix: str) -> list[dict[str, Any]]:
     return out
 
 
-def _tree_text(nodes: list[dict[str, Any]], prefix: str) -> str:
-    """The fitted tree as text with vectors/samples per node."""
-    from bayes_fdi.paper.report_tables import tree_text
-
-    return tree_text(nodes, prefix=prefix)
-
-
-def _fit_tree(
+def fit_tree(
     make: Callable[[], Any], X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray
 ) -> tuple[Any, Any, np.ndarray, float, float]:
     """Standardise (training mean/std), fit a tree classifier, predict; time both steps."""

@@ -39,6 +39,7 @@ __all__ = [
     "HierarchicalClassifier",
     "TreeNode",
     "design_tree",
+    "n_vectors",
 ]
 
 #: The paper's Figure 20 tree over its ten states.
@@ -421,7 +422,7 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
                     right_child=index_of.get((*path, 1)),
                     estimator=est,
                     scaler=scaler,
-                    n_vectors=_n_vectors(est),
+                    n_vectors=n_vectors(est),
                     n_samples=int(in_node.sum()),
                 )
             )
@@ -522,9 +523,12 @@ class HierarchicalClassifier(ClassifierMixin, BaseEstimator):
         return "\n".join(lines)
 
 
-def _n_vectors(est: Any) -> int | None:
+def n_vectors(est: Any) -> int | None:
+    """Relevance or support vectors of a fitted node classifier (also the last step of a
+    pipeline); None for a classifier without either."""
+    final = est.steps[-1][1] if hasattr(est, "steps") else est
     for attr in ("relevance_vectors_", "support_vectors_"):
-        vec = getattr(est, attr, None)
+        vec = getattr(final, attr, None)
         if vec is not None:
             return int(np.shape(vec)[0])
     return None

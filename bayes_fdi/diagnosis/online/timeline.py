@@ -16,7 +16,6 @@ import math
 import os
 import warnings
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,7 +24,7 @@ import xarray as xr
 from bayes_fdi import atomic
 from bayes_fdi.datasets.plotting import physical_range
 
-__all__ = ["STATUS_COLOURS", "plot_timeline", "save_figure"]
+__all__ = ["STATUS_COLOURS", "plot_timeline"]
 
 #: Colours of the SEVA statuses in the status strip.
 STATUS_COLOURS: dict[str, str] = {
@@ -48,11 +47,6 @@ def _one_run(ds: xr.Dataset, what: str) -> xr.Dataset:
     if "time" not in ds.dims:
         raise ValueError(f"plot_timeline: {what} has no 'time' dimension")
     return ds
-
-
-def save_figure(fig: Any, path: str | os.PathLike, *, dpi: int = 100) -> Path:
-    """Write ``fig`` atomically (a temporary file renamed), close it; return the path."""
-    return atomic.save_figure(fig, path, dpi=dpi)
 
 
 def _bin_width(n: int) -> int:
@@ -226,7 +220,7 @@ def plot_timeline(
     label = (truth or {}).get("label") or fault
     fig.suptitle(title or (f"{label}" if label else "online diagnosis"), fontsize=11)
     if path is not None:
-        return save_figure(fig, path)
+        return atomic.save_figure(fig, path, dpi=100)
     return fig
 
 
