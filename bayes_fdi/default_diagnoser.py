@@ -58,7 +58,7 @@ MAX_SEED = 1000 - max(v for d in SEED_OFFSETS.values() for v in d.values())
 
 def online_campaigns(*, small: bool = False) -> dict[str, Campaign]:
     """The three campaigns (``small``: the quick version)."""
-    from bayes_fdi.paper.reproduce import campaign_file
+    from bayes_fdi.campaigns.cache import campaign_file
 
     out = {}
     for key, name in CAMPAIGNS.items():

@@ -5,6 +5,9 @@ hour) and ``bayes-fdi benchmark --small`` (small training settings: seconds, not
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -17,21 +20,60 @@ from bayes_fdi.deployment import fitting as model_fitting
 from bayes_fdi.diagnosis import OnlineDiagnoser
 
 
+#: Runs ``bayes-fdi diagnose`` in a fresh interpreter and prints the bayes_fdi modules it loaded.
+_DIAGNOSE_AND_LIST_MODULES = """
+import json, sys
+from bayes_fdi.cli import main
+status = main(sys.argv[1:])
+print(json.dumps({"status": status, "modules": sorted(m for m in sys.modules
+                                                       if m.startswith("bayes_fdi"))}))
+"""
+
+
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    """A fresh default-model cache with the small settings; `diagnose --example` fills it."""
+    """A fresh default-model cache with the small settings, filled by ``bayes-fdi diagnose
+    --example`` run in a fresh interpreter (which fits the default model on first use); also
+    the modules that run loaded."""
     folder = tmp_path_factory.mktemp("cache")
     out = tmp_path_factory.mktemp("diagnosed")
+    env = dict(os.environ, **{model_fitting.CACHE_ENV: str(folder), model_fitting.SMALL_ENV: "1"})
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            _DIAGNOSE_AND_LIST_MODULES,
+            "diagnose",
+            "--example",
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=1200,
+        check=True,
+    )
+    loaded = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert loaded["status"] == 0
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv(model_fitting.CACHE_ENV, str(folder))
         mp.setenv(model_fitting.SMALL_ENV, "1")
-        assert main(["diagnose", "--example", "--out", str(out), "--quiet"]) == 0
         path = model_fitting.default_model_path()
-        yield path, out / "lublin-example", mp
+        yield path, out / "lublin-example", mp, loaded["modules"]
+
+
+def test_diagnose_loads_no_module_of_the_paper_or_the_benchmark(cache):
+    """Deployment stands on the library alone, also when it fits the default model."""
+    modules = cache[3]
+    assert "bayes_fdi.default_diagnoser" in modules  # the default model was fitted here
+    assert "bayes_fdi.deployment.recording" in modules
+    assert [m for m in modules if m.startswith(("bayes_fdi.paper", "bayes_fdi.benchmark"))] == []
 
 
 def test_diagnose_fits_the_default_model_once_and_caches_it(cache, tmp_path, capsys):
-    path, _, _ = cache
+    path, *_ = cache
     assert path.exists() and path.name.endswith("-small.npz")
     stamp = path.stat().st_mtime_ns
     assert main(["diagnose", "--example", "--out", str(tmp_path), "--quiet", "--no-figure"]) == 0
@@ -41,7 +83,7 @@ def test_diagnose_fits_the_default_model_once_and_caches_it(cache, tmp_path, cap
 
 
 def test_diagnose_the_shipped_hour_writes_the_stream_of_the_model(cache):
-    path, folder, _ = cache
+    path, folder, *_ = cache
     model = OnlineDiagnoser.load(path)
     hour = load_lublin_example()
     stream = model.run(hour[["CV", "P1", "P2", "T1", "X", "F"]].isel(run=0))
@@ -60,7 +102,7 @@ def test_diagnose_the_shipped_hour_writes_the_stream_of_the_model(cache):
 
 
 def test_fit_default_writes_a_model_that_diagnose_reads(cache, tmp_path, capsys):
-    path, _, _ = cache
+    path, *_ = cache
     model_file = tmp_path / "model.npz"
     assert main(["fit", "--default", "--small", "--out", str(model_file), "--quiet"]) == 0
     assert "OnlineDiagnoser fitted on the default training campaigns (small)" in (
