@@ -19,7 +19,6 @@ from bayes_fdi.datasets import load_lublin_example
 from bayes_fdi.deployment import fitting as model_fitting
 from bayes_fdi.diagnosis import OnlineDiagnoser
 
-
 #: Runs ``bayes-fdi diagnose`` in a fresh interpreter and prints the bayes_fdi modules it loaded.
 _DIAGNOSE_AND_LIST_MODULES = """
 import json, sys
