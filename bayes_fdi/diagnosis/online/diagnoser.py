@@ -1,23 +1,13 @@
 """The online self-validating diagnoser: every second, detect, isolate and say how far to trust
 X and F.
 
-`OnlineDiagnoser` chains online components per second of a recording
-(`bayes_fdi.diagnosis.online.step`): the dynamic normal models' predictions of X and F with
-calibrated standard deviations, standardised residuals whitened by an AR filter, a sequential
-test per output (CUSUM or GLR) whose threshold meets a false-alarm budget and the detection
-decision DD with hysteresis, after a detection the isolation signature since the detection and
-its fault and group probabilities with novelty, and the SEVA status
-(`bayes_fdi.diagnosis.online.stream.decide`): BLIND (a channel missing), CLEAR (no detection,
-inputs within the training envelope), BLURRED (a detected fault isolated with probability >=
-``p_fault``), DAZZLED (otherwise: a detection not yet isolated with confidence, a novel
-signature, or inputs outside the training envelope).
-
-``run(recording)`` returns the whole 1 Hz decision stream (its variables are listed in
-`OnlineDiagnoser.run`); ``update(sample)`` processes one second and returns its
-`~bayes_fdi.diagnosis.seva.record.SevaRecord` in O(1) time and memory. Both go through the same
-compiled kernels with the same state (`bayes_fdi.diagnosis.online.state`), so feeding a run
-second by second gives exactly the stream of ``run`` (tested). ``fit`` fits each component in
-turn (the isolation's training data: `bayes_fdi.diagnosis.online.training`).
+`OnlineDiagnoser` fits its online components (normal models, whiteners, detector, detection
+decision, signature window, input envelope, isolator) and runs them second by second
+(`bayes_fdi.diagnosis.online.step`): ``run(recording)`` returns the whole 1 Hz decision stream
+(its variables are listed in `OnlineDiagnoser.run`), ``update(sample)`` processes one second and
+returns its `~bayes_fdi.diagnosis.seva.record.SevaRecord` in O(1) time and memory. Both go
+through the same compiled kernels with the same state (`bayes_fdi.diagnosis.online.state`), so
+feeding a run second by second gives exactly the stream of ``run`` (tested).
 """
 
 from __future__ import annotations
@@ -58,6 +48,16 @@ Runs = xr.Dataset | Sequence[xr.Dataset]
 
 class OnlineDiagnoser(BaseEstimator):
     """Online detection, isolation and SEVA validation of an actuator, one second at a time.
+
+    Per second: the dynamic normal models' predictions of X and F with calibrated standard
+    deviations; the standardised residuals, whitened by an AR filter; a sequential test per
+    output (CUSUM or GLR) with a threshold for a false-alarm budget and the detection decision DD
+    with hysteresis; after a detection, the isolation signature since the detection and its
+    fault and group probabilities with novelty; and the SEVA status
+    (`bayes_fdi.diagnosis.online.stream.decide`): BLIND (a channel missing), CLEAR (no
+    detection, inputs within the training envelope), BLURRED (a detected fault isolated with
+    probability >= ``p_fault``), DAZZLED (otherwise: a detection not yet isolated with
+    confidence, a novel signature, or inputs outside the training envelope).
 
     Parameters
     ----------
@@ -186,15 +186,10 @@ class OnlineDiagnoser(BaseEstimator):
     ) -> OnlineDiagnoser:
         """Fit detection on fault-free runs and, given fault runs, isolation.
 
-        1. The normal models on the fault-free runs, with their out-of-fold standardised
-           residuals (every training sample predicted by models that did not see its run or
-           time block); 2. one AR whitening filter per output on those residuals; 3. the
-           detector threshold for the false-alarm budget on their innovations; 4. the input
-           envelope; 5. with fault runs: the stream runs over every fault run as it will
-           online, and the isolation signatures at chosen ages after each detection that
-           follows the fault's onset train, validate and calibrate the `FaultIsolator`. Faults
-           detected in fewer than ``detect_rate`` of their training runs (or with fewer than 5
-           signatures) are not detectable (DGN0) and not classified.
+        The normal models, the whitening filters and the detector's threshold
+        (`~bayes_fdi.diagnosis.online.training.fit_detection`) and the input envelope on the
+        fault-free runs; the isolator on the signatures the stream gives on the fault runs
+        (`~bayes_fdi.diagnosis.online.training.fit_isolation`).
 
         Parameters
         ----------
@@ -261,8 +256,7 @@ class OnlineDiagnoser(BaseEstimator):
                 random_state=self.random_state,
                 seconds=seconds,
             )
-            self.isolator_ = fitted.isolator
-            self.undetectable_ = fitted.undetectable
+            self.isolator_, self.undetectable_ = fitted.isolator, fitted.undetectable
             self.detection_rates_ = fitted.detection_rates
             if fitted.n_signatures is not None:
                 self.n_signatures_ = fitted.n_signatures
