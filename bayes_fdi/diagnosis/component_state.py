@@ -40,12 +40,13 @@ def check_state(state: Any, fresh: tuple, what: str) -> None:
     if type(state) is not cls:
         raise ValueError(f"{what} must be a {cls.__name__}, got {type(state).__name__}")
     for name, want, got in zip(cls._fields, fresh, state, strict=True):
+        if type(got) is np.ndarray and got.shape == want.shape and got.dtype == want.dtype:
+            continue  # the usual case, first
         if _is_state(want):
             check_state(got, want, f"{what}.{name}")
-            continue
-        if not isinstance(got, np.ndarray):
+        elif not isinstance(got, np.ndarray):
             raise ValueError(f"{what}.{name} must be an array, got {type(got).__name__}")
-        if got.dtype != want.dtype or got.shape != want.shape:
+        else:
             raise ValueError(
                 f"{what}.{name} must be a {want.dtype} array of shape {want.shape}, got "
                 f"{got.dtype} {got.shape} (the state of another model?)"
@@ -54,9 +55,7 @@ def check_state(state: Any, fresh: tuple, what: str) -> None:
 
 def writable_copy(state: State) -> State:
     """A copy of ``state`` whose arrays a compiled kernel may update in place."""
-    return type(state)(
-        *(writable_copy(v) if _is_state(v) else np.array(v, copy=True) for v in state)
-    )
+    return type(state)(*(v.copy() if type(v) is np.ndarray else writable_copy(v) for v in state))
 
 
 def stack_states(states: Sequence[State]) -> State:

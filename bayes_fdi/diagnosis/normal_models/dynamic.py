@@ -377,10 +377,12 @@ class DynamicNormalModels(BaseEstimator):
 
     def init_state(self) -> NormalModelsState:
         """A fresh stream state: no sample seen (the history of CV and ``s`` is undefined)."""
-        self._check_params()
-        return NormalModelsState(
-            np.zeros((2, int(self.n_differences))), np.zeros(1, dtype=np.int64)
-        )
+        if hasattr(self, "params_"):  # the fitted kernel's number of increments
+            n_differences = (self.params_.input_mean.size - 2) // 2
+        else:
+            self._check_params()
+            n_differences = int(self.n_differences)
+        return NormalModelsState(np.zeros((2, n_differences)), np.zeros(1, dtype=np.int64))
 
     def check_state(self, state: Any) -> None:
         """Raise a `ValueError` naming the field unless ``state`` is a state of these models."""

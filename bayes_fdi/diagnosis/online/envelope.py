@@ -140,11 +140,10 @@ class InputEnvelope:
         the envelope (False for NaN)."""
         self._check_fitted()
         x = np.asarray(inputs, dtype=np.float64)
-        novel = np.zeros(x.shape[0], dtype=bool)
-        for j in range(len(ENVELOPE_CHANNELS)):
-            with np.errstate(invalid="ignore"):
-                novel |= (x[:, j] < self.low_[j]) | (x[:, j] > self.high_[j])
-        return novel
+        if x.ndim != 2 or x.shape[1] != len(ENVELOPE_CHANNELS):
+            raise ValueError(f"inputs must be (n, 4), got shape {x.shape}")
+        with np.errstate(invalid="ignore"):
+            return np.any((x < self.low_) | (x > self.high_), axis=1)
 
     def init_state(self) -> EnvelopeState:
         """A fresh state: no average yet, no detection."""

@@ -10,6 +10,7 @@ docstring and in ``docs/online.md``).
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -22,12 +23,25 @@ from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis.isolation.signatures import ISOLATION_FEATURES
 from bayes_fdi.diagnosis.seva.record import SevaStatus
 
-__all__ = ["FAULTS", "MODEL_OUTPUTS", "assemble_stream", "decide", "stream_attrs"]
+__all__ = [
+    "FAULTS",
+    "MODEL_OUTPUTS",
+    "assemble_stream",
+    "coverage_quantile",
+    "decide",
+    "stream_attrs",
+]
 
 #: The fault names of the stream's ``fault`` coordinate.
 FAULTS: tuple[str, ...] = tuple(f"f{i}" for i in range(1, 20))
 #: The normal models' outputs in the stream.
 MODEL_OUTPUTS = ("X_hat", "X_hat_std", "F_hat", "F_hat_std")
+
+
+@functools.lru_cache(maxsize=16)
+def coverage_quantile(coverage: float) -> float:
+    """The standard normal quantile ``z`` of a two-sided ``coverage`` (1.96 for 0.95)."""
+    return float(sps.norm.ppf(0.5 + coverage / 2.0))
 
 
 def decide(
@@ -88,7 +102,7 @@ def decide(
     indicated = np.zeros((n, len(group_labels)), dtype=bool)
     if indicated.shape[1]:
         indicated[np.flatnonzero(known), top[known]] = True
-    z = float(sps.norm.ppf(0.5 + coverage / 2.0))
+    z = coverage_quantile(coverage)
     return {
         "state": state,
         "probability": prob,
