@@ -322,26 +322,37 @@ function remember(v, h) {
   latest[v] = {status: h.status[n - 1], state: h.state[n - 1], p: h.p[n - 1], t: h.t[n - 1]};
   count += n;
 }
+function newer(h, after) {  // the points of a message later than what is drawn
+  const keep = h.t.map(t => after === undefined || t > after);
+  const out = {};
+  for (const k in h) out[k] = h[k].filter((_, i) => keep[i]);
+  return out;
+}
 async function start() {
+  const queued = [];
+  const source = new EventSource("/events");  // opened first: no message is missed
+  source.onmessage = e => queued.push(JSON.parse(e.data));
   const state = await (await fetch("/api/state")).json();
   const want = new URLSearchParams(location.search).get("valve");
   drawn = state.valves.filter(v => want ? v.name === want : true).slice(0, want ? 1 : state.panels);
   for (const v of drawn) { panel(v); draw(v, state.history[v.name]); }
   for (const v of state.valves) remember(v.name, state.history[v.name]);
   overview(); alarms(state.alarms);
-  const source = new EventSource("/events");
-  source.onmessage = e => {
-    const m = JSON.parse(e.data);
-    for (const v of drawn) { const h = m.points[v.name]; if (!h) continue;
+  const apply = m => {
+    for (const v of drawn) { if (!m.points[v.name]) continue;
+      const h = newer(m.points[v.name], latest[v.name] && latest[v.name].t);
+      if (!h.t.length) continue;
       Plotly.extendTraces("X-" + v.name, bandUpdate(h, "X"), [0, 1, 2, 3], KEEP);
       Plotly.extendTraces("F-" + v.name, bandUpdate(h, "F"), [0, 1, 2, 3], KEEP);
       Plotly.extendTraces("S-" + v.name, ribbonUpdate(h), [0, 1, 2, 3], KEEP); }
-    for (const v in m.points) remember(v, m.points[v]);
+    for (const v in m.points) remember(v, newer(m.points[v], latest[v] && latest[v].t));
     overview(); alarms(m.alarms);
     const now = new Date().toISOString().slice(11, 19);
     document.getElementById("updated").textContent = now + " UTC";
     document.getElementById("count").textContent = count;
   };
+  queued.forEach(apply);
+  source.onmessage = e => apply(JSON.parse(e.data));
 }
 start();
 </script></body></html>
