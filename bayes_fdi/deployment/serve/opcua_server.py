@@ -50,6 +50,7 @@ QUALITY: dict[str, int] = {
     "DAZZLED": ua.StatusCodes.Uncertain,
     "BLIND": ua.StatusCodes.Bad,
 }
+_CODES = {status: ua.StatusCode(code) for status, code in QUALITY.items()}
 _POLICY = {
     "None": ua.SecurityPolicyType.NoSecurity,
     "Basic256Sha256_Sign": ua.SecurityPolicyType.Basic256Sha256_Sign,
@@ -258,22 +259,22 @@ class SevaPublisher:
         import datetime as dt
 
         units = self.valves[valve]
-        status = str(row["status"])
-        quality = ua.StatusCode(QUALITY[status])
+        quality = _CODES[str(row["status"])]
+        good = _CODES["CLEAR"]
         stamp = dt.datetime.fromtimestamp(int(row["time"]), dt.UTC)
+        now = dt.datetime.now(dt.UTC)  # one server timestamp for the whole record
         values = _published_values(row, units)
-        server = self.server
+        write = self.server.write_attribute_value
+        nodes = self.nodes[valve]
         for name, dtype, _, takes_quality in _VARIABLES:
-            value = values[name]
-            code = quality if takes_quality else ua.StatusCode(ua.StatusCodes.Good)
-            variant = ua.Variant(value, _VARIANT[dtype])
+            variant = ua.Variant(values[name], _VARIANT[dtype])
             dv = ua.DataValue(
                 variant,
-                StatusCode=code,
+                StatusCode=quality if takes_quality else good,
                 SourceTimestamp=stamp,
-                ServerTimestamp=dt.datetime.now(dt.UTC),
+                ServerTimestamp=now,
             )
-            await server.write_attribute_value(self.nodes[valve][name], dv)
+            await write(nodes[name], dv)
 
     async def stop(self) -> None:
         """Close the endpoint."""
