@@ -122,15 +122,14 @@ def test_a_0_1_0_glr_state_keeps_its_ring_and_counters():
     assert state.detect.F.stored.dtype == np.int64 and state.decision.on.tolist() == [True]
 
 
-def test_a_0_1_0_stream_state_of_two_runs_is_nested_with_its_run_axis(saved):
-    old = saved["_stream"]
-    other = dict(old, seconds=31, held=old["held"] + 1.0)
-    runs = [old, other]
+def _flat_fields(runs):
+    """The fields of 0.1.0's `StreamState` of run states in 0.1.0's layout: one array per run
+    and component, stacked."""
 
     def stacked(get):
         return np.stack([get(r) for r in runs])
 
-    flat = {  # the fields of 0.1.0's StreamState, one array per run and component
+    return {
         "model_history": stacked(lambda r: r["models"][0]),
         "model_seen": stacked(lambda r: r["models"][1]),
         **{f"whiten_{c}": stacked(lambda r, c=c: r["whiten"][c][0]) for c in ("X", "F")},
@@ -140,8 +139,14 @@ def test_a_0_1_0_stream_state_of_two_runs_is_nested_with_its_run_axis(saved):
         "held": stacked(lambda r: r["held"]),
         "features": stacked(lambda r: r["features"]),
         "input_reference": stacked(lambda r: r["reference"]),
-        "seconds": np.array([30, 31]),
+        "seconds": np.array([r["seconds"] for r in runs]),
     }
+
+
+def test_a_0_1_0_stream_state_of_two_runs_is_nested_with_its_run_axis(saved):
+    old = saved["_stream"]
+    runs = [old, dict(old, seconds=31, held=old["held"] + 1.0)]
+    flat = _flat_fields(runs)
     state = StreamState(**upgrade_stream_state(flat))
     want = StreamState.of_runs([upgrade_run_state(r) for r in runs])
     got_leaves, want_leaves = _leaves(state), _leaves(want)
@@ -213,3 +218,55 @@ def test_stream_state_layout_is_checked():
     bad = state._replace(onset=state.onset._replace(average=np.zeros((3, 4))))
     with pytest.raises(ValueError, match=r"state.onset.average must be an array with a leading"):
         bad.check_layout()
+
+
+def test_stream_state_arrays_round_trip_by_path():
+    one = RunState(
+        models=DynamicNormalModels().init_state(),
+        whiten=PerOutput(*(ARWhitener(order=1).fit(np.arange(40.0) % 3).init_state(),) * 2),
+        detect=PerOutput(
+            GLRState(np.arange(4.0), np.ones(1, np.int64), np.zeros(1, np.int64)),
+            GLRState(np.zeros(4), np.zeros(1, np.int64), np.ones(1, np.int64)),
+        ),
+        decision=DetectionDecision(1.0).init_state(),
+        signature=SignatureWindow().init_state(),
+        onset=InputEnvelope().init_state(),
+        seconds=3,
+    )
+    state = StreamState.of_runs([one])
+    arrays = state.arrays()
+    assert "detect.X.buffer" in arrays and "models.history" in arrays and "seconds" in arrays
+    back = StreamState.from_arrays({k: v.copy() for k, v in arrays.items()})
+    assert isinstance(back.detect.X, GLRState)
+    for path, value in back.arrays().items():
+        np.testing.assert_array_equal(value, arrays[path], err_msg=path)
+        assert value.dtype == arrays[path].dtype and not value.flags.writeable, path
+    with pytest.raises(ValueError, match="unknown stream state arrays"):
+        StreamState.from_arrays({**arrays, "detect.X.extra": np.zeros(1)})
+    missing = {k: v for k, v in arrays.items() if k != "onset.average"}
+    with pytest.raises(ValueError, match="no EnvelopeState at 'onset'"):
+        StreamState.from_arrays(missing)
+
+
+def test_a_checkpoint_of_the_flat_state_decodes_to_todays(saved):
+    import base64
+
+    from bayes_fdi.deployment.serve.records import decode_state, encode_state
+
+    def encoded(a):
+        a = np.ascontiguousarray(a)
+        data = base64.b64encode(a.tobytes()).decode("ascii")
+        return {"dtype": a.dtype.str, "shape": list(a.shape), "data": data}
+
+    flat = _flat_fields([saved["_stream"]])
+    fields = {
+        k: [encoded(a) for a in v] if isinstance(v, tuple) else encoded(v) for k, v in flat.items()
+    }
+    text = json.dumps({"format": "bayes_fdi.StreamState", "version": 1, "fields": fields})
+    state = decode_state(text)
+    want = StreamState.of_runs([upgrade_run_state(saved["_stream"])])
+    for path, value in want.arrays().items():
+        np.testing.assert_array_equal(state.arrays()[path], value, err_msg=path)
+    again = decode_state(encode_state(state))  # today's text: the same state, bit for bit
+    for path, value in state.arrays().items():
+        assert again.arrays()[path].tobytes() == value.tobytes(), path

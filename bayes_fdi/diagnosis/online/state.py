@@ -20,13 +20,15 @@ dict); `bayes_fdi.diagnosis.online.legacy` rebuilds today's layout from them.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from bayes_fdi.diagnosis.component_state import stack_states, state_of_run
 from bayes_fdi.diagnosis.detection.decision import DecisionState
+from bayes_fdi.diagnosis.detection.detectors import CUSUMState, GLRState
+from bayes_fdi.diagnosis.detection.whitening import WhitenState
 from bayes_fdi.diagnosis.isolation.signatures import SignatureState
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import NormalModelsState
 from bayes_fdi.diagnosis.online.envelope import EnvelopeState
@@ -101,6 +103,55 @@ class StreamState(NamedTuple):
 
         walk(self, "state")
 
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every array of the state by its dotted path (``"models.history"``,
+        ``"detect.X.sums"``, ..., ``"seconds"``); `from_arrays` rebuilds the state."""
+        out: dict[str, np.ndarray] = {}
+
+        def walk(value: Any, where: str) -> None:
+            if isinstance(value, tuple):
+                for name, item in zip(value._fields, value, strict=True):
+                    walk(item, f"{where}.{name}" if where else name)
+            else:
+                out[where] = value
+
+        walk(self, "")
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays: Mapping[str, np.ndarray]) -> StreamState:
+        """The state of `arrays`' output (read-only); a `ValueError` names a missing or
+        unknown path."""
+        used: set[str] = set()
+
+        def build(options: tuple[type, ...], where: str) -> Any:
+            for option in options:
+                paths = [f"{where}.{name}" for name in option._fields]
+                if all(p in arrays for p in paths):
+                    used.update(paths)
+                    return option(*(np.asarray(arrays[p]) for p in paths))
+            raise ValueError(
+                f"the arrays hold no {' or '.join(o.__name__ for o in options)} at {where!r}"
+            )
+
+        fields: dict[str, Any] = {}
+        for name, options in _COMPONENT_STATES.items():
+            if name in ("whiten", "detect"):
+                fields[name] = PerOutput(build(options, f"{name}.X"), build(options, f"{name}.F"))
+            else:
+                fields[name] = build(options, name)
+        if "seconds" not in arrays:
+            raise ValueError("the arrays hold no 'seconds'")
+        fields["seconds"] = np.asarray(arrays["seconds"])
+        unknown = sorted(set(arrays) - used - {"seconds"})
+        if unknown:
+            raise ValueError(f"unknown stream state arrays {unknown}")
+        state = cls(**fields)
+        state.check_layout()
+        for value in state.arrays().values():
+            value.flags.writeable = False
+        return state
+
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
         """A saved `StreamState`'s fields in today's layout
@@ -108,3 +159,14 @@ class StreamState(NamedTuple):
         from bayes_fdi.diagnosis.online.legacy import upgrade_stream_state
 
         return upgrade_stream_state(data)
+
+
+#: The classes each component state of a `StreamState` may be of.
+_COMPONENT_STATES: dict[str, tuple[type, ...]] = {
+    "models": (NormalModelsState,),
+    "whiten": (WhitenState,),
+    "detect": (CUSUMState, GLRState),
+    "decision": (DecisionState,),
+    "signature": (SignatureState,),
+    "onset": (EnvelopeState,),
+}
