@@ -266,7 +266,7 @@ def test_normal_runs_as_a_list_of_datasets_of_different_durations(recording):
         OnlineDiagnoser(_tiny_models()).fit([a, "b.csv"])
 
 
-def test_onset_inputs_novel_holds_the_envelope_check_of_the_pre_detection_average():
+def test_the_envelope_onset_check_holds_the_check_of_the_pre_detection_average():
     envelope = InputEnvelope.from_bounds(np.zeros(4), np.full(4, 0.4))
     dd = np.array([0, 0, 0, 1, 1, 1, 0, 0, 1, 1], dtype=bool)
     inside = np.full((10, 4), 0.2)
