@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -38,12 +38,10 @@ from bayes_fdi.diagnosis.online.step import (
     step,
 )
 from bayes_fdi.diagnosis.online.stream import FAULTS, assemble_stream, decide, stream_attrs
-from bayes_fdi.diagnosis.online.training import fit_detection, fit_isolation, stack_runs
+from bayes_fdi.diagnosis.online.training import Runs, fit_detection, fit_isolation, stack_runs
 from bayes_fdi.diagnosis.seva.record import SevaRecord
 
 __all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
-
-Runs = xr.Dataset | Sequence[xr.Dataset]
 
 
 class OnlineDiagnoser(BaseEstimator):
@@ -62,8 +60,9 @@ class OnlineDiagnoser(BaseEstimator):
     Parameters
     ----------
     normal_models
-        Unfitted normal models with the interface of `DynamicNormalModels` (cloned); None:
-        ``DynamicNormalModels(random_state=random_state)``.
+        Unfitted normal models with the interface of `DynamicNormalModels` (``fit``,
+        ``oof_z_``, and as an online component ``init_state``, ``check_state``, ``run``;
+        cloned); None: ``DynamicNormalModels(random_state=random_state)``.
     detector
         ``"cusum"`` (default) or ``"glr"``.
     cusum_k
@@ -296,13 +295,11 @@ class OnlineDiagnoser(BaseEstimator):
     @property
     def input_low_(self) -> np.ndarray:
         """Lower bounds of the input envelope (CV, P1, P2, T1)."""
-        self._check_fitted()
         return self.envelope_.low_
 
     @property
     def input_high_(self) -> np.ndarray:
         """Upper bounds of the input envelope (CV, P1, P2, T1)."""
-        self._check_fitted()
         return self.envelope_.high_
 
     # ------------------------------------------------------------------ persistence

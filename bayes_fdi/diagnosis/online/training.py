@@ -35,6 +35,7 @@ __all__ = [
     "SIGNATURE_AGES",
     "DetectionFit",
     "IsolationFit",
+    "Runs",
     "Signatures",
     "cap_rows",
     "detection_signatures",
@@ -55,6 +56,7 @@ SIGNATURE_AGES: tuple[int, ...] = (
 #: probabilities carry the uncertainty of the first seconds.
 GROUP_MIN_AGE = 20
 
+#: Runs given as one dataset or as a list of datasets (e.g. of different durations).
 Runs = xr.Dataset | Sequence[xr.Dataset]
 
 
