@@ -153,6 +153,21 @@ def test_detection_only_without_fault_runs(recording):
     assert json.loads(s.attrs["undetectable"]) == []
 
 
+def test_a_detector_object_gives_the_stream_of_its_name(recording):
+    """A sequential test passed as an object is calibrated like the built-in one it equals."""
+    from bayes_fdi.diagnosis.detection import CUSUM
+
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    by_name = OnlineDiagnoser(_tiny_models(), detector="cusum", cusum_k=0.7).fit(normal)
+    by_object = OnlineDiagnoser(_tiny_models(), detector=CUSUM(k=0.7, threshold=99.0)).fit(normal)
+    assert by_object.threshold_ == by_name.threshold_
+    a, b = by_name.run(recording), by_object.run(recording)
+    for name in ("DD", "stat_X", "stat_F", "status"):
+        np.testing.assert_array_equal(a[name].values, b[name].values)
+    with pytest.raises(ValueError, match="detector must be 'cusum', 'glr' or a sequential test"):
+        OnlineDiagnoser(_tiny_models(), detector=object()).fit(normal)
+
+
 def test_clone_refits_and_bad_input_is_named(fitted, recording):
     params = fitted.get_params()
     assert params["max_signatures_per_fault"] == 20

@@ -41,6 +41,16 @@ from bayes_fdi.diagnosis.online.stream import FAULTS, assemble_stream, decide, s
 from bayes_fdi.diagnosis.online.training import Runs, fit_detection, fit_isolation, stack_runs
 from bayes_fdi.diagnosis.seva.record import SevaRecord
 
+#: What `OnlineDiagnoser` needs of a sequential test given as its ``detector``.
+_DETECTOR_METHODS = (
+    "init_state",
+    "check_state",
+    "update",
+    "run",
+    "with_threshold",
+    "gaussian_threshold",
+)
+
 __all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
 
 
@@ -64,7 +74,9 @@ class OnlineDiagnoser(BaseEstimator):
         ``oof_z_``, and as an online component ``init_state``, ``check_state``, ``run``;
         cloned); None: ``DynamicNormalModels(random_state=random_state)``.
     detector
-        ``"cusum"`` (default) or ``"glr"``.
+        ``"cusum"`` (default), ``"glr"``, or an unfitted sequential test with the interface of
+        `bayes_fdi.diagnosis.detection.CUSUM` (``init_state``, ``check_state``, ``update``,
+        ``run``, ``with_threshold``, ``gaussian_threshold``): its threshold is calibrated here.
     cusum_k
         CUSUM reference value, in innovation standard deviations (default 0.5).
     glr_window
@@ -215,13 +227,10 @@ class OnlineDiagnoser(BaseEstimator):
         self.normal_models_ = clone(models).fit(normal_runs)
         seconds["normal_models"] = time.perf_counter() - t0
         t0 = time.perf_counter()
+        prototype = self._detector_prototype()
         clear = self.clear_level
         if clear is None:
-            clear = 0.0 if self.detector == "cusum" else 2.0
-        if self.detector == "cusum":
-            prototype = CUSUM(k=float(self.cusum_k), threshold=1.0)
-        else:
-            prototype = GLR(window=int(self.glr_window), threshold=1.0)
+            clear = 0.0 if isinstance(prototype, CUSUM) else 2.0
         detection = fit_detection(
             self.normal_models_.oof_z_,
             prototype,
@@ -264,9 +273,22 @@ class OnlineDiagnoser(BaseEstimator):
         self.reset()
         return self
 
+    def _detector_prototype(self) -> Any:
+        """The unfitted sequential test (threshold 1) whose threshold the fit calibrates."""
+        if isinstance(self.detector, str):
+            if self.detector == "cusum":
+                return CUSUM(k=float(self.cusum_k), threshold=1.0)
+            if self.detector == "glr":
+                return GLR(window=int(self.glr_window), threshold=1.0)
+        elif all(hasattr(self.detector, m) for m in _DETECTOR_METHODS):
+            return self.detector.with_threshold(1.0)
+        raise ValueError(
+            f"detector must be 'cusum', 'glr' or a sequential test with the methods "
+            f"{', '.join(_DETECTOR_METHODS)}; got {self.detector!r}"
+        )
+
     def _check_params(self) -> None:
-        if self.detector not in ("cusum", "glr"):
-            raise ValueError(f"detector must be 'cusum' or 'glr', got {self.detector!r}")
+        self._detector_prototype()
         checks = {
             "false_alarm_hours": self.false_alarm_hours > 0,
             "cusum_k": self.cusum_k >= 0,
@@ -487,7 +509,7 @@ class OnlineDiagnoser(BaseEstimator):
         attrs = stream_attrs(
             self.groups_,
             self.undetectable_,
-            detector=self.detector,
+            detector=self.detector if isinstance(self.detector, str) else repr(self.detector),
             threshold=self.threshold_,
             clear_level=self.clear_level_,
             coverage=self.coverage,
