@@ -72,9 +72,9 @@ def measure(problem: str, n: int) -> dict[str, float]:
     docstring)."""
     import torch
 
-    import bayes_fdi.rvm.sbl_gaussian as sbl_gaussian
+    import bayes_fdi.rvm.sbl.gaussian as sbl_gaussian
     from bayes_fdi.rvm import RVR
-    from bayes_fdi.rvm.design import Design
+    from bayes_fdi.rvm.sbl.design import Design
 
     torch.set_num_threads(1)
     spec = PROBLEMS[problem]

@@ -282,10 +282,10 @@ def test_floor_counts_the_fits_products_and_iterations_without_changing_it(monke
     update), the fit itself unchanged, and the solver's functions restored afterwards (counts
     only: no timing asserted)."""
     floor = _load("rvm_floor")
-    import bayes_fdi.rvm.sbl_gaussian as sbl_gaussian
+    import bayes_fdi.rvm.sbl.gaussian as sbl_gaussian
     from bayes_fdi.rvm import RVR
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sbl_tracking import TrackedFactors
+    from bayes_fdi.rvm.sbl.design import Design
+    from bayes_fdi.rvm.sbl.tracked_factors import TrackedFactors
 
     additions = [0]
     add = TrackedFactors.add

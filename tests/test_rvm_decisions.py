@@ -1,4 +1,4 @@
-"""The fast solvers' decision rules (bayes_fdi.rvm.sbl_decisions) against independent
+"""The fast solvers' decision rules (bayes_fdi.rvm.sbl.decisions) against independent
 references: the textbook factors in 50-digit arithmetic (mpmath), a design with duplicated
 columns in permuted order, a perturbed design, and the closed-form marginal likelihood
 (Gaussian) or an independently computed Laplace approximation (Bernoulli)."""
@@ -12,9 +12,9 @@ import scipy.optimize
 import scipy.special
 import torch
 
-from bayes_fdi.rvm.design import Design
+from bayes_fdi.rvm.sbl.design import Design
 from bayes_fdi.rvm.kernels import RBF
-from bayes_fdi.rvm.sbl_decisions import (
+from bayes_fdi.rvm.sbl.decisions import (
     best_action,
     exact_factors,
     gaussian_screened_Q,
@@ -24,8 +24,8 @@ from bayes_fdi.rvm.sbl_decisions import (
     verified_argmax,
     weighted_exact_factors,
 )
-from bayes_fdi.rvm.sbl_numerics import _factor
-from bayes_fdi.rvm.sparse_bayes import fast_bernoulli, fast_gaussian, posterior_mode
+from bayes_fdi.rvm.sbl.precision_factor import _factor
+from bayes_fdi.rvm.sbl import fast_bernoulli, fast_gaussian, posterior_mode
 from bayes_fdi.rvm.threads import fit_threads
 
 
@@ -363,7 +363,7 @@ def test_bernoulli_float32_screening_takes_the_exact_decisions():
 def test_thin_matmul_within_highams_bound(k):
     """``thin_matmul`` (the transposed product for thin right-hand sides) is ``A @ W`` within
     ``gamma_m sum |A| |W|``, on a column view of a wider buffer (as the solver's ``Phi``)."""
-    from bayes_fdi.rvm.sbl_decisions import rounding_gamma, thin_matmul
+    from bayes_fdi.rvm.sbl.decisions import rounding_gamma, thin_matmul
 
     rng = np.random.default_rng(k)
     buf = torch.tensor(rng.standard_normal((700, 64)))

@@ -268,8 +268,8 @@ def test_screening_copy_takes_the_exact_decisions():
     """The screening copy (float32 + bfloat16 entries) only ranks candidates, with a rigorous
     bound of its error (``Design.screening_error``): every action is decided on exact factors,
     so the solver takes the same path as with the float64 matrix and reaches the same optimum."""
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+    from bayes_fdi.rvm.sbl.design import Design
+    from bayes_fdi.rvm.sbl import fast_gaussian
 
     rng = np.random.default_rng(17)
     X = rng.uniform(0, 1, (700, 3))
@@ -311,8 +311,8 @@ def test_screening_copy_takes_the_exact_decisions():
 def test_screening_product_and_monotone_evidence():
     """The one-triangle screening product agrees with float64 K v within its bound, and the
     screened solver (additions re-checked exactly) still never lowers the evidence."""
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+    from bayes_fdi.rvm.sbl.design import Design
+    from bayes_fdi.rvm.sbl import fast_gaussian
 
     rng = np.random.default_rng(23)
     X = rng.uniform(0, 1, (900, 3))
@@ -333,9 +333,9 @@ def test_screening_product_and_monotone_evidence():
 
 def test_buffer_growth_does_not_change_the_fit(monkeypatch):
     """Phi / B^T Phi buffers that must grow (capacity 2) give the same fit as roomy ones."""
-    from bayes_fdi.rvm import sbl_gaussian
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+    from bayes_fdi.rvm.sbl import gaussian as sbl_gaussian
+    from bayes_fdi.rvm.sbl.design import Design
+    from bayes_fdi.rvm.sbl import fast_gaussian
 
     rng = np.random.default_rng(5)
     X = torch.tensor(rng.uniform(-10, 10, (300, 1)))
@@ -354,7 +354,7 @@ def test_buffer_growth_does_not_change_the_fit(monkeypatch):
 
 def test_fast_solver_stops_when_only_reestimations_gain_nothing(monkeypatch):
     """The stall rule ends a fit early only at the evidence the full run reaches anyway."""
-    import bayes_fdi.rvm.sbl_gaussian as sb
+    import bayes_fdi.rvm.sbl.gaussian as sb
 
     rng = np.random.default_rng(1)
     X = rng.uniform(0, 1, (800, 3))
@@ -373,8 +373,8 @@ def test_fast_solver_stops_when_only_reestimations_gain_nothing(monkeypatch):
 def test_kernel_rows_in_blocks_give_the_same_fit():
     """A kernel matrix too large for the memory budget is computed in row blocks; the
     decisions are taken on exact factors either way, so the fit is the same."""
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+    from bayes_fdi.rvm.sbl.design import Design
+    from bayes_fdi.rvm.sbl import fast_gaussian
 
     rng = np.random.default_rng(8)
     X = torch.tensor(rng.uniform(0, 1, (400, 3)))

@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 import torch
 
-from bayes_fdi.rvm import RVR, sbl_gaussian
-from bayes_fdi.rvm.sbl_decisions import best_action, rounding_gamma
-from bayes_fdi.rvm.sbl_numerics import _factor
-from bayes_fdi.rvm.sbl_tracking import TrackedFactors, posterior_context
-from bayes_fdi.rvm.sbl_verification import (
+from bayes_fdi.rvm import RVR
+from bayes_fdi.rvm.sbl import gaussian as sbl_gaussian
+from bayes_fdi.rvm.sbl.decisions import best_action, rounding_gamma
+from bayes_fdi.rvm.sbl.precision_factor import _factor
+from bayes_fdi.rvm.sbl.tracked_factors import TrackedFactors, posterior_context
+from bayes_fdi.rvm.sbl.verification import (
     lazy_verified_action,
     reestimate_gain_bounds,
     useful_lower_bound,

@@ -9,7 +9,7 @@ from bayes_fdi.rvm.classification import RVC
 from bayes_fdi.rvm.kernels import RBF, Kernel, Linear, Polynomial, Product, Scaled, Sum
 from bayes_fdi.rvm.loading import load
 from bayes_fdi.rvm.regression import RVR
-from bayes_fdi.rvm.sparse_bayes import NumericalWarning, SBLResult
+from bayes_fdi.rvm.sbl import NumericalWarning, SBLResult
 
 __all__ = [
     "RBF",

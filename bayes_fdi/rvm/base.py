@@ -29,10 +29,10 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils.validation import check_is_fitted, validate_data
 from torch import Tensor
 
-from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES, Design
+from bayes_fdi.rvm.sbl.design import DEFAULT_MAX_BYTES, Design
 from bayes_fdi.rvm.kernels import RBF, Kernel, Linear, Polynomial
 from bayes_fdi.rvm.persistence import save
-from bayes_fdi.rvm.sparse_bayes import SBLResult
+from bayes_fdi.rvm.sbl import SBLResult
 
 __all__ = ["RVMBase"]
 

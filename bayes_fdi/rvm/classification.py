@@ -27,9 +27,9 @@ from sklearn.utils.multiclass import check_classification_targets
 from torch import Tensor
 
 from bayes_fdi.rvm.base import RVMBase, _is_torch
-from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES
+from bayes_fdi.rvm.sbl.design import DEFAULT_MAX_BYTES
 from bayes_fdi.rvm.kernels import RBF, Kernel
-from bayes_fdi.rvm.sparse_bayes import SBLResult, em_bernoulli, fast_bernoulli
+from bayes_fdi.rvm.sbl import SBLResult, em_bernoulli, fast_bernoulli
 from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.rvm.width import search_width, width_bounds
 

@@ -18,8 +18,8 @@ import torch
 from bayes_fdi.rvm.classification import RVC
 from bayes_fdi.rvm.persistence import DEFAULT_MAX_BYTES, _params_from_json, read_model_file
 from bayes_fdi.rvm.regression import RVR
-from bayes_fdi.rvm.sbl_polish import Polish
-from bayes_fdi.rvm.sparse_bayes import SBLResult
+from bayes_fdi.rvm.sbl.polish import Polish
+from bayes_fdi.rvm.sbl import SBLResult
 
 __all__ = ["load"]
 

@@ -45,7 +45,7 @@ import numpy as np
 
 from bayes_fdi.atomic import atomic_path, check_output_path
 from bayes_fdi.rvm.kernels import Kernel, kernel_from_dict
-from bayes_fdi.rvm.sparse_bayes import SBLResult
+from bayes_fdi.rvm.sbl import SBLResult
 
 __all__ = ["DEFAULT_MAX_BYTES", "FORMAT_NAME", "FORMAT_VERSION", "read_model_file", "save"]
 

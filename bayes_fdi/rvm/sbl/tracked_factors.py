@@ -2,7 +2,7 @@ r"""Screening factors of every candidate carried from iteration to iteration, wi
 error bounds (:class:`TrackedFactors`), for the fast Gaussian solver.
 
 Written by hand: no maintained library implements Tipping & Faul's solver, nor error bounds for
-its updates. :func:`bayes_fdi.rvm.sbl_decisions.screened_factors` recomputes the screening
+its updates. :func:`bayes_fdi.rvm.sbl.decisions.screened_factors` recomputes the screening
 factors of all ``P`` candidates from a fresh factor at ``O(P M^2)`` per iteration. Here they are
 *carried*: each add / re-estimate / delete changes the posterior precision by a rank-one or
 bordering step, and the candidates' solve coefficients ``c_m`` follow by one rank-one update of
@@ -22,7 +22,7 @@ value comes with a bound of its error that grows with each update:
   (``c^T Delta c``, ``c^T Delta mu``) and the second-order rest goes into the bounds and into
   ``rho``.
 
-The decisions are still taken on exact factors (:mod:`bayes_fdi.rvm.sbl_verification`): the
+The decisions are still taken on exact factors (:mod:`bayes_fdi.rvm.sbl.verification`): the
 carried factors and bounds only decide which candidates need an exact look, so they change the
 cost, never the path of actions. Rows that could win are first screened afresh from the fresh
 factor (:meth:`TrackedFactors.tighten`, ``O(M^2)`` each); when the bounds have grown so loose
@@ -39,13 +39,13 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl_decisions import (
+from bayes_fdi.rvm.sbl.decisions import (
     gaussian_screened_Q,
     rounding_gamma,
     screened_factors,
     thin_matmul,
 )
-from bayes_fdi.rvm.sbl_numerics import _Factor
+from bayes_fdi.rvm.sbl.precision_factor import _Factor
 
 __all__ = ["Posterior", "TrackedFactors", "posterior_context"]
 

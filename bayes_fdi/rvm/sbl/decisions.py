@@ -1,7 +1,7 @@
 r"""Decisions of the fast sparse Bayesian solvers that do not depend on rounding.
 
 Written by hand: no maintained library implements Tipping & Faul's sequential solver, let alone
-these safeguards. The fast solver (:mod:`bayes_fdi.rvm.sparse_bayes`) chooses one action per
+these safeguards. The fast solver (:mod:`bayes_fdi.rvm.sbl`) chooses one action per
 iteration (add, re-estimate or delete a basis function) by the largest exact evidence gain
 computed from the factors ``S_m, Q_m`` (``shared/reference/fast-sbl.md``). With smooth kernels
 the active columns are nearly collinear and those factors lose most of their digits twice:
@@ -61,7 +61,7 @@ import torch
 from torch import Tensor
 
 if TYPE_CHECKING:  # pragma: no cover
-    from bayes_fdi.rvm.sbl_numerics import _Factor
+    from bayes_fdi.rvm.sbl.precision_factor import _Factor
 
 __all__ = [
     "NEGLIGIBLE_GAIN",

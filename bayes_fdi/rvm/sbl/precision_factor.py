@@ -15,8 +15,8 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_decisions import exact_near_threshold
+from bayes_fdi.rvm.sbl.design import Design
+from bayes_fdi.rvm.sbl.decisions import exact_near_threshold
 
 __all__ = ["NumericalWarning", "SBLResult", "cholesky_jitter"]
 

@@ -1,9 +1,9 @@
 """Polishing a fast Gaussian fit by a re-estimation restart (:func:`polish_gaussian`).
 
 The evidence of an RBF design has many local optima: Tipping & Faul's sequential solver
-(:func:`~bayes_fdi.rvm.sbl_gaussian.fast_gaussian`) builds its basis greedily from one column
+(:func:`~bayes_fdi.rvm.sbl.gaussian.fast_gaussian`) builds its basis greedily from one column
 and stops at an optimum where no single addition, deletion or re-estimation helps, while
-Tipping's re-estimation from the whole basis (:func:`~bayes_fdi.rvm.sbl_em.em_gaussian`,
+Tipping's re-estimation from the whole basis (:func:`~bayes_fdi.rvm.sbl.reestimation.em_gaussian`,
 scikit-learn's ``ARDRegression``) often reaches a different one, nats higher (on 200 to 400
 noisy samples of a smooth function with an RBF basis of width 0.5, 0.1 to 6 nats; the two
 active sets share half their columns). Moves of one or two columns from the fast optimum
@@ -23,10 +23,10 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_em import em_gaussian
-from bayes_fdi.rvm.sbl_gaussian import fast_gaussian
-from bayes_fdi.rvm.sbl_numerics import SBLResult, _unit_columns
+from bayes_fdi.rvm.sbl.design import Design
+from bayes_fdi.rvm.sbl.reestimation import em_gaussian
+from bayes_fdi.rvm.sbl.gaussian import fast_gaussian
+from bayes_fdi.rvm.sbl.precision_factor import SBLResult, _unit_columns
 
 __all__ = ["Polish", "polish_gaussian", "restart_pool"]
 

@@ -15,10 +15,10 @@ import math
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_bernoulli import posterior_mode
-from bayes_fdi.rvm.sbl_gaussian import _BETA_MAX_FACTOR
-from bayes_fdi.rvm.sbl_numerics import (
+from bayes_fdi.rvm.sbl.design import Design
+from bayes_fdi.rvm.sbl.bernoulli import posterior_mode
+from bayes_fdi.rvm.sbl.gaussian import _BETA_MAX_FACTOR
+from bayes_fdi.rvm.sbl.precision_factor import (
     SBLResult,
     _factor,
     _gaussian_log_ml,

@@ -13,15 +13,15 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_decisions import (
+from bayes_fdi.rvm.sbl.design import Design
+from bayes_fdi.rvm.sbl.decisions import (
     optimistic_ratio,
     screened_factors,
     verified_action,
     verified_argmax,
     weighted_exact_factors,
 )
-from bayes_fdi.rvm.sbl_numerics import (
+from bayes_fdi.rvm.sbl.precision_factor import (
     SBLResult,
     _Alignment,
     _exact_alignment,

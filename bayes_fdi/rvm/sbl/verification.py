@@ -3,10 +3,10 @@ could win (:func:`lazy_verified_action`).
 
 Written by hand (no maintained library implements Tipping & Faul's solver). Given screened
 factors ``S, Q`` of every column -- active or not -- with rigorous bounds of their error
-(:mod:`bayes_fdi.rvm.sbl_tracking`), each action's evidence gain is bounded from above:
+(:mod:`bayes_fdi.rvm.sbl.tracked_factors`), each action's evidence gain is bounded from above:
 
 * an **addition** by the largest ``Q^2/S`` the bounds allow
-  (:func:`bayes_fdi.rvm.sbl_decisions.optimistic_ratio`);
+  (:func:`bayes_fdi.rvm.sbl.decisions.optimistic_ratio`);
 * a **re-estimation** of active ``j`` by the gain written as
   ``2 Delta L = v - 1 - log v`` with ``v = Q^2 / S`` (:func:`reestimate_gain_bounds`), whose
   largest value over the box of ``(S, |Q|)`` is at one of its corners;
@@ -15,10 +15,10 @@ factors ``S, Q`` of every column -- active or not -- with rigorous bounds of the
 
 Actives whose usefulness is uncertain are recomputed exactly at once (deletions pre-empt, so
 they must be known). Then, round by round, every action whose upper bound reaches the best
-exact gain (minus the tie band of :func:`~bayes_fdi.rvm.sbl_decisions.lowest_index_in_band`) is
+exact gain (minus the tie band of :func:`~bayes_fdi.rvm.sbl.decisions.lowest_index_in_band`) is
 recomputed exactly, until none is left. The chosen action is therefore the one
-:func:`~bayes_fdi.rvm.sbl_decisions.best_action` picks on exact factors of every column, as in
-:func:`~bayes_fdi.rvm.sbl_decisions.verified_action`, at the cost of a few exact columns per
+:func:`~bayes_fdi.rvm.sbl.decisions.best_action` picks on exact factors of every column, as in
+:func:`~bayes_fdi.rvm.sbl.decisions.verified_action`, at the cost of a few exact columns per
 iteration instead of all ``M`` actives.
 """
 
@@ -30,7 +30,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl_decisions import (
+from bayes_fdi.rvm.sbl.decisions import (
     NEGLIGIBLE_GAIN,
     TIE_RELATIVE,
     ZERO_FACTOR,
@@ -124,7 +124,7 @@ def lazy_verified_action(
         ``(N_B,)`` screened factors of every column and bounds of their error; overwritten
         where tightened or recomputed exactly (exact values get a zero bound).
     act, alpha, addable
-        As in :func:`~bayes_fdi.rvm.sbl_decisions.best_action`.
+        As in :func:`~bayes_fdi.rvm.sbl.decisions.best_action`.
     exact : callable
         ``idx -> (S_idx, Q_idx)`` exact factors of basis columns (active or not).
     tighten : callable, optional

@@ -3,8 +3,8 @@
 
 Written by hand: no maintained library implements it (``shared/reference/fast-sbl.md``;
 SparseBayes v2 is MATLAB). One add / re-estimate / delete per iteration, decided on exact
-factors (:mod:`bayes_fdi.rvm.sbl_decisions`, :mod:`bayes_fdi.rvm.sbl_verification`) from
-screening factors carried with error bounds (:mod:`bayes_fdi.rvm.sbl_tracking`).
+factors (:mod:`bayes_fdi.rvm.sbl.decisions`, :mod:`bayes_fdi.rvm.sbl.verification`) from
+screening factors carried with error bounds (:mod:`bayes_fdi.rvm.sbl.tracked_factors`).
 """
 
 from __future__ import annotations
@@ -14,14 +14,14 @@ import math
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_decisions import (
+from bayes_fdi.rvm.sbl.design import Design
+from bayes_fdi.rvm.sbl.decisions import (
     exact_factors,
     lowest_index_in_band,
     rounding_gamma,
     thin_matmul,
 )
-from bayes_fdi.rvm.sbl_numerics import (
+from bayes_fdi.rvm.sbl.precision_factor import (
     SBLResult,
     _Alignment,
     _exact_alignment,
@@ -31,8 +31,8 @@ from bayes_fdi.rvm.sbl_numerics import (
     _result,
     _unit_columns,
 )
-from bayes_fdi.rvm.sbl_tracking import Posterior, TrackedFactors, posterior_context
-from bayes_fdi.rvm.sbl_verification import lazy_verified_action
+from bayes_fdi.rvm.sbl.tracked_factors import Posterior, TrackedFactors, posterior_context
+from bayes_fdi.rvm.sbl.verification import lazy_verified_action
 
 __all__ = ["fast_gaussian"]
 
@@ -165,7 +165,7 @@ def fast_gaussian(
         can otherwise be re-estimated for thousands of iterations at no gain.
     start : SBLResult or None
         Start from this state on the same design (its basis, precisions and noise precision,
-        e.g. a re-estimation run's, as :func:`bayes_fdi.rvm.sbl_polish.polish_gaussian` does)
+        e.g. a re-estimation run's, as :func:`bayes_fdi.rvm.sbl.polish.polish_gaussian` does)
         instead of the single column best aligned with ``t``. Each addition, re-estimation
         and deletion from there raises the evidence (the noise precision is re-estimated on
         SparseBayes' schedule as in a fresh run).
