@@ -72,9 +72,9 @@ def measure(problem: str, n: int) -> dict[str, float]:
     docstring)."""
     import torch
 
-    import bayes_fdi.rvm.sbl.gaussian as sbl_gaussian
+    import bayes_fdi.rvm.sbl.gaussian as gaussian_module  # the module whose decision is counted
     from bayes_fdi.rvm import RVR
-    from bayes_fdi.rvm.sbl.design import Design
+    from bayes_fdi.rvm.sbl import Design
 
     torch.set_num_threads(1)
     spec = PROBLEMS[problem]
@@ -84,7 +84,7 @@ def measure(problem: str, n: int) -> dict[str, float]:
     products = [0]
     sizes: list[int] = []
     designs: list[Design] = []
-    rmatmul, decide = Design.rmatmul, sbl_gaussian.lazy_verified_action
+    rmatmul, decide = Design.rmatmul, gaussian_module.lazy_verified_action
 
     def counted_rmatmul(self, V, *, exact=True):
         # the screening products B^T b_i: the first column's and one per addition (B^T t is
@@ -106,14 +106,14 @@ def measure(problem: str, n: int) -> dict[str, float]:
         return decide(*args, **kwargs)
 
     Design.rmatmul = counted_rmatmul
-    sbl_gaussian.lazy_verified_action = counted_decide
+    gaussian_module.lazy_verified_action = counted_decide
     try:
         c0 = time.process_time()
         model = RVR(kernel="rbf", width=spec.sigma, method="fast", bias=True).fit(X, y)
         cpu = time.process_time() - c0
     finally:
         Design.rmatmul = rmatmul
-        sbl_gaussian.lazy_verified_action = decide
+        gaussian_module.lazy_verified_action = decide
 
     design = designs[0]
     v = torch.randn(n, 1, dtype=torch.float64, generator=torch.Generator().manual_seed(0))

@@ -16,10 +16,9 @@ import numpy as np
 import torch
 
 from bayes_fdi.rvm.classification import RVC
-from bayes_fdi.rvm.persistence import DEFAULT_MAX_BYTES, _params_from_json, read_model_file
+from bayes_fdi.rvm.persistence import DEFAULT_MAX_BYTES, params_from_json, read_model_file
 from bayes_fdi.rvm.regression import RVR
-from bayes_fdi.rvm.sbl.polish import Polish
-from bayes_fdi.rvm.sbl import SBLResult
+from bayes_fdi.rvm.sbl import Polish, SBLResult
 
 __all__ = ["load"]
 
@@ -108,7 +107,7 @@ def _rebuild(meta: dict, arrays: dict, name: str, device: Any) -> Any:
         cls = {"RVR": RVR, "RVC": RVC}[meta["estimator"]]
         if not isinstance(meta["params"], dict):
             raise TypeError("params is not a table")
-        params = _params_from_json(meta["params"])
+        params = params_from_json(meta["params"])
         models_meta = list(meta["models"])
         width = meta["width"]
         n_features = meta["n_features_in"]

@@ -23,11 +23,16 @@ from sklearn.base import RegressorMixin
 from sklearn.metrics import r2_score
 from torch import Tensor
 
-from bayes_fdi.rvm.base import RVMBase, _is_torch, power_of_two_scale
-from bayes_fdi.rvm.sbl.design import DEFAULT_MAX_BYTES
+from bayes_fdi.rvm.base import RVMBase, is_torch, power_of_two_scale
 from bayes_fdi.rvm.kernels import RBF, Kernel
-from bayes_fdi.rvm.sbl.polish import Polish, polish_gaussian
-from bayes_fdi.rvm.sbl import SBLResult, em_gaussian, fast_gaussian
+from bayes_fdi.rvm.sbl import (
+    DEFAULT_MAX_BYTES,
+    Polish,
+    SBLResult,
+    em_gaussian,
+    fast_gaussian,
+    polish_gaussian,
+)
 from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.rvm.width import search_width, width_bounds
 
@@ -293,9 +298,9 @@ class RVR(RegressorMixin, RVMBase):
     def score(self, X: Any, y: Any, sample_weight: Any = None) -> float:
         """Coefficient of determination R^2 of the predictive mean (torch inputs accepted)."""
         pred = self.predict(X)
-        if _is_torch(pred):
+        if is_torch(pred):
             pred = pred.detach().cpu().numpy()
-        y_np = y.detach().cpu().numpy() if _is_torch(y) else y
+        y_np = y.detach().cpu().numpy() if is_torch(y) else y
         return float(r2_score(y_np, pred, sample_weight=sample_weight))
 
     @property

@@ -28,6 +28,10 @@ matrix exceeds ``max_bytes`` and the copy fits it (``N`` from about 15 800 to 25
 default 2 GB); recomputing the kernel rows for every product instead made the smooth benchmark
 fit at ``N = 20000`` ten times slower (``docs/rvm-benchmark.md``).  On other devices the rows
 are recomputed there, which is cheap.
+
+Imports :mod:`bayes_fdi.rvm.kernels` and :mod:`~bayes_fdi.rvm.sbl.screening_copy` only. Written
+by hand: no maintained library serves a kernel design in blocks or from a reduced-precision copy
+with a bound of the products' error.
 """
 
 from __future__ import annotations

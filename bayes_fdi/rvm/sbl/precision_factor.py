@@ -1,9 +1,14 @@
-"""Numerics shared by the sparse Bayesian solvers: the result type, the scaled Cholesky factor
-of the posterior precision, the exact Gaussian log evidence, unit-norm columns and the
-alignment test.
+"""The posterior precision's Cholesky factor and what the solvers compute from it.
 
-Written by hand: no maintained library implements Tipping & Faul's sequential solver
-(``shared/reference/fast-sbl.md``).
+:func:`factor_precision` factorises ``H = diag(alpha) + G`` in a scaled form that exists even
+when ``H`` is badly scaled (:class:`PrecisionFactor`: solves, the covariance, the log
+determinant); :func:`cholesky_jitter` is the factorisation with a jitter fallback, which warns
+with :class:`NumericalWarning`; :func:`gaussian_log_evidence` is the exact log marginal
+likelihood of the Gaussian model from the posterior statistics (Tipping 2001).
+
+Imports torch only: every other module of the solver family may import this one.
+Written by hand: the scaled form and the evidence terms are specific to the sparse Bayesian
+model; the factorisation itself is torch's.
 """
 
 from __future__ import annotations
@@ -15,54 +20,19 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl.design import Design
-from bayes_fdi.rvm.sbl.decisions import exact_near_threshold
+__all__ = [
+    "NumericalWarning",
+    "PrecisionFactor",
+    "cholesky_jitter",
+    "factor_precision",
+    "gaussian_log_evidence",
+]
 
-__all__ = ["NumericalWarning", "SBLResult", "cholesky_jitter"]
-
-# SparseBayes v2: candidates with |cosine| above this to an active column are not added
-_ALIGNMENT_MAX = 1.0 - 1e-3
 _LOG_2PI = math.log(2.0 * math.pi)
 
 
 class NumericalWarning(UserWarning):
     """A numerical safeguard (e.g. Cholesky jitter) was needed."""
-
-
-class SBLResult(NamedTuple):
-    """Result of a sparse Bayesian solver (immutable).
-
-    Attributes
-    ----------
-    active : Tensor
-        ``(M,)`` long indices of the selected columns of the candidate basis, sorted.
-    mean : Tensor
-        ``(M,)`` posterior mean (mode) of the weights of the active columns.
-    covariance : Tensor
-        ``(M, M)`` posterior covariance ``(A + Phi^T B Phi)^-1``.
-    alpha : Tensor
-        ``(M,)`` prior precisions of the active weights.
-    beta : float
-        Noise precision (Gaussian); ``nan`` for the Bernoulli likelihood.
-    evidence_trace : Tensor
-        Log marginal likelihood after each iteration.
-    log_evidence : float
-        Final log marginal likelihood (exact for Gaussian, Laplace for Bernoulli).
-    n_iter : int
-        Iterations performed.
-    converged : bool
-        Whether a stopping rule (not the iteration limit) ended the run.
-    """
-
-    active: Tensor
-    mean: Tensor
-    covariance: Tensor
-    alpha: Tensor
-    beta: float
-    evidence_trace: Tensor
-    log_evidence: float
-    n_iter: int
-    converged: bool
 
 
 def cholesky_jitter(H: Tensor, *, what: str = "posterior precision") -> Tensor:
@@ -94,11 +64,18 @@ def cholesky_jitter(H: Tensor, *, what: str = "posterior precision") -> Tensor:
     raise ValueError(f"{what} is not positive definite (Cholesky failed even with jitter)")
 
 
-class _Factor(NamedTuple):
+class PrecisionFactor(NamedTuple):
     """Cholesky factor of a posterior precision ``H = diag(alpha) + G`` in scaled form.
 
     ``H = D^-1 (I + D G D) D^-1`` with ``D = diag(alpha^-1/2)``; the scaled matrix has all
     eigenvalues >= 1, so its Cholesky factor ``L`` exists even when ``H`` is badly scaled.
+
+    Attributes
+    ----------
+    L : Tensor
+        ``(M, M)`` lower Cholesky factor of ``I + D G D``.
+    d : Tensor
+        ``(M,)`` the diagonal of ``D``, ``alpha^-1/2``.
     """
 
     L: Tensor
@@ -121,87 +98,45 @@ class _Factor(NamedTuple):
         return float(torch.log(self.L.diagonal()).sum())
 
 
-def _factor(alpha: Tensor, G: Tensor, *, what: str = "posterior precision") -> _Factor:
+def factor_precision(
+    alpha: Tensor, G: Tensor, *, what: str = "posterior precision"
+) -> PrecisionFactor:
+    """The :class:`PrecisionFactor` of ``H = diag(alpha) + G`` (``G`` symmetrised first).
+
+    Parameters
+    ----------
+    alpha : Tensor
+        ``(M,)`` prior precisions (> 0).
+    G : Tensor
+        ``(M, M)`` the data term, ``beta Phi^T Phi`` or ``Phi^T W Phi``.
+    what : str
+        How a failure or a jitter warning names the matrix (:func:`cholesky_jitter`).
+    """
     d = alpha.rsqrt()
     Hs = d[:, None] * (0.5 * (G + G.T)) * d[None, :]
     Hs.diagonal().add_(1.0)
-    return _Factor(cholesky_jitter(Hs, what=what), d)
+    return PrecisionFactor(cholesky_jitter(Hs, what=what), d)
 
 
-def _gaussian_log_ml(
-    N: int, beta: float, ee: float, alpha: Tensor, mu: Tensor, fac: _Factor
+def gaussian_log_evidence(
+    N: int, beta: float, ee: float, alpha: Tensor, mu: Tensor, fac: PrecisionFactor
 ) -> float:
-    """Exact ``log N(t | 0, beta^-1 I + Phi A^-1 Phi^T)`` from the posterior statistics."""
+    """Exact ``log N(t | 0, beta^-1 I + Phi A^-1 Phi^T)`` from the posterior statistics.
+
+    Parameters
+    ----------
+    N : int
+        Number of samples.
+    beta : float
+        Noise precision.
+    ee : float
+        ``||t - Phi mu||^2``.
+    alpha, mu : Tensor
+        ``(M,)`` prior precisions and posterior mean.
+    fac : PrecisionFactor
+        Factor of ``H = A + beta Phi^T Phi``.
+    """
     return (
         0.5 * (N * math.log(beta) - beta * ee - N * _LOG_2PI - float((alpha * mu * mu).sum()))
         - fac.half_logdet_scaled()
-    )
-
-
-def _unit_columns(design: Design) -> tuple[Tensor, Tensor]:
-    """Column norms (zero norms replaced by 1) and a mask of usable (non-zero) columns."""
-    norms = design.column_norms()
-    valid = norms > 0
-    return torch.where(valid, norms, torch.ones_like(norms)), valid
-
-
-def _result(
-    active: Tensor,
-    mu: Tensor,
-    Sigma: Tensor,
-    alpha: Tensor,
-    norms: Tensor,
-    *,
-    beta: float,
-    trace: list[float],
-    log_ml: float,
-    n_iter: int,
-    converged: bool,
-) -> SBLResult:
-    """The :class:`SBLResult` of a solver run: unit-norm-basis weights, covariance and
-    precisions mapped to the caller's basis, sorted by column index."""
-    order = torch.argsort(active)
-    active = active[order]
-    d = norms[active]
-    return SBLResult(
-        active=active,
-        mean=mu[order] / d,
-        covariance=Sigma[order][:, order] / (d[:, None] * d[None, :]),
-        alpha=alpha[order] * d * d,
-        beta=float(beta),
-        evidence_trace=torch.tensor(trace, dtype=torch.float64),
-        log_evidence=float(log_ml),
-        n_iter=n_iter,
-        converged=converged,
-    )
-
-
-class _Alignment:
-    """Alignment test of SparseBayes: refuse candidates nearly parallel to an active column."""
-
-    def __init__(self, n_basis: int, device: torch.device) -> None:
-        self.count = torch.zeros(n_basis, dtype=torch.long, device=device)
-
-    def add(self, col: Tensor) -> None:
-        self.count += (col.abs() > _ALIGNMENT_MAX).long()
-
-    def remove(self, col: Tensor) -> None:
-        self.count -= (col.abs() > _ALIGNMENT_MAX).long()
-
-    @property
-    def free(self) -> Tensor:
-        return self.count == 0
-
-
-def _exact_alignment(
-    BtBi: Tensor, design: Design, norms: Tensor, b_i: Tensor, error: float
-) -> None:
-    """Recompute exactly (in place) the screened cosines ``B^T b_i`` within their error bound
-    ``error`` (``Design.screening_error``) of the alignment threshold
-    (``sbl_decisions.exact_near_threshold``)."""
-    exact_near_threshold(
-        BtBi,
-        _ALIGNMENT_MAX,
-        lambda idx: (design.columns(idx) / norms[idx]).T @ b_i,
-        relative=2.0 * error / _ALIGNMENT_MAX,
     )
