@@ -15,10 +15,11 @@ actions, and times the fastest way this machine does each piece, in the same pro
   kernel matrix, which reads one triangle (from ``N`` about 15 800 on, the screening copy's
   product, ``docs/rvm.md``);
 * every **iteration** updates the factors ``S, Q`` of all ``N_B`` candidates, which reads the
-  ``N_B x M`` cache once (``v_j = beta B^T Phi Sigma_j``, shared reference ``fast-sbl.md``). The
-  active-set size ``M`` of each iteration is recorded, and a float64 GEMV of ``N_B x M_max`` is
-  timed; ``t(M) = t(M_max) M / M_max`` understates a GEMV of ``M`` columns (its fixed cost does
-  not scale down), so the sum over iterations is a lower bound.
+  ``N_B x M`` cache once (``v_j = beta B^T Phi Sigma_j``; Tipping & Faul 2003, "Fast marginal
+  likelihood maximisation for sparse Bayesian models", AISTATS). The active-set size ``M`` of
+  each iteration is recorded, and a float64 GEMV of ``N_B x M_max`` is timed;
+  ``t(M) = t(M_max) M / M_max`` understates a GEMV of ``M`` columns (its fixed cost does not scale
+  down), so the sum over iterations is a lower bound.
 
 The floor is the sum of the two. It leaves out everything else (noise updates, Cholesky,
 candidate selection, Python), so a fit cannot be faster than it on this machine and path;

@@ -13,6 +13,9 @@ two loses nothing, so any finite data from ``1e-300`` to ``1e300`` fit; data wit
 ``[2^-32, 2^32]`` are not rescaled at all (``x_scale = t_scale = 1``). The fitted state is kept
 in the scaled units (``_mu_``, ``_Sigma_``, ``_X_fit_``, ``_kernel_``; the scales in
 ``_x_scale_`` and ``_t_scale_``) and the public attributes are given in the caller's units.
+
+Imports :mod:`~bayes_fdi.rvm.kernels`, :mod:`~bayes_fdi.rvm.persistence` and the solvers' face
+:mod:`bayes_fdi.rvm.sbl`.
 """
 
 from __future__ import annotations

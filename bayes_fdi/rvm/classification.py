@@ -12,6 +12,9 @@ Probabilities use MacKay's moderated output
 latent mean :math:`\mu_a = \phi^\top\mu` and variance :math:`\sigma_a^2 = \phi^\top\Sigma\phi`
 (``moderated=True``), or the plain :math:`\sigma(\mu_a)` of eq. 30.  More than two classes
 are handled one-vs-rest with normalised probabilities.
+
+Imports :mod:`~bayes_fdi.rvm.base`, :mod:`~bayes_fdi.rvm.kernels`, :mod:`~bayes_fdi.rvm.threads`,
+:mod:`~bayes_fdi.rvm.width` and the solvers' face :mod:`bayes_fdi.rvm.sbl`.
 """
 
 from __future__ import annotations

@@ -3,6 +3,9 @@
 The file format is described in `bayes_fdi.rvm.persistence`. Every field is checked before the
 estimator is rebuilt: types, shapes, indices, finiteness of the arrays, positive precisions and
 noise precision. Whatever is wrong with a file, the error is a :class:`ValueError` naming it.
+
+Imports the estimators, :mod:`~bayes_fdi.rvm.persistence` and the solvers' face
+:mod:`bayes_fdi.rvm.sbl`.
 """
 
 from __future__ import annotations

@@ -31,6 +31,9 @@ Reading checks the archive before decompressing anything: its members' declared 
 up to at most ``max_bytes`` (default :data:`DEFAULT_MAX_BYTES`) and each member's array header
 must match its size. Unreadable files, missing entries, inconsistent shapes, non-finite weights,
 non-positive precisions and unknown formats or versions raise :class:`ValueError`.
+
+Imports :mod:`bayes_fdi.atomic`, :mod:`~bayes_fdi.rvm.kernels` and the solvers' face
+:mod:`bayes_fdi.rvm.sbl` (for :class:`~bayes_fdi.rvm.sbl.SBLResult`).
 """
 
 from __future__ import annotations

@@ -9,6 +9,9 @@ re-estimation (``method="em"``, the paper's eqs. 10-11) -- and most :math:`\alph
 to infinity, leaving a few *relevance vectors*.  Predictions are Gaussian with
 mean :math:`\phi_*^\top\mu` and variance :math:`\beta^{-1} + \phi_*^\top\Sigma\phi_*`
 (eqs. 13-14).
+
+Imports :mod:`~bayes_fdi.rvm.base`, :mod:`~bayes_fdi.rvm.kernels`, :mod:`~bayes_fdi.rvm.threads`,
+:mod:`~bayes_fdi.rvm.width` and the solvers' face :mod:`bayes_fdi.rvm.sbl`.
 """
 
 from __future__ import annotations
