@@ -84,7 +84,7 @@ PERSISTED: dict[str, str] = {
     "rvm.Scaled": "bayes_fdi.rvm:Scaled",
     "rvm.Sum": "bayes_fdi.rvm:Sum",
     "rvm.SBLResult": "bayes_fdi.rvm:SBLResult",
-    "rvm.Polish": "bayes_fdi.rvm.sbl_polish:Polish",
+    "rvm.Polish": "bayes_fdi.rvm.sbl:Polish",
     "rvm.WidthSearch": "bayes_fdi.rvm.width:WidthSearch",
     # scikit-learn classes found inside the baselines and recalibrators (public import paths)
     "sklearn.StandardScaler": "sklearn.preprocessing:StandardScaler",
