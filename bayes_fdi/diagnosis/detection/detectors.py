@@ -42,7 +42,16 @@ from numba import njit
 from bayes_fdi.diagnosis.component_state import check_state, writable_copy
 from bayes_fdi.diagnosis.detection.thresholds import calibrate_threshold, cusum_threshold
 
-__all__ = ["CUSUM", "GLR", "WHITE_SAMPLES", "CUSUMState", "DetectorOutput", "GLRState"]
+__all__ = [
+    "CUSUM",
+    "GLR",
+    "SEQUENTIAL_TEST_METHODS",
+    "WHITE_SAMPLES",
+    "CUSUMState",
+    "DetectorOutput",
+    "GLRState",
+    "sequential_test",
+]
 
 #: White Gaussian samples per channel behind the GLR's threshold on Gaussian innovations.
 WHITE_SAMPLES = 200_000
@@ -317,3 +326,31 @@ class GLR(_SequentialTest):
         white = [rng.standard_normal((WHITE_SAMPLES, int(n_channels)))]
         grid = np.arange(2.0, 40.01, 1.0)
         return calibrate_threshold(self, white, target_arl, clear=clear, grid=grid)["threshold"]
+
+
+#: What a sequential test needs to serve as the online diagnoser's detector.
+SEQUENTIAL_TEST_METHODS = (
+    "init_state",
+    "check_state",
+    "update",
+    "run",
+    "with_threshold",
+    "gaussian_threshold",
+)
+
+
+def sequential_test(detector: Any, *, cusum_k: float, glr_window: int) -> Any:
+    """The unfitted test (threshold 1) that ``detector`` names: ``"cusum"`` (`CUSUM` with
+    reference ``cusum_k``), ``"glr"`` (`GLR` over ``glr_window`` s), or an object with the
+    methods of :data:`SEQUENTIAL_TEST_METHODS` (e.g. a new detector class)."""
+    if isinstance(detector, str):
+        if detector == "cusum":
+            return CUSUM(k=float(cusum_k), threshold=1.0)
+        if detector == "glr":
+            return GLR(window=int(glr_window), threshold=1.0)
+    elif all(hasattr(detector, m) for m in SEQUENTIAL_TEST_METHODS):
+        return detector.with_threshold(1.0)
+    raise ValueError(
+        f"detector must be 'cusum', 'glr' or a sequential test with the methods "
+        f"{', '.join(SEQUENTIAL_TEST_METHODS)}; got {detector!r}"
+    )

@@ -24,7 +24,7 @@ from sklearn.base import BaseEstimator, clone
 
 from bayes_fdi import model_files
 from bayes_fdi.datasets import CHANNELS, validate_dataset
-from bayes_fdi.diagnosis.detection.detectors import CUSUM, GLR
+from bayes_fdi.diagnosis.detection.detectors import CUSUM, sequential_test
 from bayes_fdi.diagnosis.isolation.signatures import SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 from bayes_fdi.diagnosis.online.envelope import InputEnvelope
@@ -40,16 +40,6 @@ from bayes_fdi.diagnosis.online.step import (
 from bayes_fdi.diagnosis.online.stream import FAULTS, assemble_stream, decide, stream_attrs
 from bayes_fdi.diagnosis.online.training import Runs, fit_detection, fit_isolation, stack_runs
 from bayes_fdi.diagnosis.seva.record import SevaRecord
-
-#: What `OnlineDiagnoser` needs of a sequential test given as its ``detector``.
-_DETECTOR_METHODS = (
-    "init_state",
-    "check_state",
-    "update",
-    "run",
-    "with_threshold",
-    "gaussian_threshold",
-)
 
 __all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
 
@@ -275,17 +265,7 @@ class OnlineDiagnoser(BaseEstimator):
 
     def _detector_prototype(self) -> Any:
         """The unfitted sequential test (threshold 1) whose threshold the fit calibrates."""
-        if isinstance(self.detector, str):
-            if self.detector == "cusum":
-                return CUSUM(k=float(self.cusum_k), threshold=1.0)
-            if self.detector == "glr":
-                return GLR(window=int(self.glr_window), threshold=1.0)
-        elif all(hasattr(self.detector, m) for m in _DETECTOR_METHODS):
-            return self.detector.with_threshold(1.0)
-        raise ValueError(
-            f"detector must be 'cusum', 'glr' or a sequential test with the methods "
-            f"{', '.join(_DETECTOR_METHODS)}; got {self.detector!r}"
-        )
+        return sequential_test(self.detector, cusum_k=self.cusum_k, glr_window=self.glr_window)
 
     def _check_params(self) -> None:
         self._detector_prototype()
