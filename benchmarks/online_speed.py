@@ -2,7 +2,7 @@
 ``update`` milliseconds per sample, one thread.
 
     OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/online_speed.py \
-        [--model FILE | --small] [--hours 2] [--updates 20000]
+        [--model FILE | --small] [--hours 2] [--updates 20000] [--valves 200]
 
 - ``run``: a simulated recording of ``--hours`` hours in runs of 1 h (half fault-free, half with
   an abrupt fault at 900 s, so the isolation path runs too), processed by ``run``; CPU seconds
@@ -12,6 +12,10 @@
   <= 1 ms/sample. The records are checked equal to ``run``'s stream (state, probability).
 - ``chunks``: ``run`` on the same recording in 60-s chunks carrying the state, against one call
   (the cost of chunking; the streams must be identical).
+- ``valves``: ``--valves`` runs advanced one second at a time (what ``bayes-fdi serve`` does for
+  the valves of one model): one ``run`` call over the second of every run, carrying the
+  ``StreamState``, against one ``update`` call per run; CPU ms per second of all runs, over 60 s
+  (the streams must be identical).
 
 The model: ``--model FILE`` (``bayes-fdi fit``), ``--small`` fits the small default settings
 (seconds), otherwise the full default model is fitted (about a minute and a half). The machine
@@ -22,6 +26,7 @@ may be shared: the load average is printed. Results go to stdout and
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import os
 import statistics
@@ -61,6 +66,7 @@ def main() -> None:
     parser.add_argument("--small", action="store_true")
     parser.add_argument("--hours", type=float, default=2.0)
     parser.add_argument("--updates", type=int, default=20_000)
+    parser.add_argument("--valves", type=int, default=200)
     args = parser.parse_args()
 
     from bayes_fdi.diagnosis import OnlineDiagnoser
@@ -113,6 +119,7 @@ def main() -> None:
         if done >= args.updates:
             break
     ms = np.asarray(per_call) * 1e3
+    valves = _valves(model, args.valves)
     result = {
         "model": source,
         "load_average": os.getloadavg(),
@@ -125,11 +132,45 @@ def main() -> None:
             "p99_ms": float(np.percentile(ms, 99)),
             "mean_cpu_ms": 1e3 * cpu_total / max(done, 1),
         },
+        "valves": valves,
     }
     print(json.dumps(result, indent=2))
     out = ROOT / "benchmarks" / "out"
     out.mkdir(parents=True, exist_ok=True)
     (out / "online_speed.json").write_text(json.dumps(result, indent=2) + "\n")
+
+
+def _valves(model, n: int, seconds: int = 60) -> dict:
+    """CPU ms per second of ``n`` runs: one ``run`` over the second of every run, or one
+    ``update`` per run (see the module docstring)."""
+    from bayes_fdi.actuator import benchmark_inputs, simulate
+    from bayes_fdi.diagnosis import StreamState
+
+    rec = simulate(benchmark_inputs(n, seconds, seed=50_001, vary=True), seed=50_001)[
+        list(CHANNELS)
+    ]
+    fresh = model.reset().stream_state().run(0)
+    state, probs = StreamState.of_runs([fresh] * n), []
+    c0 = time.process_time()
+    for t in range(seconds):
+        stream, state = model.run(rec.isel(time=[t]), state=state, return_state=True)
+        probs.append(stream["VMV_X"].values[:, 0])
+    cpu_run = time.process_time() - c0
+    values = {c: rec[c].transpose("run", "time").values for c in CHANNELS}
+    diagnosers = [copy.deepcopy(model).reset() for _ in range(n)]  # one per valve
+    vmv = np.empty((seconds, n))
+    c0 = time.process_time()
+    for t in range(seconds):
+        for r, one in enumerate(diagnosers):
+            vmv[t, r] = one.update({c: float(values[c][r, t]) for c in CHANNELS}).x_vmv
+    cpu_update = time.process_time() - c0
+    np.testing.assert_array_equal(np.asarray(probs), vmv)
+    return {
+        "runs": n,
+        "seconds": seconds,
+        "run_cpu_ms_per_second": 1e3 * cpu_run / seconds,
+        "update_cpu_ms_per_second": 1e3 * cpu_update / seconds,
+    }
 
 
 if __name__ == "__main__":

@@ -8,7 +8,9 @@ arrays. The component creates it (``init_state``), checks it (``check_state``, w
 functions) and returns a new one from every ``update`` and ``run``: its compiled kernel works on
 a `writable_copy`, so a state once handed out never changes. The online diagnoser nests the
 components' states and stacks those of several runs along a leading ``run`` axis
-(`stack_states`, read-only; `state_of_run` takes one run's back out).
+(`stack_states`, read-only; `state_of_run` takes one run's back out); a component's
+``run_stacked`` advances such a stacked state of many runs in one compiled call
+(`check_stacked_state` checks it).
 
 Written by hand: a few lines over numpy that no library offers for named tuples.
 """
@@ -20,7 +22,14 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-__all__ = ["check_state", "stack_states", "state_of_run", "writable_copy"]
+__all__ = [
+    "as_stack_of_one",
+    "check_stacked_state",
+    "check_state",
+    "stack_states",
+    "state_of_run",
+    "writable_copy",
+]
 
 State = TypeVar("State", bound=tuple)
 
@@ -53,6 +62,27 @@ def check_state(state: Any, fresh: tuple, what: str) -> None:
             )
 
 
+def check_stacked_state(state: Any, fresh: tuple, n_runs: int, what: str) -> None:
+    """Raise a `ValueError` naming the field unless ``state`` stacks ``n_runs`` states laid out
+    like ``fresh`` (each field an array of ``fresh``'s dtype and shape after a leading axis of
+    ``n_runs``, as `stack_states` makes them)."""
+    cls = type(fresh)
+    if type(state) is not cls:
+        raise ValueError(f"{what} must be a {cls.__name__}, got {type(state).__name__}")
+    for name, want, got in zip(cls._fields, fresh, state, strict=True):
+        if _is_state(want):
+            check_stacked_state(got, want, n_runs, f"{what}.{name}")
+            continue
+        shape = (n_runs, *want.shape)
+        if not isinstance(got, np.ndarray):
+            raise ValueError(f"{what}.{name} must be an array, got {type(got).__name__}")
+        if got.shape != shape or got.dtype != want.dtype:
+            raise ValueError(
+                f"{what}.{name} must be a {want.dtype} array of shape {shape} ({n_runs} "
+                f"run(s)), got {got.dtype} {got.shape}"
+            )
+
+
 def writable_copy(state: State) -> State:
     """A copy of ``state`` whose arrays a compiled kernel may update in place."""
     return type(state)(*(v.copy() if type(v) is np.ndarray else writable_copy(v) for v in state))
@@ -73,6 +103,11 @@ def stack_states(states: Sequence[State]) -> State:
             stacked.flags.writeable = False
             fields.append(stacked)
     return type(first)(*fields)
+
+
+def as_stack_of_one(state: State) -> State:
+    """``state`` as a stack of one run: views of its arrays with a leading axis of 1."""
+    return type(state)(*(as_stack_of_one(v) if _is_state(v) else v[None] for v in state))
 
 
 def state_of_run(stacked: State, i: int) -> State:

@@ -18,7 +18,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import (
+    check_stacked_state,
+    check_state,
+    writable_copy,
+)
 
 __all__ = ["DecisionState", "DetectionDecision", "detection_decision"]
 
@@ -53,6 +57,14 @@ def _decision_kernel(stats, threshold, clear, state, dd):  # pragma: no cover - 
                     on = True
         state.on[0] = on
         dd[t] = on
+
+
+@njit(cache=True, error_model="numpy")
+def _decision_runs(stats, threshold, clear, state, dd):  # pragma: no cover - compiled
+    """`_decision_kernel` over each run of ``stats`` ``(runs, n, c)``; ``state`` stacked."""
+    for r in range(stats.shape[0]):
+        run_state = DecisionState(state.on[r], state.held[r])
+        _decision_kernel(stats[r], threshold, clear, run_state, dd[r])
 
 
 class DetectionDecision:
@@ -121,6 +133,19 @@ class DetectionDecision:
             state = writable_copy(state)
         dd = np.zeros(s.shape[0], dtype=np.bool_)
         _decision_kernel(s, float(self.threshold), float(self.clear), state, dd)
+        return dd, state
+
+    def run_stacked(self, stats: Any, state: DecisionState) -> tuple[np.ndarray, DecisionState]:
+        """`run` of many runs at once: ``stats`` ``(runs, n, n_channels)``, ``state`` their
+        states stacked along a leading run axis; returns ``(runs, n)`` DD and the stacked states
+        after them (each run's equal to `run`'s)."""
+        s = np.ascontiguousarray(np.asarray(stats, dtype=np.float64))
+        if s.ndim != 3 or s.shape[2] != self.n_channels:
+            raise ValueError(f"stats must be (runs, n, {self.n_channels}), got shape {s.shape}")
+        check_stacked_state(state, self.init_state(), s.shape[0], "decision state")
+        state = writable_copy(state)
+        dd = np.zeros(s.shape[:2], dtype=np.bool_)
+        _decision_runs(s, float(self.threshold), float(self.clear), state, dd)
         return dd, state
 
     def update(self, stats: Any, state: DecisionState | None = None) -> tuple[bool, DecisionState]:

@@ -18,11 +18,11 @@ unit-variance innovations ``e``, which feed a sequential test:
 
 Each detector is one small class in the style of river's drift detectors and BlackJAX's
 kernels: immutable parameters, a state it creates (``init_state``: `CUSUMState`, `GLRState`),
-checks (``check_state``) and carries, ``update(e, state)`` for one sample (O(1) time and memory)
-and ``run(e, state)`` over a sequence, both through the same compiled kernel, so ``run`` equals
-``update`` sample by sample exactly. Both return the statistics (`DetectorOutput`) and the new
-state; the state passed in is never changed. A NaN innovation (a gap) leaves the state unchanged
-and gives a NaN statistic.
+checks (``check_state``) and carries, ``update(e, state)`` for one sample (O(1) time and memory),
+``run(e, state)`` over a sequence and ``run_stacked`` over the sequences of many runs at once,
+all through the same compiled kernel, so ``run`` equals ``update`` sample by sample exactly.
+They return the statistics (`DetectorOutput`) and the new state; the state passed in is never
+changed. A NaN innovation (a gap) leaves the state unchanged and gives a NaN statistic.
 
 The detection decision DD with hysteresis is `bayes_fdi.diagnosis.detection.decision`; the
 thresholds for a false-alarm budget are `bayes_fdi.diagnosis.detection.thresholds`, and each
@@ -39,7 +39,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import (
+    check_stacked_state,
+    check_state,
+    writable_copy,
+)
 from bayes_fdi.diagnosis.detection.thresholds import calibrate_threshold, cusum_threshold
 
 __all__ = [
@@ -146,6 +150,22 @@ def _glr_kernel(e, state, stat, since):  # pragma: no cover - compiled
         since[t] = best_len
 
 
+@njit(cache=True, error_model="numpy")
+def _cusum_runs(e, k, cap, state, stat, since):  # pragma: no cover - compiled
+    """`_cusum_kernel` over each run (row) of ``e``; ``state`` stacks the runs' states."""
+    for r in range(e.shape[0]):
+        run_state = CUSUMState(state.sums[r], state.lengths[r])
+        _cusum_kernel(e[r], k, cap, run_state, stat[r], since[r])
+
+
+@njit(cache=True, error_model="numpy")
+def _glr_runs(e, state, stat, since):  # pragma: no cover - compiled
+    """`_glr_kernel` over each run (row) of ``e``; ``state`` stacks the runs' states."""
+    for r in range(e.shape[0]):
+        run_state = GLRState(state.buffer[r], state.stored[r], state.slot[r])
+        _glr_kernel(e[r], run_state, stat[r], since[r])
+
+
 class _SequentialTest:
     """What `CUSUM` and `GLR` share: ``update``/``run`` over one compiled kernel."""
 
@@ -156,6 +176,11 @@ class _SequentialTest:
         raise NotImplementedError
 
     def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
+        raise NotImplementedError  # pragma: no cover - abstract
+
+    def _kernel_stacked(
+        self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray
+    ) -> None:
         raise NotImplementedError  # pragma: no cover - abstract
 
     def _check_params(self) -> None:
@@ -195,6 +220,21 @@ class _SequentialTest:
         stat = np.empty_like(x)
         since = np.empty(x.size, dtype=np.float64)
         self._kernel(x, state, stat, since)
+        return DetectorOutput(stat, since), state
+
+    def run_stacked(self, e: Any, state: Any) -> tuple[DetectorOutput, Any]:
+        """`run` of many runs at once: ``e`` ``(runs, n)``, ``state`` their states stacked
+        along a leading run axis (`~bayes_fdi.diagnosis.component_state.stack_states`); returns
+        ``(runs, n)`` outputs and the stacked states after them (each run's equal to `run`'s)."""
+        self._check_params()
+        x = np.ascontiguousarray(np.asarray(e, dtype=np.float64))
+        if x.ndim != 2:
+            raise ValueError(f"expected (runs, n) sequences, got shape {x.shape}")
+        check_stacked_state(state, self.init_state(), x.shape[0], "detector state")
+        state = writable_copy(state)
+        stat = np.empty_like(x)
+        since = np.empty(x.shape, dtype=np.float64)
+        self._kernel_stacked(x, state, stat, since)
         return DetectorOutput(stat, since), state
 
     def update(self, e: float, state: Any = None) -> tuple[DetectorOutput, Any]:
@@ -253,6 +293,11 @@ class CUSUM(_SequentialTest):
     def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
         _cusum_kernel(e, float(self.k), self.cap_, state, stat, since)
 
+    def _kernel_stacked(
+        self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray
+    ) -> None:
+        _cusum_runs(e, float(self.k), self.cap_, state, stat, since)
+
     def with_threshold(self, threshold: float) -> CUSUM:
         """The same CUSUM with another threshold (and the default cap follows it)."""
         return CUSUM(k=self.k, threshold=float(threshold), cap=self.cap)
@@ -307,6 +352,11 @@ class GLR(_SequentialTest):
     def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
         _glr_kernel(e, state, stat, since)
 
+    def _kernel_stacked(
+        self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray
+    ) -> None:
+        _glr_runs(e, state, stat, since)
+
     def with_threshold(self, threshold: float) -> GLR:
         """The same GLR with another threshold."""
         return GLR(window=self.window, threshold=float(threshold))
@@ -334,6 +384,7 @@ SEQUENTIAL_TEST_METHODS = (
     "check_state",
     "update",
     "run",
+    "run_stacked",
     "with_threshold",
     "gaussian_threshold",
 )

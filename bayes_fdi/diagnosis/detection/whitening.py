@@ -23,7 +23,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import (
+    check_stacked_state,
+    check_state,
+    writable_copy,
+)
 
 __all__ = ["ARWhitener", "WhitenState", "levinson_durbin"]
 
@@ -114,6 +118,14 @@ def _whiten_kernel(x, mean, table, std, state, out):  # pragma: no cover - compi
             hist[0] = c
         if j < p:
             n_valid[0] = j + 1
+
+
+@njit(cache=True, error_model="numpy")
+def _whiten_runs(x, mean, table, std, state, out):  # pragma: no cover - compiled
+    """`_whiten_kernel` over each run (row) of ``x``; ``state`` stacks the runs' states."""
+    for r in range(x.shape[0]):
+        run_state = WhitenState(state.history[r], state.valid[r])
+        _whiten_kernel(x[r], mean, table, std, run_state, out[r])
 
 
 class ARWhitener:
@@ -213,6 +225,21 @@ class ARWhitener:
             state = writable_copy(state)
         out = np.empty_like(x)
         _whiten_kernel(x, self.mean_, self.predictors_, self.innovation_std_, state, out)
+        return out, state
+
+    def run_stacked(self, z: Any, state: WhitenState) -> tuple[np.ndarray, WhitenState]:
+        """`run` of many runs at once: ``z`` ``(runs, n)``, ``state`` their states stacked
+        along a leading run axis (`~bayes_fdi.diagnosis.component_state.stack_states`); returns
+        ``(runs, n)`` innovations and the stacked states after them (each run's equal to
+        `run`'s)."""
+        self._check()
+        x = np.ascontiguousarray(np.asarray(z, dtype=np.float64))
+        if x.ndim != 2:
+            raise ValueError(f"expected (runs, n) sequences, got shape {x.shape}")
+        check_stacked_state(state, self.init_state(), x.shape[0], "whitener state")
+        state = writable_copy(state)
+        out = np.empty_like(x)
+        _whiten_runs(x, self.mean_, self.predictors_, self.innovation_std_, state, out)
         return out, state
 
     def update(self, z: float, state: WhitenState | None = None) -> tuple[float, WhitenState]:

@@ -262,6 +262,13 @@ class FaultIsolator:
         return float(t) if t is not None and not hasattr(cal, "weights_") else None
 
     @property
+    def rows_independent(self) -> bool:
+        """Whether `run` gives each row the numbers it gives that row alone (the compiled
+        path: a compiled tree with no calibrator or a temperature scaling)."""
+        compiled_calibration = self.calibrator_ is None or self.temperature() is not None
+        return self.lean_ is not None and compiled_calibration
+
+    @property
     def group_of_(self) -> np.ndarray:
         """``(n_faults,)`` int64: the group of each fault."""
         return np.ascontiguousarray(np.argmax(self.membership_, axis=1).astype(np.int64))
@@ -296,7 +303,7 @@ class FaultIsolator:
         n_f, n_g = self.faults_.size, len(self.groups_)
         fq, gq, nov = np.empty((n, n_f)), np.empty((n, n_g)), np.empty(n)
         T = self.temperature()
-        if self.lean_ is not None and (self.calibrator_ is None or T is not None):
+        if self.rows_independent:
             floor = float(getattr(self.calibrator_, "floor", 1e-12))
             params = IsolationParams(
                 tree=self.lean_.arrays(),

@@ -35,7 +35,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import (
+    check_stacked_state,
+    check_state,
+    writable_copy,
+)
 
 __all__ = [
     "INPUT_REFERENCE_SECONDS",
@@ -165,6 +169,24 @@ def _signature_kernel(x, alpha, ridge, state, out):  # pragma: no cover - compil
         out[t, 9] = sums[15] / n - ref[2]
 
 
+@njit(cache=True, error_model="numpy")
+def _signature_runs(x, alpha, ridge, state, out):  # pragma: no cover - compiled
+    """`_signature_kernel` over each run (row) of the inputs; ``state`` stacks the runs'."""
+    for r in range(x.detected.shape[0]):
+        inputs = SignatureInputs(
+            x.detected[r], x.r_x[r], x.r_f[r], x.x_hat[r], x.f_hat[r], x.s[r], x.p1[r], x.p2[r],
+            x.t1[r],
+        )  # fmt: skip
+        run_state = SignatureState(
+            state.count[r],
+            state.sums[r],
+            state.reference[r],
+            state.reference_set[r],
+            state.detected[r],
+        )
+        _signature_kernel(inputs, alpha, ridge, run_state, out[r])
+
+
 class SignatureWindow:
     """The isolation features of the window since each detection (see the module docstring).
 
@@ -243,6 +265,24 @@ class SignatureWindow:
         out = np.empty((n, len(ISOLATION_FEATURES)))
         alpha = 1.0 / self.reference_seconds
         _signature_kernel(SignatureInputs(flags, *values), alpha, self.slope_ridge, state, out)
+        return out, state
+
+    def run_stacked(
+        self, inputs: SignatureInputs, state: SignatureState
+    ) -> tuple[np.ndarray, SignatureState]:
+        """`run` of many runs at once: `SignatureInputs` of ``(runs, n)`` arrays, ``state``
+        their states stacked along a leading run axis; returns ``(runs, n, 10)`` features and
+        the stacked states after them (each run's equal to `run`'s)."""
+        self._check_params()
+        flags = np.ascontiguousarray(np.asarray(inputs.detected, dtype=np.bool_))
+        values = [np.ascontiguousarray(np.asarray(a, dtype=np.float64)) for a in inputs[1:]]
+        if flags.ndim != 2 or any(a.shape != flags.shape for a in values):
+            raise ValueError("SignatureWindow: every input must be a (runs, n) array")
+        check_stacked_state(state, self.init_state(), flags.shape[0], "signature state")
+        state = writable_copy(state)
+        out = np.empty((*flags.shape, len(ISOLATION_FEATURES)))
+        alpha = 1.0 / self.reference_seconds
+        _signature_runs(SignatureInputs(flags, *values), alpha, self.slope_ridge, state, out)
         return out, state
 
     def update(

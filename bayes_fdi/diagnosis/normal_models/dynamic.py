@@ -58,12 +58,17 @@ import xarray as xr
 from sklearn.base import BaseEstimator
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import (
+    check_stacked_state,
+    check_state,
+    writable_copy,
+)
 from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     NormalModelsParams,
     NormalModelsState,
     dynamic_inputs,
+    predict_runs,
     predict_seconds,
     signed_root,
 )
@@ -423,6 +428,25 @@ class DynamicNormalModels(BaseEstimator):
             state = writable_copy(state)
         out = np.empty((cv.size, 5))
         predict_seconds(cv, p1, p2, self.params_, state, out)
+        return out, state
+
+    def run_stacked(
+        self, channels: Mapping[str, Any], state: NormalModelsState
+    ) -> tuple[np.ndarray, NormalModelsState]:
+        """`run` of many runs at once: ``CV``, ``P1``, ``P2`` ``(runs, n)``, ``state`` their
+        states stacked along a leading run axis; returns ``(runs, n, 5)`` predictions and the
+        stacked states after them (each run's equal to `run`'s)."""
+        self._check_fitted()
+        cv, p1, p2 = (
+            np.ascontiguousarray(np.asarray(channels[c], dtype=np.float64))
+            for c in ("CV", "P1", "P2")
+        )
+        if cv.ndim != 2 or p1.shape != cv.shape or p2.shape != cv.shape:
+            raise ValueError("CV, P1 and P2 must be (runs, n) arrays of one shape")
+        check_stacked_state(state, self.init_state(), cv.shape[0], "normal models state")
+        state = writable_copy(state)
+        out = np.empty((*cv.shape, 5))
+        predict_runs(cv, p1, p2, self.params_, state, out)
         return out, state
 
     def update(

@@ -7,7 +7,8 @@ last ``D`` values of CV and of the signed root ``s`` of the pressure drop
 (`NormalModelsState`) and takes the fitted values as one named tuple (`NormalModelsParams`:
 the input standardisation, the two `~bayes_fdi.diagnosis.normal_models.compiled.LeanRVR`
 regressions and the std factors per command-speed bin). Whole recordings and single seconds go
-through the same loop, so they give the same numbers. `dynamic_inputs` is a vectorised reference
+through the same loop (`predict_runs` runs it over many runs at once), so they give the same
+numbers. `dynamic_inputs` is a vectorised reference
 of the inputs the loop builds, and the fit's.
 
 Written by hand: no library compiles this per-sample chain of two RVM predictions.
@@ -29,6 +30,7 @@ __all__ = [
     "NormalModelsParams",
     "NormalModelsState",
     "dynamic_inputs",
+    "predict_runs",
     "predict_seconds",
     "signed_root",
 ]
@@ -165,3 +167,12 @@ def predict_seconds(cv, p1, p2, params, state, out):  # pragma: no cover - compi
         out[t, 2] = fm
         out[t, 3] = math.sqrt(fv) * fs
         out[t, 4] = speed
+
+
+@njit(cache=True, error_model="numpy")
+def predict_runs(cv, p1, p2, params, state, out):  # pragma: no cover - compiled
+    """`predict_seconds` of each run (row) of ``(runs, n)`` inputs into ``out``
+    ``(runs, n, 5)``; ``state`` stacks the runs' `NormalModelsState` (leading run axis)."""
+    for r in range(cv.shape[0]):
+        run_state = NormalModelsState(state.history[r], state.seen[r])
+        predict_seconds(cv[r], p1[r], p2[r], params, run_state, out[r])

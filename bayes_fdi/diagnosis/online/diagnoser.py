@@ -36,6 +36,7 @@ from bayes_fdi.diagnosis.online.step import (
     check_stream_state,
     init_run_state,
     step,
+    step_runs,
 )
 from bayes_fdi.diagnosis.online.stream import FAULTS, assemble_stream, decide, stream_attrs
 from bayes_fdi.diagnosis.online.training import Runs, fit_detection, fit_isolation, stack_runs
@@ -473,19 +474,25 @@ class OnlineDiagnoser(BaseEstimator):
         channels = ds[[c for c in CHANNELS if c in ds.data_vars]].reset_coords(drop=True)
         validate_dataset(channels, require=CHANNELS, allow_nan=True)
         n_runs, n_t = ds.sizes["run"], ds.sizes["time"]
+        if n_runs == 0:
+            raise ValueError("the recording has no runs")
         components = self._components()
-        if state is not None:
+        if state is None:
+            state = StreamState.of_runs([init_run_state(components)] * n_runs)
+        else:
             check_stream_state(components, state, n_runs)
         data = {
             c: np.asarray(ds[c].transpose("run", "time").values, dtype=np.float64) for c in CHANNELS
         }
-        per_run, states = [], []
-        for i in range(n_runs):
-            arrays = {c: np.ascontiguousarray(v[i]) for c, v in data.items()}
-            start = init_run_state(components) if state is None else state.run(i)
-            out, end = step(components, arrays, start)
-            per_run.append((out, self._decide(arrays, out)))
-            states.append(end)
+        out, end = step_runs(components, data, state)  # every run at once
+
+        def rows(arrays: Mapping[str, Any]) -> dict[str, Any]:  # (runs, time, ...) -> rows
+            return {k: v.reshape(n_runs * n_t, *v.shape[2:]) for k, v in arrays.items()}
+
+        decisions = {
+            k: v.reshape(n_runs, n_t, *v.shape[1:]) if isinstance(v, np.ndarray) else v
+            for k, v in self._decide(rows(data), rows(out)).items()
+        }
         attrs = stream_attrs(
             self.groups_,
             self.undetectable_,
@@ -493,15 +500,15 @@ class OnlineDiagnoser(BaseEstimator):
             threshold=self.threshold_,
             clear_level=self.clear_level_,
             coverage=self.coverage,
+            p_fault=self.p_fault,
+            novelty_ratio=self.novelty_ratio,
         )
         stream = assemble_stream(
-            ds, per_run, n_t, faults=self._faults, group_labels=self._group_labels, attrs=attrs
+            ds, out, decisions, faults=self._faults, group_labels=self._group_labels, attrs=attrs
         )
         if single:
             stream = stream.isel(run=0, drop=True)
-        if return_state:
-            return stream, StreamState.of_runs(states) if states else state
-        return stream
+        return (stream, end) if return_state else stream
 
     @property
     def _faults(self) -> tuple[str, ...]:

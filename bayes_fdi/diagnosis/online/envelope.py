@@ -22,7 +22,11 @@ import numpy as np
 import xarray as xr
 from numba import njit
 
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import (
+    check_stacked_state,
+    check_state,
+    writable_copy,
+)
 from bayes_fdi.diagnosis.isolation.signatures import INPUT_REFERENCE_SECONDS
 
 __all__ = ["ENVELOPE_CHANNELS", "INPUT_MARGIN_FLOOR", "EnvelopeState", "InputEnvelope"]
@@ -74,6 +78,16 @@ def _onset_kernel(dd, inputs, low, high, alpha, state, out):  # pragma: no cover
             state.novel_at_onset[0] = novel
         state.detected[0] = True
         out[t] = state.novel_at_onset[0]
+
+
+@njit(cache=True, error_model="numpy")
+def _onset_runs(dd, inputs, low, high, alpha, state, out):  # pragma: no cover - compiled
+    """`_onset_kernel` over each run (row) of ``dd``; ``state`` stacks the runs' states."""
+    for r in range(dd.shape[0]):
+        run_state = EnvelopeState(
+            state.average[r], state.average_set[r], state.novel_at_onset[r], state.detected[r]
+        )
+        _onset_kernel(dd[r], inputs[r], low, high, alpha, run_state, out[r])
 
 
 class InputEnvelope:
@@ -189,6 +203,26 @@ class InputEnvelope:
         out = np.zeros(dd.size, dtype=np.bool_)
         low, high = np.ascontiguousarray(self.low_), np.ascontiguousarray(self.high_)
         _onset_kernel(dd, x, low, high, 1.0 / self.reference_seconds, state, out)
+        return out, state
+
+    def run_stacked(
+        self, inputs: Any, detected: Any, state: EnvelopeState
+    ) -> tuple[np.ndarray, EnvelopeState]:
+        """`run` of many runs at once: ``inputs`` ``(runs, n, 4)``, ``detected`` ``(runs, n)``,
+        ``state`` their states stacked along a leading run axis; returns ``(runs, n)`` flags and
+        the stacked states after them (each run's equal to `run`'s)."""
+        self._check_fitted()
+        x = np.ascontiguousarray(np.asarray(inputs, dtype=np.float64))
+        dd = np.ascontiguousarray(np.asarray(detected, dtype=np.bool_))
+        if x.ndim != 3 or x.shape[2] != 4 or dd.shape != x.shape[:2]:
+            raise ValueError(
+                f"inputs must be (runs, n, 4) and detected (runs, n), got {x.shape}, {dd.shape}"
+            )
+        check_stacked_state(state, self.init_state(), x.shape[0], "envelope state")
+        state = writable_copy(state)
+        out = np.zeros(dd.shape, dtype=np.bool_)
+        low, high = np.ascontiguousarray(self.low_), np.ascontiguousarray(self.high_)
+        _onset_runs(dd, x, low, high, 1.0 / self.reference_seconds, state, out)
         return out, state
 
     def update(

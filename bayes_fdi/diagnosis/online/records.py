@@ -5,7 +5,8 @@
 quantities and decisions (`bayes_fdi.diagnosis.online.stream.decide`): the validated values and
 uncertainties, the diagnosed state with its probability and distribution over the groups, the
 SEVA status and the reason for it in words (`status_reasons`); `last_values` are the second's
-other stream values.
+other stream values. `stream_reasons` gives the same words for every second of
+`OnlineDiagnoser.run`'s stream.
 """
 
 from __future__ import annotations
@@ -15,12 +16,14 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+import xarray as xr
 
 from bayes_fdi.datasets import CHANNELS
+from bayes_fdi.diagnosis.online.stream import NOVELTY_FLAGS
 from bayes_fdi.diagnosis.seva.record import ClassDistribution, SevaRecord, SevaStatus
 from bayes_fdi.diagnosis.seva.rules import entropy
 
-__all__ = ["last_values", "second_record", "status_reasons"]
+__all__ = ["last_values", "second_record", "status_reasons", "stream_reasons"]
 
 
 def status_reasons(
@@ -30,34 +33,58 @@ def status_reasons(
     isolating: bool,
     novelty_ratio: float,
     p_fault: float,
+    i: int = 0,
 ) -> tuple[str, ...]:
-    """Why the first second of ``out``/``dec`` has its status, in words (``isolating``: an
+    """Why second ``i`` of ``out``/``dec`` has its status, in words (``isolating``: an
     isolator is fitted)."""
-    if dec["blind"][0]:
+    if dec["blind"][i]:
         return ("a measurement is missing this second",)
-    if not out["DD"][0]:
-        if dec["novel_inputs"][0]:
+    if not out["DD"][i]:
+        if dec["novel_inputs"][i]:
             return ("inputs outside the training envelope: the normal models extrapolate",)
         return (
-            f"no detection (statistics X {out['stat_X'][0]:.3g}, F "
-            f"{out['stat_F'][0]:.3g} <= threshold {threshold:.3g})",
+            f"no detection (statistics X {out['stat_X'][i]:.3g}, F "
+            f"{out['stat_F'][i]:.3g} <= threshold {threshold:.3g})",
         )
     if not isolating:
         return ("fault detected; no isolation fitted",)
-    if dec["novel_signature"][0]:
+    if dec["novel_signature"][i]:
         return (
             f"fault detected; signature unlike every known fault (novelty "
-            f"{out['novelty'][0]:.3g} > {novelty_ratio})",
+            f"{out['novelty'][i]:.3g} > {novelty_ratio})",
         )
-    p = dec["probability"][0]
-    if dec["novel_onset"][0]:
+    p = dec["probability"][i]
+    if dec["novel_onset"][i]:
         return (
             f"fault detected while the inputs were outside the training envelope: the "
-            f"normal models extrapolate, P({dec['state'][0]}) = {p:.3f} is not "
+            f"normal models extrapolate, P({dec['state'][i]}) = {p:.3f} is not "
             f"trusted",
         )
     need = ">=" if p >= p_fault else "<"
-    return (f"fault detected; P({dec['state'][0]}) = {p:.3f} {need} p_fault = {p_fault}",)
+    return (f"fault detected; P({dec['state'][i]}) = {p:.3f} {need} p_fault = {p_fault}",)
+
+
+def stream_reasons(stream: xr.Dataset) -> np.ndarray:
+    """Why each second of `OnlineDiagnoser.run`'s stream has its status, in words: the text
+    `update`'s record gives that second (its reasons joined by ``"; "``), an array of the
+    shape of the stream's ``status``."""
+    shape = stream["status"].shape
+
+    def flat(name: str) -> np.ndarray:
+        return np.asarray(stream[name].values).reshape(-1)
+
+    out = {k: flat(k) for k in ("DD", "stat_X", "stat_F", "novelty")}
+    dec = {k: flat(k) for k in (*NOVELTY_FLAGS, "probability", "state")}
+    dec["blind"] = flat("status") == SevaStatus.BLIND.value
+    isolating = stream.sizes.get("group", 0) > 0
+    a = stream.attrs
+    texts = [
+        "; ".join(
+            status_reasons(out, dec, a["threshold"], isolating, a["novelty_ratio"], a["p_fault"], i)
+        )
+        for i in range(int(np.prod(shape)))
+    ]
+    return np.asarray(texts, dtype=object).reshape(shape)
 
 
 def second_record(

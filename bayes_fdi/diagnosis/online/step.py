@@ -7,8 +7,9 @@ per-second quantity and the state after the last second; the state passed in is 
 Per second: the normal models' predictions, the standardised residuals and their whitened
 innovations, the sequential tests and the detection decision DD, the isolation signature since
 the detection and its fault and group probabilities with novelty, and the input envelope's
-checks. ``run`` over a recording and ``update`` for one second both call it, so they give the
-same numbers.
+checks. `step_runs` advances many runs at once (each component's ``run_stacked``); `step` is
+`step_runs` of one run. ``run`` over a recording and ``update`` for one second both go through
+`step_runs`, so they give the same numbers.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from bayes_fdi.diagnosis.component_state import as_stack_of_one
 from bayes_fdi.diagnosis.detection.decision import DetectionDecision
 from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
 from bayes_fdi.diagnosis.isolation.signatures import SignatureInputs, SignatureWindow
@@ -26,7 +28,7 @@ from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, InputEnvelope
 from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
 from bayes_fdi.diagnosis.online.stream import MODEL_OUTPUTS
 
-__all__ = ["Components", "check_stream_state", "init_run_state", "step"]
+__all__ = ["Components", "check_stream_state", "init_run_state", "step", "step_runs"]
 
 
 class Components(NamedTuple):
@@ -77,21 +79,94 @@ def check_stream_state(components: Components, state: Any, n_runs: int) -> None:
 
 
 def _isolate(isolator: FaultIsolator | None, feats: np.ndarray) -> dict[str, np.ndarray]:
-    """Fault/group probabilities and novelty of feature rows (NaN rows stay NaN)."""
+    """Fault/group probabilities and novelty of ``(runs, n, 10)`` signatures (NaN rows stay
+    NaN): every row at once where the rows are independent, else one call per run (the rows of
+    one run together, as `run` of one run)."""
+    shape = feats.shape[:2]
     if isolator is None:
-        n = feats.shape[0]
         return {
-            "fault_proba": np.full((n, 0), np.nan),
-            "group_proba": np.full((n, 0), np.nan),
-            "novelty": np.full(n, np.nan),
+            "fault_proba": np.full((*shape, 0), np.nan),
+            "group_proba": np.full((*shape, 0), np.nan),
+            "novelty": np.full(shape, np.nan),
         }
-    return isolator.run(feats)._asdict()
+    if isolator.rows_independent:
+        out = isolator.run(feats.reshape(-1, feats.shape[2]))
+        return {k: v.reshape(*shape, *v.shape[1:]) for k, v in out._asdict().items()}
+    per_run = [isolator.run(run_feats)._asdict() for run_feats in feats]
+    return {k: np.stack([o[k] for o in per_run]) for k in per_run[0]}
+
+
+def step_runs(
+    components: Components, channels: Mapping[str, np.ndarray], state: StreamState
+) -> tuple[dict[str, Any], StreamState]:
+    """Every per-second quantity of consecutive seconds of many runs, and the state after them.
+
+    Each component advances every run at once (its ``run_stacked``: one compiled loop over the
+    runs, each run through the kernel of its ``run``), so each run's numbers equal those of
+    `step` on that run alone.
+
+    Parameters
+    ----------
+    components
+        The fitted components.
+    channels
+        ``(runs, n)`` float64 arrays of CV, P1, P2, T1, X, F (NaN = missing).
+    state
+        The runs' `StreamState` after the preceding second (not changed; checked by the
+        components).
+
+    Returns
+    -------
+    quantities : dict
+        ``(runs, n)`` arrays ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``, ``r_X``,
+        ``r_F`` (innovations), ``stat_X``, ``stat_F``, ``DD``, ``novel_inputs``,
+        ``novel_onset``, ``novelty``; ``features`` ``(runs, n, 10)``, ``fault_proba``
+        ``(runs, n, n_faults)``, ``group_proba`` ``(runs, n, n_groups)``.
+    state : StreamState
+        Read-only.
+    """
+    c = {k: np.ascontiguousarray(np.asarray(v, dtype=np.float64)) for k, v in channels.items()}
+    pred, models_state = components.normal_models.run_stacked(c, state.models)
+    out: dict[str, Any] = {k: pred[:, :, j] for j, k in enumerate(MODEL_OUTPUTS)}
+    r_x, z_x = standardised_residuals(c["X"], pred[:, :, 0], pred[:, :, 1])
+    r_f, z_f = standardised_residuals(c["F"], pred[:, :, 2], pred[:, :, 3])
+    e_x, whiten_x = components.whiteners.X.run_stacked(z_x, state.whiten.X)
+    e_f, whiten_f = components.whiteners.F.run_stacked(z_f, state.whiten.F)
+    test_x, detect_x = components.detector.run_stacked(e_x, state.detect.X)
+    test_f, detect_f = components.detector.run_stacked(e_f, state.detect.F)
+    out["r_X"], out["r_F"] = e_x, e_f
+    out["stat_X"], out["stat_F"] = test_x.statistic, test_f.statistic
+    stats = np.stack([test_x.statistic, test_f.statistic], axis=-1)
+    dd, decision = components.decision.run_stacked(stats, state.decision)
+    out["DD"] = dd
+    p1, p2, t1 = c["P1"], c["P2"], c["T1"]
+    window = SignatureInputs(
+        dd, r_x, r_f, pred[:, :, 0], pred[:, :, 2], signed_root(p1, p2), p1, p2, t1
+    )
+    out["features"], signature = components.signature.run_stacked(window, state.signature)
+    inputs = np.stack([c[k] for k in ENVELOPE_CHANNELS], axis=-1)
+    out["novel_inputs"] = components.envelope.outside(inputs.reshape(-1, 4)).reshape(dd.shape)
+    out["novel_onset"], onset = components.envelope.run_stacked(inputs, dd, state.onset)
+    out.update(_isolate(components.isolator, out["features"]))
+    end = StreamState(
+        models=models_state,
+        whiten=PerOutput(whiten_x, whiten_f),
+        detect=PerOutput(detect_x, detect_f),
+        decision=decision,
+        signature=signature,
+        onset=onset,
+        seconds=np.asarray(state.seconds, dtype=np.int64) + dd.shape[1],
+    )
+    for array in end.arrays().values():
+        array.flags.writeable = False
+    return out, end
 
 
 def step(
     components: Components, channels: Mapping[str, np.ndarray], state: RunState
 ) -> tuple[dict[str, Any], RunState]:
-    """Every per-second quantity of consecutive seconds of one run, and the state after them.
+    """Every per-second quantity of consecutive seconds of one run, and the state after them:
+    `step_runs` of that run alone.
 
     Parameters
     ----------
@@ -105,40 +180,12 @@ def step(
     Returns
     -------
     quantities : dict
-        ``(n,)`` arrays ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``, ``r_X``, ``r_F``
-        (innovations), ``stat_X``, ``stat_F``, ``DD``, ``novel_inputs``, ``novel_onset``,
-        ``novelty``; ``features`` ``(n, 10)``, ``fault_proba`` ``(n, n_faults)``,
-        ``group_proba`` ``(n, n_groups)``.
+        The arrays of `step_runs` of the run: ``(n,)``, ``features`` ``(n, 10)``,
+        ``fault_proba`` ``(n, n_faults)``, ``group_proba`` ``(n, n_groups)``.
     state : RunState
     """
-    models = components.normal_models
-    pred, models_state = models.run(channels, state.models)
-    out: dict[str, Any] = {k: pred[:, j] for j, k in enumerate(MODEL_OUTPUTS)}
-    r_x, z_x = standardised_residuals(channels["X"], pred[:, 0], pred[:, 1])
-    r_f, z_f = standardised_residuals(channels["F"], pred[:, 2], pred[:, 3])
-    e_x, whiten_x = components.whiteners.X.run(z_x, state.whiten.X)
-    e_f, whiten_f = components.whiteners.F.run(z_f, state.whiten.F)
-    test_x, detect_x = components.detector.run(e_x, state.detect.X)
-    test_f, detect_f = components.detector.run(e_f, state.detect.F)
-    out["r_X"], out["r_F"] = e_x, e_f
-    out["stat_X"], out["stat_F"] = test_x.statistic, test_f.statistic
-    stats = np.column_stack([test_x.statistic, test_f.statistic])
-    dd, decision = components.decision.run(stats, state.decision)
-    out["DD"] = dd
-    p1, p2, t1 = channels["P1"], channels["P2"], channels["T1"]
-    window = SignatureInputs(dd, r_x, r_f, pred[:, 0], pred[:, 2], signed_root(p1, p2), p1, p2, t1)
-    out["features"], signature = components.signature.run(window, state.signature)
-    inputs = np.column_stack([channels[c] for c in ENVELOPE_CHANNELS])
-    out["novel_inputs"] = components.envelope.outside(inputs)
-    out["novel_onset"], onset = components.envelope.run(inputs, dd, state.onset)
-    out.update(_isolate(components.isolator, out["features"]))
-    end = RunState(
-        models=models_state,
-        whiten=PerOutput(whiten_x, whiten_f),
-        detect=PerOutput(detect_x, detect_f),
-        decision=decision,
-        signature=signature,
-        onset=onset,
-        seconds=state.seconds + int(dd.size),
-    )
-    return out, end
+    rows = {k: np.asarray(v, dtype=np.float64)[None] for k, v in channels.items()}
+    fields = [as_stack_of_one(component_state) for component_state in state[:-1]]
+    stacked = StreamState(*fields, np.array([state.seconds], dtype=np.int64))
+    out, end = step_runs(components, rows, stacked)
+    return {k: v[0] for k, v in out.items()}, end.run(0)

@@ -26,6 +26,7 @@ from bayes_fdi.diagnosis.seva.record import SevaStatus
 __all__ = [
     "FAULTS",
     "MODEL_OUTPUTS",
+    "NOVELTY_FLAGS",
     "assemble_stream",
     "coverage_quantile",
     "decide",
@@ -36,6 +37,8 @@ __all__ = [
 FAULTS: tuple[str, ...] = tuple(f"f{i}" for i in range(1, 20))
 #: The normal models' outputs in the stream.
 MODEL_OUTPUTS = ("X_hat", "X_hat_std", "F_hat", "F_hat_std")
+#: The stream's flags of what makes a second DAZZLED (with a detection not yet isolated).
+NOVELTY_FLAGS = ("novel_inputs", "novel_signature", "novel_onset")
 
 
 @functools.lru_cache(maxsize=16)
@@ -119,16 +122,16 @@ def decide(
 
 def assemble_stream(
     recording: xr.Dataset,
-    per_run: Sequence[tuple[Mapping[str, Any], Mapping[str, Any]]],
-    n_times: int,
+    out: Mapping[str, Any],
+    decisions: Mapping[str, Any],
     *,
     faults: Sequence[str],
     group_labels: Sequence[str],
     attrs: Mapping[str, Any],
 ) -> xr.Dataset:
     """The stream dataset (dims ``run``, ``time``, ``group``, ``fault``) of the runs'
-    per-second quantities and decisions (``per_run``: one ``(out, decisions)`` pair per run of
-    ``recording``, which has a ``run`` dimension).
+    per-second quantities ``out`` and decisions (`decide`'s), each a ``(runs, time, ...)``
+    array over the runs of ``recording`` (which has a ``run`` dimension).
 
     ``faults`` are the columns of the quantities' ``fault_proba`` (the classifier's faults):
     the stream's ``fault_proba`` has one column per fault of `FAULTS`, 0 once detected for a
@@ -136,16 +139,12 @@ def assemble_stream(
     are kept, those named like a stream variable (a truth label such as ``state``) renamed
     ``true_<name>``.
     """
-
-    def stack(key: str, src: int) -> np.ndarray:
-        return np.stack([pr[src][key] for pr in per_run])
-
-    z = per_run[0][1]["z"] if per_run else 1.96
+    z = decisions["z"]
     dims = ("run", "time")
     fault_cols = {f: j for j, f in enumerate(faults)}
-    fault = np.full((len(per_run), n_times, len(FAULTS)), np.nan)
-    if per_run and faults:
-        fq = stack("fault_proba", 0)
+    fault = np.full((*out["DD"].shape, len(FAULTS)), np.nan)
+    if faults:
+        fq = out["fault_proba"]
         for k, f in enumerate(FAULTS):
             if f in fault_cols:
                 fault[:, :, k] = fq[:, :, fault_cols[f]]
@@ -153,29 +152,28 @@ def assemble_stream(
                 fault[:, :, k] = np.where(np.isfinite(fq[:, :, 0]), 0.0, np.nan)
     quantities = (*MODEL_OUTPUTS, "r_X", "r_F", "stat_X", "stat_F")
     data = {
-        "DD": (dims, stack("DD", 0)),
-        "FFID": (dims, stack("FFID", 1)),
-        "indicated": ((*dims, "group"), stack("indicated", 1)),
-        "group_proba": ((*dims, "group"), stack("group_proba", 0)),
+        "DD": (dims, out["DD"]),
+        "FFID": (dims, decisions["FFID"]),
+        "indicated": ((*dims, "group"), decisions["indicated"]),
+        "group_proba": ((*dims, "group"), out["group_proba"]),
         "fault_proba": ((*dims, "fault"), fault),
-        "state": (dims, stack("state", 1)),
-        "probability": (dims, stack("probability", 1)),
-        "status": (dims, stack("status", 1)),
-        "novelty": (dims, stack("novelty", 0)),
-        **{k: (dims, stack(k, 0)) for k in quantities},
-        "VMV_X": (dims, stack("X_hat", 0)),
-        "VU_X": (dims, z * stack("X_hat_std", 0)),
-        "VMV_F": (dims, stack("F_hat", 0)),
-        "VU_F": (dims, z * stack("F_hat_std", 0)),
+        **{k: (dims, decisions[k]) for k in ("state", "probability", "status")},
+        "novelty": (dims, out["novelty"]),
+        **{k: (dims, out[k]) for k in quantities},
+        "VMV_X": (dims, out["X_hat"]),
+        "VU_X": (dims, z * out["X_hat_std"]),
+        "VMV_F": (dims, out["F_hat"]),
+        "VU_F": (dims, z * out["F_hat_std"]),
+        **{k: (dims, decisions[k]) for k in NOVELTY_FLAGS},
     }
     coords = {k: v.variable for k, v in recording.coords.items() if set(v.dims) <= {"run", "time"}}
     for k in [k for k in coords if k in data]:  # a truth label such as `state` is kept
         coords[f"true_{k}"] = coords.pop(k)
     coords["group"] = np.asarray(group_labels, dtype=str)
     coords["fault"] = np.asarray(FAULTS, dtype=str)
-    out = xr.Dataset(data, coords=coords)
-    out.attrs.update(attrs)
-    return out
+    stream = xr.Dataset(data, coords=coords)
+    stream.attrs.update(attrs)
+    return stream
 
 
 def stream_attrs(
@@ -186,9 +184,12 @@ def stream_attrs(
     threshold: float,
     clear_level: float,
     coverage: float,
+    p_fault: float,
+    novelty_ratio: float,
 ) -> dict[str, Any]:
     """The stream's attributes: ``groups`` and ``undetectable`` (JSON), the detector, its
-    threshold and clear level, the coverage of VU and the isolation features."""
+    threshold and clear level, the coverage of VU, the decision's ``p_fault`` and
+    ``novelty_ratio`` and the isolation features."""
     return {
         "groups": json.dumps({"|".join(g): list(g) for g in groups}),
         "undetectable": json.dumps(list(undetectable)),
@@ -196,5 +197,7 @@ def stream_attrs(
         "threshold": float(threshold),
         "clear_level": float(clear_level),
         "coverage": float(coverage),
+        "p_fault": float(p_fault),
+        "novelty_ratio": float(novelty_ratio),
         "features": ",".join(ISOLATION_FEATURES),
     }
