@@ -1,7 +1,8 @@
-"""One valve's seconds in ``serve``: the aligner's rules with an explicit wall clock (deadlines,
-duplicates, late samples, clock jumps, restarts), the runner against the batch ``run`` of the
-same seconds, and the durable log's checkpoints (a runner rebuilt from the log continues the
-stream bit for bit)."""
+"""The valves' seconds in ``serve``: the aligner's rules with an explicit wall clock (deadlines,
+duplicates, late samples, clock jumps, restarts), a valve group against the batch ``run`` of the
+same seconds and, valve by valve, against ``update`` (many valves diagnosed in one call, in
+changing subsets, gaps among them), and the durable log's checkpoints (a group rebuilt from the
+log continues the stream bit for bit)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from bayes_fdi.datasets.units import PHYSICAL_UNITS, to_physical
 from bayes_fdi.deployment.serve.alignment import FinishedSecond, Gap, SecondAligner
 from bayes_fdi.deployment.serve.durable_log import DurableLog, read_log
 from bayes_fdi.deployment.serve.records import group_labels
-from bayes_fdi.deployment.serve.valve_runner import ValveRunner
+from bayes_fdi.deployment.serve.valve_group import ValveGroup
 from bayes_fdi.diagnosis import OnlineDiagnoser
 
 T0 = 1_800_000_000  # plant time of second 0
@@ -118,15 +119,23 @@ def recording():
     return rec.isel(run=0)
 
 
-def _play(runner, recording, seconds, wall_of=float):
-    """Feed the recording's seconds (physical units) through a runner; returns its rows."""
+def _play(group, recording, seconds, wall_of=float, valve="V1"):
+    """Feed the recording's seconds (physical units) to a valve; returns its group's rows."""
     rows = []
     for k in seconds:
         for c in CHANNELS:
             value = float(to_physical(float(recording[c].values[k]), c))
-            runner.offer(c, value, T0 + k, wall_of(k))
-        rows += runner.step(wall_of(k), 0.0)
+            group.offer(valve, c, value, T0 + k, wall_of(k))
+        rows += [row for _, row in group.step(wall_of(k), 0.0)]
     return rows
+
+
+def _one(model_path, checkpoint=None, model_id="m"):
+    """A group of one valve, V1."""
+    checkpoints = {"V1": checkpoint} if checkpoint is not None else {}
+    return ValveGroup(
+        OnlineDiagnoser.load(model_path), model_id, {"V1": PHYSICAL_UNITS}, checkpoints
+    )
 
 
 def _check_against_batch(rows, model_path):
@@ -145,11 +154,11 @@ def _check_against_batch(rows, model_path):
         np.testing.assert_array_equal([r[name] for r in rows], batch[name].values, err_msg=name)
 
 
-def test_runner_equals_the_batch_run_with_gaps(model, recording):
-    runner = ValveRunner("V1", OnlineDiagnoser.load(model), PHYSICAL_UNITS, "m")
+def test_a_valve_equals_the_batch_run_with_gaps(model, recording):
+    group = _one(model)
     seconds = [k for k in range(240) if not (60 <= k < 63 or 150 <= k < 170)]
-    rows = _play(runner, recording, seconds)
-    rows += runner.step(300.0, 0.0)[:1]  # second 240: BLIND, as the plant stopped
+    rows = _play(group, recording, seconds)
+    rows += [row for _, row in group.step(300.0, 0.0)][:1]  # second 240: BLIND (plant stopped)
     times = [r["time"] - T0 for r in rows]
     assert times == list(range(241))
     status = np.array([r["status"] for r in rows])
@@ -158,20 +167,90 @@ def test_runner_equals_the_batch_run_with_gaps(model, recording):
     _check_against_batch(rows, model)
 
 
-def test_a_runner_rebuilt_from_the_log_continues_the_stream_exactly(model, recording, tmp_path):
+def _check_against_update(rows, model_path):
+    """Each row is the record ``update`` gives its second from the channels the row holds (NaN
+    where missing), reason included, bit for bit."""
+    diag = OnlineDiagnoser.load(model_path)
+    want = {k: [] for k in ("status", "state", "reason", "probability", "VMV_X", "VU_X", "VMV_F",
+                            "VU_F", "novelty", "DD", "FFID", "r_X", "r_F", "stat_X", "stat_F",
+                            "group_proba")}  # fmt: skip
+    for row in rows:
+        rec = diag.update({c: row[c] for c in CHANNELS})
+        last = diag.last_
+        values = {"status": rec.status.value, "state": rec.state, "reason": "; ".join(rec.reasons),
+                  "probability": rec.probability, "VMV_X": rec.x_vmv, "VU_X": rec.x_vu,
+                  "VMV_F": rec.f_vmv, "VU_F": rec.f_vu, "novelty": rec.feature_novelty}  # fmt: skip
+        values |= {k: last[k] for k in ("DD", "FFID", "r_X", "r_F", "stat_X", "stat_F")}
+        values["group_proba"] = last["group_proba"]
+        for k, v in values.items():
+            want[k].append(v)
+    for k, v in want.items():
+        np.testing.assert_array_equal([r[k] for r in rows], v, err_msg=k)
+
+
+def test_valves_of_one_model_are_diagnosed_together_each_as_update_would(model):
+    n = 5
+    specs = [None, Fault("f1", 0.7, 40.0), None, Fault("f18", 0.8, 30.0), None]
+    rec = simulate(benchmark_inputs(n, 150, seed=8, vary=True), specs, seed=8)
+    names = [f"V{i}" for i in range(n)]
+    group = ValveGroup(OnlineDiagnoser.load(model), "m", dict.fromkeys(names, PHYSICAL_UNITS))
+    calls = []
+    run = group.diagnoser.run
+
+    def counted(chunk, **kwargs):  # the real run, counted
+        calls.append(chunk.sizes["run"])
+        return run(chunk, **kwargs)
+
+    group.diagnoser.run = counted
+    rows = {v: [] for v in names}
+
+    def offer(i, k, wall, channels=CHANNELS, shift=0):
+        for c in channels:
+            value = float(to_physical(float(rec[c].values[i, k]), c))
+            group.offer(names[i], c, value, T0 + k + shift, wall)
+
+    def step(wall, valves=None):
+        for v, row in group.step(wall, 0.0, valves):
+            rows[v].append(row)
+
+    for k in range(150):
+        wall = float(k)
+        for i in (0, 1, 2):  # arrive together: one run call of three runs
+            offer(i, k, wall + 0.1, shift=100 if i == 2 and k >= 60 else 0)
+        before = len(calls)
+        step(wall + 0.1)
+        if 1 <= k < 60:  # (with V3's second before the last, when its deadline passed)
+            assert calls[before] >= 3 and len(calls) - before <= 2
+        offer(3, k, wall + 0.3, channels=CHANNELS[:5] if k % 17 == 0 else CHANNELS)
+        if not 80 <= k < 90:  # V4 silent for 10 s: BLIND at the deadlines
+            offer(4, k, wall + 0.3)
+        step(wall + 0.3, ["V3", "V4"])  # the ready valves only, as serve's loop does
+    step(1000.0)
+    for v in names:
+        _check_against_update(rows[v], model)
+        times = np.array([r["time"] for r in rows[v]]) - T0
+        assert np.all(np.diff(times) == 1), v
+    blind = {v: {r["time"] - T0 for r in rows[v] if r["status"] == "BLIND"} for v in names}
+    assert set(range(80, 90)) <= blind["V4"]  # silent: by the deadlines
+    assert {k for k in range(1, 150) if k % 17 == 0} <= blind["V3"]  # F missing (0: no stream yet)
+    assert set(range(60, 160)) <= blind["V2"]  # the clock jump's 100 s without data
+    assert "BLURRED" in {r["status"] for r in rows["V1"]}
+
+
+def test_a_group_rebuilt_from_the_log_continues_the_stream_exactly(model, recording, tmp_path):
     diag = OnlineDiagnoser.load(model)
     log = DurableLog(tmp_path, {"V1": group_labels(diag)}, segment_seconds=50)
-    runner = ValveRunner("V1", diag, PHYSICAL_UNITS, "m")
+    group = _one(model)
     for k in range(100):  # one commit a second, as serve does
-        rows = _play(runner, recording, [k])
-        log.commit({"V1": rows}, {"V1": runner.checkpoint()})
+        rows = _play(group, recording, [k])
+        log.commit({"V1": rows}, group.checkpoints(["V1"])())
     # the process dies here; a new one recovers the log and resumes 10 s later
     log2 = DurableLog(tmp_path, {"V1": group_labels(diag)}, segment_seconds=50)
     checkpoints = log2.recover()
     assert checkpoints["V1"].last_second == T0 + 99
-    runner2 = ValveRunner("V1", OnlineDiagnoser.load(model), PHYSICAL_UNITS, "m", checkpoints["V1"])
-    rows2 = _play(runner2, recording, range(110, 240), wall_of=lambda k: 1000.0 + k)
-    log2.commit({"V1": rows2}, {"V1": runner2.checkpoint()})
+    group2 = _one(model, checkpoints["V1"])
+    rows2 = _play(group2, recording, range(110, 240), wall_of=lambda k: 1000.0 + k)
+    log2.commit({"V1": rows2}, {"V1": group2.checkpoint("V1")})
     log2.flush()
     logged = read_log(tmp_path, "V1")
     assert logged.sizes["time"] == 240
@@ -198,10 +277,8 @@ def test_a_runner_rebuilt_from_the_log_continues_the_stream_exactly(model, recor
             r[name] = logged[name].values[i]
     _check_against_batch(rows, model)
     # another model's checkpoint is not resumed
-    other = ValveRunner(
-        "V1", OnlineDiagnoser.load(model), PHYSICAL_UNITS, "other", checkpoints["V1"]
-    )
-    assert other.last_second is None and "model file changed" in other.startup_notes[0]
+    other = _one(model, checkpoints["V1"], model_id="other")
+    assert other.last_second["V1"] is None and "model file changed" in other.startup_notes["V1"][0]
 
 
 def test_the_log_rotates_days_into_one_netcdf_file_that_diagnose_reads(model, recording, tmp_path):
@@ -209,16 +286,15 @@ def test_the_log_rotates_days_into_one_netcdf_file_that_diagnose_reads(model, re
 
     diag = OnlineDiagnoser.load(model)
     log = DurableLog(tmp_path, {"V1": group_labels(diag)}, segment_seconds=40)
-    runner = ValveRunner("V1", diag, PHYSICAL_UNITS, "m")
+    group = _one(model)
     midnight = 1_800_057_600  # 2027-01-16T00:00:00Z
     rows = []
     for k in range(120):  # 60 s before midnight, 60 after
         for c in CHANNELS:
-            runner.offer(
-                c, float(to_physical(float(recording[c].values[k]), c)), midnight - 60 + k, float(k)
-            )
-        rows = runner.step(float(k), 0.0)
-        log.commit({"V1": rows}, {"V1": runner.checkpoint()})
+            value = float(to_physical(float(recording[c].values[k]), c))
+            group.offer("V1", c, value, midnight - 60 + k, float(k))
+        rows = [row for _, row in group.step(float(k), 0.0)]
+        log.commit({"V1": rows}, group.checkpoints(["V1"])())
     log.flush()
     day = tmp_path / "V1" / "V1_2027-01-15.nc"
     assert day.exists() and not (tmp_path / "V1" / "2027-01-15").exists()

@@ -8,10 +8,11 @@ their uncertainty and its status. ``serve`` does that for many valves at once, o
 - `bayes_fdi.deployment.serve.alignment`: samples placed on the 1 s grid of the plant's clock;
   a second is diagnosed when its six channels are in, or BLIND when its time is up; duplicate,
   late and clock-jumped samples are reported, never merged.
-- `bayes_fdi.deployment.serve.records`: one second's SEVA record as a flat row (the log's
-  columns) from `OnlineDiagnoser.update` or from the batch ``run`` of a gap.
-- `bayes_fdi.deployment.serve.valve_runner`: one valve's loop: alignment, diagnosis, resume
-  from the log's last checkpoint, the seconds it was down filled as BLIND.
+- `bayes_fdi.deployment.serve.records`: the seconds of ``OnlineDiagnoser.run``'s stream as flat
+  rows (the log's columns), and the stream state as checkpoint text.
+- `bayes_fdi.deployment.serve.valve_group`: the valves of one model file: alignment, one
+  ``run`` call a second for all of them, resume from the log's last checkpoints, the seconds
+  a valve was down filled as BLIND.
 - `bayes_fdi.deployment.serve.durable_log`: the log (a journal of Parquet parts, one per commit,
   with every valve's stream state; per-valve netCDF segments; one netCDF file per valve and day).
 - `bayes_fdi.deployment.serve.opcua_client`: the plant reader (subscriptions or polling,

@@ -27,11 +27,14 @@ from collections import deque
 from collections.abc import AsyncIterator, Mapping
 from typing import Any
 
+import numpy as np
+
 from bayes_fdi.datasets.units import to_physical
 
 __all__ = ["LiveHub", "live_app", "plotly_js_path"]
 
 _FIELDS = ("t", "X", "F", "X_vmv", "X_vu", "F_vmv", "F_vu", "status", "state", "p", "DD")
+_FLOATS = ("X", "F", "X_vmv", "X_vu", "F_vmv", "F_vu", "p")
 _MAX_ALARMS = 200
 
 
@@ -49,6 +52,49 @@ def _clean(v: Any) -> Any:
     return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
+def _json_floats(values: np.ndarray) -> list[float | None]:
+    """Floats for JSON: NaN and infinities as None."""
+    return [v if math.isfinite(v) else None for v in values.tolist()]
+
+
+class _History:
+    """The last ``size`` points of one valve, column by column (ring buffers)."""
+
+    def __init__(self, size: int) -> None:
+        self.size, self.n, self.head = int(size), 0, 0
+        self.columns: dict[str, np.ndarray] = {"t": np.zeros(self.size, dtype=np.int64)}
+        self.columns |= {k: np.full(self.size, np.nan) for k in _FLOATS}
+        self.columns |= {k: np.empty(self.size, dtype=object) for k in ("status", "state")}
+        self.columns["DD"] = np.zeros(self.size, dtype=bool)
+
+    def append(self, point: Mapping[str, Any]) -> None:
+        for k, column in self.columns.items():
+            value = point[k]
+            column[self.head] = np.nan if value is None else value
+        self.head = (self.head + 1) % self.size
+        self.n = min(self.n + 1, self.size)
+
+    def ordered(self) -> dict[str, np.ndarray]:
+        """The columns, oldest point first."""
+        index = (self.head - self.n + np.arange(self.n)) % self.size
+        return {k: v[index] for k, v in self.columns.items()}
+
+    def replace(self, columns: Mapping[str, np.ndarray]) -> None:
+        """Hold the last ``size`` points of ``columns`` (oldest first) instead."""
+        m = min(len(columns["t"]), self.size)
+        for k, column in self.columns.items():
+            column[:m] = np.asarray(columns[k])[len(columns["t"]) - m :]
+        self.n, self.head = m, m % self.size
+
+    def as_json(self) -> dict[str, list[Any]]:
+        cols = self.ordered()
+        out: dict[str, list[Any]] = {"t": cols["t"].tolist()}
+        out |= {k: _json_floats(cols[k]) for k in _FLOATS}
+        out |= {k: [str(v) for v in cols[k]] for k in ("status", "state")}
+        out["DD"] = cols["DD"].tolist()
+        return {k: out[k] for k in _FIELDS}
+
+
 class LiveHub:
     """The live page's data (see the module docstring)."""
 
@@ -57,34 +103,54 @@ class LiveHub:
     ) -> None:
         self.units = {v: dict(u) for v, u in valves.items()}
         self.panels = int(panels)
-        self.history = {v: deque(maxlen=int(history_seconds)) for v in self.units}
+        self.history = {v: _History(history_seconds) for v in self.units}
         self.fresh: dict[str, list[dict[str, Any]]] = {v: [] for v in self.units}
         self.alarms: deque[dict[str, Any]] = deque(maxlen=_MAX_ALARMS)
         self.active: dict[str, dict[str, Any]] = {}
         self.queues: set[asyncio.Queue] = set()
         self.sent = 0
 
+    def _points(self, valve: str, rows: Mapping[str, Any]) -> dict[str, np.ndarray]:
+        """Columns of points in engineering units from record columns (arrays or scalars)."""
+        units = self.units[valve]
+
+        def phys(c: str, v: Any) -> np.ndarray:
+            return np.asarray(to_physical(np.asarray(v, dtype=np.float64), c, units[c]))
+
+        def width(c: str, centre: Any, half: Any) -> np.ndarray:
+            centre = np.asarray(centre, dtype=np.float64)
+            return phys(c, centre + np.asarray(half, dtype=np.float64)) - phys(c, centre)
+
+        return {
+            "t": np.asarray(rows["time"], dtype=np.int64) * 1000,
+            "X": phys("X", rows["X"]),
+            "F": phys("F", rows["F"]),
+            "X_vmv": phys("X", rows["VMV_X"]),
+            "X_vu": width("X", rows["VMV_X"], rows["VU_X"]),
+            "F_vmv": phys("F", rows["VMV_F"]),
+            "F_vu": width("F", rows["VMV_F"], rows["VU_F"]),
+            "status": np.asarray(rows["status"]).astype(str),
+            "state": np.asarray(rows["state"]).astype(str),
+            "p": np.asarray(rows["probability"], dtype=np.float64),
+            "DD": np.asarray(rows["DD"], dtype=bool),
+        }
+
     def add(self, valve: str, row: Mapping[str, Any]) -> None:
         """One record (a row of `bayes_fdi.deployment.serve.records`)."""
         units = self.units[valve]
 
-        def phys(c: str, v: float) -> float | None:
-            return _clean(float(to_physical(v, c, units[c])))
+        def phys(c: str, v: float) -> float:
+            return float(to_physical(v, c, units[c]))
 
-        def width(c: str, centre: float, half: float) -> float | None:
-            return _clean(
-                float(to_physical(centre + half, c, units[c]) - to_physical(centre, c, units[c]))
-            )
-
-        t = int(row["time"])
+        x, f = float(row["VMV_X"]), float(row["VMV_F"])
         point = {
-            "t": t * 1000,
-            "X": phys("X", row["X"]),
-            "F": phys("F", row["F"]),
-            "X_vmv": phys("X", row["VMV_X"]),
-            "X_vu": width("X", row["VMV_X"], row["VU_X"]),
-            "F_vmv": phys("F", row["VMV_F"]),
-            "F_vu": width("F", row["VMV_F"], row["VU_F"]),
+            "t": int(row["time"]) * 1000,
+            "X": _clean(phys("X", row["X"])),
+            "F": _clean(phys("F", row["F"])),
+            "X_vmv": _clean(phys("X", x)),
+            "X_vu": _clean(phys("X", x + row["VU_X"]) - phys("X", x)),
+            "F_vmv": _clean(phys("F", f)),
+            "F_vu": _clean(phys("F", f + row["VU_F"]) - phys("F", f)),
             "status": str(row["status"]),
             "state": str(row["state"]),
             "p": _clean(float(row["probability"])),
@@ -93,6 +159,22 @@ class LiveHub:
         self.history[valve].append(point)
         self.fresh[valve].append(point)
         self._alarm(valve, point)
+
+    def load(self, valve: str, records: Mapping[str, Any]) -> None:
+        """Records from before this process (the log's last hour, columns of record rows
+        oldest first): put before the points added since, alarms replayed."""
+        cols = self._points(valve, records)
+        history = self.history[valve]
+        now = history.ordered()
+        older = cols["t"] < (now["t"][0] if history.n else np.iinfo(np.int64).max)
+        merged = {k: np.concatenate([cols[k][older], now[k]]) for k in cols}
+        history.replace(merged)
+        active = self.active.pop(valve, None)
+        if active is not None:  # replayed from the older points on
+            self.alarms.remove(active)
+        dd = merged["DD"]
+        for i in np.flatnonzero(dd | np.concatenate([[False], dd[:-1]])):
+            self._alarm(valve, {k: _clean(v[i].item()) for k, v in merged.items()})
 
     def _alarm(self, valve: str, point: Mapping[str, Any]) -> None:
         alarm = self.active.get(valve)
@@ -119,14 +201,27 @@ class LiveHub:
             if point["state"] not in ("", "fn"):
                 alarm["state"], alarm["probability"] = point["state"], point["p"]
 
-    def snapshot(self) -> dict[str, Any]:
-        """Everything the page draws first."""
+    def snapshot(self, valve: str | None = None) -> dict[str, Any]:
+        """What the page draws first: the history of the valves it draws (``valve``, or the
+        first ``panels``), every valve's last point, the alarms."""
+        names = list(self.units)
+        drawn = [valve] if valve in self.units else names[: self.panels]
+        latest = {}
+        for v in names:
+            h = self.history[v]
+            if h.n:
+                i = (h.head - 1) % h.size
+                latest[v] = {k: _clean(h.columns[k][i]) for k in ("status", "state")}
+                latest[v] |= {"t": int(h.columns["t"][i]), "p": _clean(float(h.columns["p"][i]))}
         return {
             "valves": [
                 {"name": v, "X_unit": u["X"], "F_unit": u["F"]} for v, u in self.units.items()
             ],
             "panels": self.panels,
-            "history": {v: _columns(list(h)) for v, h in self.history.items()},
+            "keep": self.history[names[0]].size if names else 0,
+            "drawn": drawn,
+            "history": {v: self.history[v].as_json() for v in drawn},
+            "latest": latest,
             "alarms": list(self.alarms),
         }
 
@@ -185,7 +280,7 @@ def live_app(hub: LiveHub) -> Any:
         return HTMLResponse(_PAGE)
 
     async def state(request: Any) -> JSONResponse:
-        return JSONResponse(hub.snapshot())
+        return JSONResponse(hub.snapshot(request.query_params.get("valve")))
 
     async def events(request: Any) -> StreamingResponse:
         return StreamingResponse(
@@ -249,27 +344,44 @@ td,th{border:1px solid #ccc;padding:2px 8px;font-size:90%}
 <script>
 const STATUS = ["CLEAR", "BLURRED", "DAZZLED", "BLIND"];
 const COLOUR = {CLEAR: "#2e7d32", BLURRED: "#ef6c00", DAZZLED: "#c62828", BLIND: "#607d8b"};
-let KEEP = 3600, drawn = [], latest = {}, count = 0;
+let keep = 3600, hist = {}, drawn = [], latest = {}, count = 0;
 const fmt = t => t === null ? "" : new Date(t).toISOString().slice(0, 19).replace("T", " ");
 const pct = p => p === null || p === undefined ? "" :
   (100 * p).toFixed(1) + " %";
-const add = (a, b) => a.map((v, i) => v === null || b[i] === null ? null : v + b[i]);
-const sub = (a, b) => a.map((v, i) => v === null || b[i] === null ? null : v - b[i]);
 const date = ts => ts.map(t => new Date(t));
-function bandTraces(h, q, unit) {
-  const x = date(h.t), v = h[q + "_vmv"], u = h[q + "_vu"];
+function gapped(h) {  // a null point where seconds are missing: no line across the gap
+  const out = {};
+  for (const k in h) out[k] = [];
+  h.t.forEach((t, i) => {
+    if (i > 0 && t - h.t[i - 1] > 1000)
+      for (const k in h) out[k].push(k === "t" ? h.t[i - 1] + 1000 : null);
+    for (const k in h) out[k].push(h[k][i]);
+  });
+  return out;
+}
+function band(x, v, u) {  // VMV +- VU: one closed polygon per stretch without a gap (BLIND)
+  const bx = [], by = [];
+  let run = [];
+  const close = () => {
+    if (!run.length) return;
+    if (bx.length) { bx.push(null); by.push(null); }
+    run.forEach(i => { bx.push(x[i]); by.push(v[i] + u[i]); });
+    run.slice().reverse().forEach(i => { bx.push(x[i]); by.push(v[i] - u[i]); });
+    run = [];
+  };
+  x.forEach((_, i) => { if (v[i] === null || u[i] === null) close(); else run.push(i); });
+  close();
+  return {x: bx, y: by};
+}
+function chart(h, q) {
+  const g = gapped(h), x = date(g.t), b = band(x, g[q + "_vmv"], g[q + "_vu"]);
   return [
-    {x: x, y: sub(v, u), mode: "lines", line: {width: 0}, showlegend: false, hoverinfo: "skip"},
-    {x: x, y: add(v, u), mode: "lines", line: {width: 0}, fill: "tonexty",
-     fillcolor: "rgba(33,150,243,0.25)", name: "VMV \u00b1 VU"},
-    {x: x, y: v, mode: "lines", line: {color: "#1565c0", dash: "dot"}, name: "VMV"},
-    {x: x, y: h[q], mode: "lines", line: {color: "#222", width: 1}, name: q + " measured"}];
+    {x: b.x, y: b.y, mode: "lines", line: {width: 0}, fill: "toself",
+     fillcolor: "rgba(33,150,243,0.25)", name: "VMV \u00b1 VU", hoverinfo: "skip"},
+    {x: x, y: g[q + "_vmv"], mode: "lines", line: {color: "#1565c0", dash: "dot"}, name: "VMV"},
+    {x: x, y: g[q], mode: "lines", line: {color: "#222", width: 1}, name: q + " measured"}];
 }
-function bandUpdate(h, q) {
-  const x = date(h.t), v = h[q + "_vmv"], u = h[q + "_vu"];
-  return {x: [x, x, x, x], y: [sub(v, u), add(v, u), v, h[q]]};
-}
-function ribbonTraces(h) {
+function ribbon(h) {
   return STATUS.map(s => {
     const x = [], y = [], text = [];
     h.t.forEach((t, i) => { if (h.status[i] === s) { x.push(new Date(t)); y.push(0);
@@ -277,10 +389,6 @@ function ribbonTraces(h) {
     return {x: x, y: y, text: text, mode: "markers", name: s, type: "scattergl",
             marker: {symbol: "square", size: 9, color: COLOUR[s]}};
   });
-}
-function ribbonUpdate(h) {
-  const r = ribbonTraces(h);
-  return {x: r.map(t => t.x), y: r.map(t => t.y), text: r.map(t => t.text)};
 }
 function panel(v) {
   const div = document.createElement("div");
@@ -294,10 +402,11 @@ function layout(title, unit) {
   return {title: {text: title, font: {size: 13}}, margin: {l: 50, r: 10, t: 30, b: 30},
           yaxis: {title: unit}, xaxis: {type: "date"}, legend: {orientation: "h", y: -0.25}};
 }
-function draw(v, h) {
-  Plotly.newPlot("X-" + v.name, bandTraces(h, "X"), layout("X: stem position", v.X_unit));
-  Plotly.newPlot("F-" + v.name, bandTraces(h, "F"), layout("F: flow", v.F_unit));
-  Plotly.newPlot("S-" + v.name, ribbonTraces(h), {margin: {l: 50, r: 10, t: 10, b: 30},
+function draw(v) {
+  const h = hist[v.name];
+  Plotly.react("X-" + v.name, chart(h, "X"), layout("X: stem position", v.X_unit));
+  Plotly.react("F-" + v.name, chart(h, "F"), layout("F: flow", v.F_unit));
+  Plotly.react("S-" + v.name, ribbon(h), {margin: {l: 50, r: 10, t: 10, b: 30},
     yaxis: {visible: false}, xaxis: {type: "date"}, showlegend: true,
     legend: {orientation: "h", y: 1.3}});
 }
@@ -317,35 +426,41 @@ function alarms(list) {
     "</td><td>" + fmt(a.start) + "</td><td>" + (a.active ? "active" : fmt(a.end)) +
     "</td></tr>").join("");
 }
-function remember(v, h) {
-  const n = h.t.length; if (!n) return;
-  latest[v] = {status: h.status[n - 1], state: h.state[n - 1], p: h.p[n - 1], t: h.t[n - 1]};
-  count += n;
-}
-function newer(h, after) {  // the points of a message later than what is drawn
-  const keep = h.t.map(t => after === undefined || t > after);
+function newer(h, after) {  // the points of a message later than what is held
+  const keepIt = h.t.map(t => after === undefined || t > after);
   const out = {};
-  for (const k in h) out[k] = h[k].filter((_, i) => keep[i]);
+  for (const k in h) out[k] = h[k].filter((_, i) => keepIt[i]);
   return out;
+}
+function append(v, h) {  // new points of a drawn valve, the last `keep` seconds held
+  const held = hist[v];
+  for (const k in held) held[k] = held[k].concat(h[k]);
+  const first = held.t.findIndex(t => t > held.t[held.t.length - 1] - 1000 * keep);
+  if (first > 0) for (const k in held) held[k] = held[k].slice(first);
 }
 async function start() {
   const queued = [];
   const source = new EventSource("/events");  // opened first: no message is missed
   source.onmessage = e => queued.push(JSON.parse(e.data));
-  const state = await (await fetch("/api/state")).json();
   const want = new URLSearchParams(location.search).get("valve");
-  drawn = state.valves.filter(v => want ? v.name === want : true).slice(0, want ? 1 : state.panels);
-  for (const v of drawn) { panel(v); draw(v, state.history[v.name]); }
-  for (const v of state.valves) remember(v.name, state.history[v.name]);
+  const url = "/api/state" + (want ? "?valve=" + encodeURIComponent(want) : "");
+  const state = await (await fetch(url)).json();
+  keep = state.keep;
+  latest = state.latest;
+  drawn = state.valves.filter(v => state.drawn.includes(v.name));
+  for (const v of drawn) { hist[v.name] = state.history[v.name]; panel(v); draw(v); }
+  count = drawn.reduce((n, v) => n + hist[v.name].t.length, 0);
   overview(); alarms(state.alarms);
   const apply = m => {
-    for (const v of drawn) { if (!m.points[v.name]) continue;
-      const h = newer(m.points[v.name], latest[v.name] && latest[v.name].t);
-      if (!h.t.length) continue;
-      Plotly.extendTraces("X-" + v.name, bandUpdate(h, "X"), [0, 1, 2, 3], KEEP);
-      Plotly.extendTraces("F-" + v.name, bandUpdate(h, "F"), [0, 1, 2, 3], KEEP);
-      Plotly.extendTraces("S-" + v.name, ribbonUpdate(h), [0, 1, 2, 3], KEEP); }
-    for (const v in m.points) remember(v, newer(m.points[v], latest[v] && latest[v].t));
+    for (const v in m.points) {
+      const h = newer(m.points[v], latest[v] && latest[v].t);
+      const n = h.t.length;
+      if (!n) continue;
+      latest[v] = {status: h.status[n - 1], state: h.state[n - 1], p: h.p[n - 1], t: h.t[n - 1]};
+      count += n;
+      if (hist[v]) append(v, h);
+    }
+    for (const v of drawn) if (m.points[v.name]) draw(v);
     overview(); alarms(m.alarms);
     const now = new Date().toISOString().slice(11, 19);
     document.getElementById("updated").textContent = now + " UTC";

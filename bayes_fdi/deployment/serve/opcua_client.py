@@ -3,17 +3,22 @@
 `PlantReader` holds one connection to one plant endpoint and reads every node of the valves
 served there, either by **subscription** (one subscription, a monitored item per node with the
 ``StatusValueTimestamp`` trigger so that every new sample is reported even when its value
-repeats, a queue so that none is dropped between two publishes) or by **polling** (one read of
-all nodes every plant period). Each sample goes to ``sink(valve, channel, value, timestamp,
-wall)``: the value as a float (NaN when the plant gives a bad status), the plant's timestamp
-(source or server, ``[plant] timestamps``) in Unix seconds, and the monotonic wall clock.
+repeats, a queue so that none is dropped between two publishes; the notifications are read
+from asyncua's unbounded event queue, a publish response's samples in one go) or by
+**polling** (one read of all nodes every plant period). Each sample goes to ``sink(valve,
+channel, value, timestamp, wall)``: the value as a float (NaN when the plant gives a bad
+status), the plant's timestamp (source or server, ``[plant] timestamps``) in Unix seconds, and
+the monotonic wall clock.
 
-On every connection the nodes are checked (`check_nodes`): a node that does not exist, is not a
-variable of a numeric type, or whose ``EngineeringUnits`` differ from the unit configured for
-its channel is a `PlantConfigError` naming the valve, channel, node and problem; ``serve`` stops
-with it. A lost connection (or a failed connect) is reported to the valves (``notify``) and
-retried with exponential back-off from ``reconnect_min`` to ``reconnect_max`` seconds; the
-seconds without data become BLIND in the valves' aligners meanwhile.
+On every connection the nodes are checked (`check_nodes`: three requests for all nodes): a
+node that does not exist, is not a variable of a numeric type, or whose ``EngineeringUnits``
+differ from the unit configured for its channel is a `PlantConfigError` naming the valve,
+channel, node and problem; ``serve`` stops with it. The first connection is checked before
+reading; a reconnection while the samples flow again, so that the seconds after an outage are
+not lost to the checks. A lost connection (or a failed connect) is reported to the valves
+(``notify``) and retried with exponential back-off from ``reconnect_min`` to ``reconnect_max``
+seconds; the seconds without data become BLIND in the valves' aligners meanwhile. A value with
+the status ``BadWaitingForInitialData`` (a node not yet written) is no sample and is skipped.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from asyncua import Client, ua
+from asyncua.common.subscription import DataChangeEvent, StatusChangeEvent
 
 from bayes_fdi.datasets.units import PHYSICAL_UNITS, parse_units
 from bayes_fdi.deployment.serve.config import PlantConfig
@@ -93,6 +99,7 @@ async def check_nodes(client: Client, nodes: Mapping[str, tuple[str, str, str]])
     node_objs = [client.get_node(n) for n in ids]
     classes = await client.read_attributes(node_objs, ua.AttributeIds.NodeClass)
     types = await client.read_attributes(node_objs, ua.AttributeIds.DataType)
+    units = await _engineering_units(client, [n.nodeid for n in node_objs])
     errors, warnings = [], []
     for i, nid in enumerate(ids):
         valve, channel, unit = nodes[nid]
@@ -108,7 +115,7 @@ async def check_nodes(client: Client, nodes: Mapping[str, tuple[str, str, str]])
         if dtype not in NUMERIC_TYPES:
             errors.append(f"{where}: data type {dtype.to_string()} is not numeric")
             continue
-        eu = await _engineering_units(node_objs[i])
+        eu = units[i]
         if eu is None:
             warnings.append(f"{where}: no EngineeringUnits property; unit {unit!r} assumed")
             continue
@@ -124,15 +131,29 @@ async def check_nodes(client: Client, nodes: Mapping[str, tuple[str, str, str]])
     return warnings
 
 
-async def _engineering_units(node: Any) -> str | None:
-    try:
-        prop = await node.get_child("0:EngineeringUnits")
-    except ua.UaError:
-        return None
-    try:
-        return _unit_text(await prop.read_value())
-    except ua.UaError:
-        return None
+async def _engineering_units(client: Client, node_ids: list[ua.NodeId]) -> list[str | None]:
+    """The display names of the nodes' ``EngineeringUnits`` properties (None: none), found and
+    read in one request each (not two round trips per node: reconnecting stays quick)."""
+    paths = []
+    for nid in node_ids:
+        element = ua.RelativePathElement(
+            ReferenceTypeId=ua.NodeId(ua.ObjectIds.HierarchicalReferences),
+            IsInverse=False,
+            IncludeSubtypes=True,
+            TargetName=ua.QualifiedName("EngineeringUnits", 0),
+        )
+        paths.append(
+            ua.BrowsePath(StartingNode=nid, RelativePath=ua.RelativePath(Elements=[element]))
+        )
+    found = await client.uaclient.translate_browsepaths_to_nodeids(paths)
+    where = [i for i, r in enumerate(found) if r.StatusCode.is_good() and r.Targets]
+    targets = [client.get_node(found[i].Targets[0].TargetId) for i in where]
+    values = await client.read_attributes(targets, ua.AttributeIds.Value) if targets else []
+    out: list[str | None] = [None] * len(node_ids)
+    for i, dv in zip(where, values, strict=True):
+        good = dv.StatusCode is None or dv.StatusCode.is_good()
+        out[i] = _unit_text(dv.Value.Value) if good and dv.Value is not None else None
+    return out
 
 
 def _unix(stamp: dt.datetime | None) -> float:
@@ -220,26 +241,57 @@ class PlantReader:
             self._lost.set()
 
         client.connection_lost_callback = lost
+        reconnection = self.checked.is_set()
+        if not reconnection:
+            await self._check(client)
+        self.connections += 1
+        self._failing = False
+        if reconnection:
+            _log.info("reconnected to %s", self.endpoint)
+            self.notify(f"reconnected to the plant server {self.endpoint}")
+        self.connected.set()
+        if self.plant.mode == "subscribe":
+            sub = await self._subscribe(client)
+            watched = [asyncio.create_task(self._consume(sub))]
+            watched.append(asyncio.create_task(self._lost.wait()))
+            if reconnection:  # checked while the samples flow again (a reconnection is quick)
+                watched.append(asyncio.create_task(self._check(client)))
+            await self._until_lost(watched, check=watched[2] if reconnection else None)
+            raise ConnectionError("the server closed the connection")
+        if reconnection:
+            await self._check(client)
+        await self._poll(client)
+
+    async def _check(self, client: Client) -> None:
+        """The node checks (a `PlantConfigError` is fatal); warnings logged the first time."""
         warnings = await check_nodes(client, self.nodes)
         if not self.checked.is_set():
             for w in warnings:
                 _log.warning(w)
             self.checked.set()
-        self.connections += 1
-        self._failing = False
-        if self.connections > 1:
-            _log.info("reconnected to %s", self.endpoint)
-            self.notify(f"reconnected to the plant server {self.endpoint}")
-        self.connected.set()
-        if self.plant.mode == "subscribe":
-            await self._subscribe(client)
-            await self._lost.wait()
-            raise ConnectionError("the server closed the connection")
-        await self._poll(client)
 
-    async def _subscribe(self, client: Client) -> None:
+    @staticmethod
+    async def _until_lost(tasks: list[asyncio.Task], check: asyncio.Task | None) -> None:
+        """Wait until the connection is lost or the reading ends (a passed ``check`` is not
+        an end; a failed one raises)."""
+        pending = set(tasks)
+        try:
+            while pending:
+                done, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
+                for task in done:
+                    if task.exception() is not None:
+                        raise task.exception()
+                if any(task is not check for task in done):
+                    return
+        finally:
+            for task in tasks:
+                task.cancel()
+
+    async def _subscribe(self, client: Client) -> Any:
         period_ms = 1000.0 * self.plant.publishing_interval
-        sub = await client.create_subscription(period_ms, self)
+        # iterator mode, unbounded queue: every notification is kept, and a publish response's
+        # samples are read in one go (no task per sample, as asyncua's handler mode makes)
+        sub = await client.create_subscription(period_ms, None, queue_maxsize=0)
         requests = []
         # client handles far above asyncua's own counter (this subscription has no other items)
         for handle, nodeid in enumerate(self._by_nodeid, start=1_000_000):
@@ -262,14 +314,16 @@ class PlantReader:
         bad = [str(r) for r in results if isinstance(r, ua.StatusCode)]
         if bad:
             raise PlantConfigError(f"the plant server refused to monitor nodes: {bad}")
+        _log.info("subscribed to %d node(s) of %s", len(requests), self.endpoint)
+        return sub
 
-    def datachange_notification(self, node: Any, val: Any, data: Any) -> None:
-        """asyncua's subscription callback: one sample."""
-        self._deliver(node.nodeid, data.monitored_item.Value, time.monotonic())
-
-    def status_change_notification(self, status: Any) -> None:
-        """asyncua's subscription callback: the subscription's status changed (e.g. lost)."""
-        self._lost.set()
+    async def _consume(self, sub: Any) -> None:
+        """Every notification of the subscription: a sample, or its status changed (lost)."""
+        async for event in sub:
+            if isinstance(event, DataChangeEvent):
+                self._deliver(event.node.nodeid, event.data.monitored_item.Value, time.monotonic())
+            elif isinstance(event, StatusChangeEvent):
+                self._lost.set()
 
     def _deliver(self, nodeid: ua.NodeId, dv: ua.DataValue, wall: float) -> None:
         target = self._by_nodeid.get(nodeid)
@@ -278,6 +332,8 @@ class PlantReader:
         valve, channel, _ = target
         stamp = dv.SourceTimestamp if self.plant.timestamps == "source" else dv.ServerTimestamp
         code = dv.StatusCode
+        if code is not None and code.value == ua.StatusCodes.BadWaitingForInitialData:
+            return  # the node has no sample yet: nothing to place
         value = dv.Value.Value if dv.Value is not None else None
         if (code is not None and not code.is_good()) or not isinstance(value, int | float):
             value = math.nan

@@ -256,25 +256,37 @@ class SevaPublisher:
 
     async def publish(self, valve: str, row: Mapping[str, Any]) -> None:
         """Write one record (a row of `bayes_fdi.deployment.serve.records`)."""
+        await self.publish_many([(valve, row)])
+
+    async def publish_many(self, rows: Sequence[tuple[str, Mapping[str, Any]]]) -> None:
+        """Write the records of many valves (``(valve, row)`` pairs) with one server time."""
         import datetime as dt
 
-        units = self.valves[valve]
+        now = dt.datetime.now(dt.UTC)
+        values = [dv for valve, row in rows for dv in self._data_values(valve, row, now)]
+        write = self.server.write_attribute_value
+        for node, dv in values:
+            await write(node, dv)
+
+    def _data_values(
+        self, valve: str, row: Mapping[str, Any], now: datetime.datetime
+    ) -> list[tuple[ua.NodeId, ua.DataValue]]:
+        """The node ids and values of one record."""
         quality = _CODES[str(row["status"])]
         good = _CODES["CLEAR"]
-        stamp = dt.datetime.fromtimestamp(int(row["time"]), dt.UTC)
-        now = dt.datetime.now(dt.UTC)  # one server timestamp for the whole record
-        values = _published_values(row, units)
-        write = self.server.write_attribute_value
+        stamp = datetime.datetime.fromtimestamp(int(row["time"]), datetime.UTC)
+        values = _published_values(row, self.valves[valve])
         nodes = self.nodes[valve]
+        out = []
         for name, dtype, _, takes_quality in _VARIABLES:
-            variant = ua.Variant(values[name], _VARIANT[dtype])
             dv = ua.DataValue(
-                variant,
+                ua.Variant(values[name], _VARIANT[dtype]),
                 StatusCode=quality if takes_quality else good,
                 SourceTimestamp=stamp,
                 ServerTimestamp=now,
             )
-            await write(nodes[name], dv)
+            out.append((nodes[name], dv))
+        return out
 
     async def stop(self) -> None:
         """Close the endpoint."""

@@ -11,8 +11,9 @@ the TOML. Each node is a Double variable with the ``EngineeringUnits`` property.
 seconds: the samples of those seconds are never served), ``clock_jumps`` (from that second on the
 timestamps are shifted), ``duplicates`` (the samples of that second are written twice, the
 second time 1 % of full scale off) and ``late`` (the X sample of that second is written 3 s
-late, with its own timestamp). ``--write-times FILE`` records, per second, the Unix time its
-samples were written (for latency measurements). The plant is served without security
+late, with its own timestamp). ``--write-times FILE`` records, per second and valve, the Unix
+time its samples were written (for latency measurements); ``--wait-subscribed`` holds the first
+second until a client (``serve``) has subscribed to every node. The plant is served without security
 (anonymous, no encryption): it is a test bench for loopback use.
 """
 
@@ -72,7 +73,10 @@ class PlantSimulator:
                 )
         self.servers: dict[str, Any] = {}
         self.node_ids: dict[tuple[str, str], Any] = {}
-        self.write_times = np.full(self.duration, np.nan)
+        #: Unix time each second's samples of each valve were written, ``(seconds, valves)``
+        self.write_times = np.full((self.duration, len(config.valves)), np.nan)
+        self.monitored: set[Any] = set()  #: node ids a client subscribed to
+        self.subscribed = asyncio.Event()
 
     async def _build(self, endpoint: str, valves: Sequence[Any]) -> Any:
         from asyncua import Server, ua
@@ -84,6 +88,7 @@ class PlantSimulator:
         server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
         server.disable_clock()
         idx = await server.register_namespace("urn:bayes-fdi:simulated-plant")
+        waiting = ua.StatusCode(ua.StatusCodes.BadWaitingForInitialData)
         for valve in valves:
             obj = await server.nodes.objects.add_object(idx, valve.name)
             for channel, node in valve.nodes.items():
@@ -102,26 +107,44 @@ class PlantSimulator:
                     ua.QualifiedName("EngineeringUnits", 0),
                     eu,
                 )
+                await var.write_value(ua.DataValue(StatusCode=waiting))  # no sample yet
                 self.node_ids[(valve.name, channel)] = nid
         return server
 
     async def start_servers(self) -> None:
         """Build and open one server per endpoint of the TOML."""
+        from asyncua.common.callback import CallbackType
+
         by_endpoint: dict[str, list[Any]] = {}
         for valve in self.config.valves:
             by_endpoint.setdefault(valve.endpoint, []).append(valve)
         for endpoint, valves in by_endpoint.items():
             server = await self._build(endpoint, valves)
+            server.subscribe_server_callback(CallbackType.ItemSubscriptionCreated, self._monitoring)
             await server.start()
             self.servers[endpoint] = server
 
+    def _monitoring(self, event: Any, dispatcher: Any) -> None:
+        """asyncua's callback of created monitored items: note the nodes now subscribed to."""
+        requests = event.request_params.ItemsToCreate
+        for request, result in zip(requests, event.response_params, strict=False):
+            if getattr(result, "StatusCode", None) is None or result.StatusCode.is_good():
+                self.monitored.add(request.ItemToMonitor.NodeId)
+        if set(self.node_ids.values()) <= self.monitored:
+            self.subscribed.set()
+
     async def _write(
-        self, second: int, k: int, offset: float = 0.0, channels: Sequence[str] | None = None
+        self,
+        second: int,
+        k: int,
+        offset: float = 0.0,
+        channels: Sequence[str] | None = None,
+        stamp_times: bool = False,
     ) -> None:
         from asyncua import ua
 
         stamp = dt.datetime.fromtimestamp(second, dt.UTC)
-        for valve in self.config.valves:
+        for i, valve in enumerate(self.config.valves):
             server = self.servers[valve.endpoint]
             for c in channels or valve.nodes:
                 value = float(self.values[(valve.name, c)][k])
@@ -132,6 +155,9 @@ class PlantSimulator:
                     ServerTimestamp=stamp,
                 )
                 await server.write_attribute_value(self.node_ids[(valve.name, c)], dv)
+            if stamp_times:
+                self.write_times[k, i] = time.time()
+            await asyncio.sleep(0)  # the server publishes meanwhile, as a plant's would
 
     async def play(self, progress: bool = True) -> None:
         """Write second after second; the outages stop the servers meanwhile."""
@@ -163,10 +189,9 @@ class PlantSimulator:
                 channels = ("CV", "P1", "P2", "T1", "F")
             for old_second, old_k in late.pop(k, []):
                 await self._write(old_second, old_k, channels=("X",))
-            await self._write(second, k, channels=channels)
+            await self._write(second, k, channels=channels, stamp_times=True)
             if k in sim.duplicates:
                 await self._write(second, k, offset=_DUPLICATE_OFFSET, channels=channels)
-            self.write_times[k] = time.time()
             if progress and k % 60 == 0:
                 print(f"second {k} of {self.duration}", flush=True)
 
@@ -215,7 +240,12 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--write-times",
         default=None,
         metavar="CSV",
-        help="write the Unix time each second's samples were written",
+        help="write the Unix time each second's samples of each valve were written",
+    )
+    parser.add_argument(
+        "--wait-subscribed",
+        action="store_true",
+        help="start playing once a client (serve) has subscribed to every node",
     )
     parser.add_argument(
         "--hold",
@@ -244,6 +274,18 @@ async def _main(args: argparse.Namespace) -> int:
         loop.add_signal_handler(sig, stop.set)
     await plant.start_servers()
     endpoints = ", ".join(plant.servers)
+    if args.wait_subscribed:
+        print("waiting for a client to subscribe to every node", flush=True)
+        waiting = asyncio.create_task(plant.subscribed.wait())
+        stopping = asyncio.create_task(stop.wait())
+        await asyncio.wait({waiting, stopping}, return_when=asyncio.FIRST_COMPLETED)
+        waiting.cancel()
+        stopping.cancel()
+        if stop.is_set():
+            await plant.stop()
+            return 0
+    if start is None:  # the next whole second from now: plant time and wall clock agree
+        plant.start = float(math.ceil(time.time()))
     print(
         f"simulated plant: {len(config.valves)} valve(s) on {endpoints}, {plant.duration} s "
         f"at {speed:g}x from plant time {plant.start:.0f}",
@@ -268,8 +310,10 @@ async def _main(args: argparse.Namespace) -> int:
 def _write_times(path: str, plant: PlantSimulator) -> None:
     from bayes_fdi.atomic import write_text
 
-    lines = ["k,written"]
-    lines += [f"{k},{t:.6f}" for k, t in enumerate(plant.write_times) if np.isfinite(t)]
+    lines = ["k,valve,written"]
+    names = [v.name for v in plant.config.valves]
+    for k, times in enumerate(plant.write_times):
+        lines += [f"{k},{names[i]},{t:.6f}" for i, t in enumerate(times) if np.isfinite(t)]
     write_text(path, "\n".join(lines) + "\n")
 
 

@@ -1,17 +1,18 @@
 """One second's SEVA record as a flat row: the columns of the log and of the live page.
 
-`row_from_update` makes the row of a second diagnosed by `OnlineDiagnoser.update` (its
-`~bayes_fdi.diagnosis.seva.record.SevaRecord` and ``last_``); `rows_from_stream` makes the rows
-of a gap diagnosed at once by ``OnlineDiagnoser.run`` (the same stream, by the library's
-contract). `encode_state` and `decode_state` turn the diagnoser's
-`~bayes_fdi.diagnosis.StreamState` into JSON text and back, bit for bit (the arrays' bytes in
-base64), so a checkpoint can travel in a Parquet or netCDF file's metadata.
+`stream_rows` makes the rows of the seconds ``OnlineDiagnoser.run`` diagnosed: one second of
+many valves at once, or the seconds of a gap of one valve (the stream equals ``update``'s second
+by second, by the library's contract, and so do the reasons). `encode_state` and `decode_state`
+turn the diagnoser's `~bayes_fdi.diagnosis.StreamState` into JSON text and back, bit for bit (the
+arrays' bytes in base64), so a checkpoint can travel in a Parquet or netCDF file's metadata;
+`encode_states` gives one such text per run of a state of many runs.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -21,15 +22,16 @@ import xarray as xr
 from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis import StreamState
 from bayes_fdi.diagnosis.online.legacy import upgrade_stream_state
+from bayes_fdi.diagnosis.online.records import stream_reasons
 
 __all__ = [
     "FLOAT_COLUMNS",
     "ROW_COLUMNS",
     "decode_state",
     "encode_state",
+    "encode_states",
     "group_labels",
-    "row_from_update",
-    "rows_from_stream",
+    "stream_rows",
 ]
 
 #: Float columns of a row, besides the channels (normalised values as the diagnoser sees them).
@@ -69,69 +71,46 @@ def group_labels(diagnoser: Any) -> tuple[str, ...]:
     return tuple(isolator.group_labels_) if isolator is not None else ()
 
 
-def row_from_update(
-    record: Any,
-    last: Mapping[str, Any],
-    second: int,
-    values: Mapping[str, float],
-    notes: Sequence[str],
-    received: float,
-) -> dict[str, Any]:
-    """The row of one second from ``update``'s record and ``last_``."""
-    return {
-        "time": int(second),
-        **{c: float(values[c]) for c in CHANNELS},
-        "status": record.status.value,
-        "state": record.state,
-        "probability": record.probability,
-        "VMV_X": record.x_vmv,
-        "VU_X": record.x_vu,
-        "VMV_F": record.f_vmv,
-        "VU_F": record.f_vu,
-        "r_X": last["r_X"],
-        "r_F": last["r_F"],
-        "stat_X": last["stat_X"],
-        "stat_F": last["stat_F"],
-        "novelty": record.feature_novelty,
-        "DD": bool(last["DD"]),
-        "FFID": bool(last["FFID"]),
-        "group_proba": np.asarray(last["group_proba"], dtype=np.float64),
-        "reason": "; ".join(record.reasons),
-        "note": "; ".join(notes),
-        "received": float(received),
-        "published": float("nan"),
+def stream_rows(
+    stream: xr.Dataset, channels: Mapping[str, np.ndarray], first: Sequence[int]
+) -> list[list[dict[str, Any]]]:
+    """The rows of ``OnlineDiagnoser.run``'s stream (dims ``run``, ``time``): per run, one row
+    per second from its plant second ``first[r]`` on.
+
+    ``channels`` are the ``(runs, time)`` normalised channels the stream was run on. The
+    ``reason`` is the one ``update`` gives the second
+    (`bayes_fdi.diagnosis.online.records.stream_reasons`); ``note`` is empty and ``received``
+    and ``published`` are NaN (the caller's to fill).
+    """
+    n_runs, n_t = stream.sizes["run"], stream.sizes["time"]
+    columns = {c: np.asarray(channels[c], dtype=np.float64).tolist() for c in CHANNELS}
+    columns |= {c: stream[c].values.tolist() for c in FLOAT_COLUMNS}
+    texts = {
+        "status": np.asarray(stream["status"].values).astype(str).tolist(),
+        "state": np.asarray(stream["state"].values).astype(str).tolist(),
+        "reason": stream_reasons(stream).tolist(),
     }
-
-
-def rows_from_stream(
-    stream: xr.Dataset, channels: xr.Dataset, first: int, notes: Sequence[str], reason: str
-) -> list[dict[str, Any]]:
-    """The rows of ``run``'s stream of consecutive seconds from ``first`` (notes on the first)."""
-    n = stream.sizes["time"]
-    columns = {c: np.asarray(channels[c].values, dtype=np.float64) for c in CHANNELS}
-    columns |= {c: np.asarray(stream[c].values, dtype=np.float64) for c in FLOAT_COLUMNS}
-    status = np.asarray(stream["status"].values).astype(str)
-    state = np.asarray(stream["state"].values).astype(str)
-    dd = np.asarray(stream["DD"].values, dtype=bool)
-    ffid = np.asarray(stream["FFID"].values, dtype=bool)
-    proba = np.asarray(stream["group_proba"].transpose("time", "group").values, dtype=np.float64)
-    rows = []
-    for i in range(n):
-        row: dict[str, Any] = {"time": int(first + i)}
-        row |= {c: float(v[i]) for c, v in columns.items()}
-        row |= {
-            "status": str(status[i]),
-            "state": str(state[i]),
-            "DD": bool(dd[i]),
-            "FFID": bool(ffid[i]),
-            "group_proba": proba[i].copy(),
-            "reason": reason,
-            "note": "; ".join(notes) if i == 0 else "",
-            "received": float("nan"),
-            "published": float("nan"),
-        }
-        rows.append(row)
-    return rows
+    flags = {k: np.asarray(stream[k].values, dtype=bool).tolist() for k in ("DD", "FFID")}
+    proba = np.asarray(
+        stream["group_proba"].transpose("run", "time", "group").values, dtype=np.float64
+    )
+    out = []
+    for r in range(n_runs):
+        rows = []
+        for t in range(n_t):
+            row: dict[str, Any] = {"time": int(first[r]) + t}
+            row |= {c: v[r][t] for c, v in columns.items()}
+            row |= {k: v[r][t] for k, v in texts.items()}
+            row |= {k: v[r][t] for k, v in flags.items()}
+            row |= {
+                "group_proba": proba[r, t].copy(),
+                "note": "",
+                "received": math.nan,
+                "published": math.nan,
+            }
+            rows.append(row)
+        out.append(rows)
+    return out
 
 
 def _encode_array(a: np.ndarray) -> dict[str, Any]:
@@ -154,6 +133,18 @@ def encode_state(state: StreamState) -> str:
     """The stream state as JSON text (exact: the arrays' bytes, by their paths in the state)."""
     fields = {path: _encode_array(a) for path, a in state.arrays().items()}
     return json.dumps({"format": "bayes_fdi.StreamState", "version": 2, "fields": fields})
+
+
+def encode_states(state: StreamState) -> list[str]:
+    """`encode_state` of each run of ``state`` (one text per run, each of a one-run state)."""
+    arrays = state.arrays()
+    texts = []
+    for i in range(state.n_runs):
+        fields = {path: _encode_array(a[i : i + 1]) for path, a in arrays.items()}
+        texts.append(
+            json.dumps({"format": "bayes_fdi.StreamState", "version": 2, "fields": fields})
+        )
+    return texts
 
 
 def decode_state(text: str) -> StreamState:

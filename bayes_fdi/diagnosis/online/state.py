@@ -12,7 +12,8 @@ hysteresis of the detection decision (`DecisionState`), the running sums of the 
   ``run`` axis (read-only), so ``run(chunk, return_state=True)`` returns it after the chunk's
   last second and ``run(next_chunk, state=...)`` continues exactly where the first call
   stopped; ``stream_state()`` / ``reset(state=...)`` read and restore a one-run state for
-  ``update``. Both can be stored with `bayes_fdi.model_files`.
+  ``update``; `StreamState.select_runs` and `StreamState.with_runs` take some runs out and put
+  them back (to advance only those). Both can be stored with `bayes_fdi.model_files`.
 
 Files of bayes_fdi 0.1.0 hold these states flat (one array per component, the run state as a
 dict); `bayes_fdi.diagnosis.online.legacy` rebuilds today's layout from them.
@@ -87,6 +88,26 @@ class StreamState(NamedTuple):
         """The state of run ``i`` (read-only views)."""
         one = state_of_run(RunState(*self), i)
         return one._replace(seconds=int(one.seconds))
+
+    def select_runs(self, runs: Sequence[int]) -> StreamState:
+        """The state of the runs ``runs`` (indices, in that order; read-only copies)."""
+        index = np.asarray(runs, dtype=np.int64)
+        return StreamState.from_arrays({p: a[index] for p, a in self.arrays().items()})
+
+    def with_runs(self, runs: Sequence[int], part: StreamState) -> StreamState:
+        """This state with runs ``runs`` (indices) replaced by the runs of ``part`` (a state
+        of ``len(runs)`` runs of the same layout, e.g. `select_runs`' advanced)."""
+        index = np.asarray(runs, dtype=np.int64)
+        if part.n_runs != index.size:
+            raise ValueError(f"part is of {part.n_runs} run(s), not of {index.size}")
+        arrays, replacing = self.arrays(), part.arrays()
+        if arrays.keys() != replacing.keys():
+            raise ValueError("part has another layout than this state")
+        out = {}
+        for path, a in arrays.items():
+            out[path] = a.copy()
+            out[path][index] = replacing[path]
+        return StreamState.from_arrays(out)
 
     def check_layout(self) -> None:
         """Raise a `ValueError` unless every field is an array with the leading run axis."""
