@@ -167,7 +167,9 @@ def reproduce(
         info) and ``seconds`` (total wall-clock).
     """
     from bayes_fdi import __version__
-    from bayes_fdi.paper import report as rep
+    from bayes_fdi.paper.report import render_report
+    from bayes_fdi.paper.report_figures import plot_features, plot_residuals
+    from bayes_fdi.reporting import to_jsonable, write_json
 
     t_start = time.perf_counter()
     say = _Progress(progress)
@@ -240,10 +242,10 @@ def reproduce(
         results["datasets"][key] = res
         say(f"{key}: figures")
         figs = {
-            "residuals": rep.plot_residuals(
+            "residuals": plot_residuals(
                 art["residuals"], out / f"{key}-residuals.png", title=f"{key}: residuals"
             ).name,
-            "features": rep.plot_features(
+            "features": plot_features(
                 art["features"],
                 art["labels"],
                 out / f"{key}-features.png",
@@ -252,7 +254,7 @@ def reproduce(
             ).name,
         }
         if "all_states" in res:
-            figs["all_features"] = rep.plot_features(
+            figs["all_features"] = plot_features(
                 art["train_features"],
                 art["train_labels"],
                 out / f"{key}-all-states.png",
@@ -261,9 +263,9 @@ def reproduce(
         figures[key] = figs
     results["seconds"] = time.perf_counter() - t_start
     results["figures"] = figures
-    results = rep.to_jsonable(results)
-    write_text(out / "report.md", rep.render_report(results))
-    rep.write_json(results, out / "results.json")
+    results = to_jsonable(results)
+    write_text(out / "report.md", render_report(results))
+    write_json(results, out / "results.json")
     say(f"done in {results['seconds']:.0f} s: {out / 'report.md'}")
     return results
 
