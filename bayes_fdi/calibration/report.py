@@ -12,8 +12,8 @@
 - ``calibration.json``: every number of the report.
 
 It only uses the diagnoser's public contract: ``diagnose(runs)`` returning the Dataset of
-``CONTRACTS.md`` (``proba (run, class)``, ``features (run, feature)``, ``X_hat``,
-``X_hat_std``, ``F_hat``, ``F_hat_std``) and, for the per-node table,
+`bayes_fdi.diagnosis.FaultDiagnoser.diagnose` (``proba (run, class)``, ``features (run,
+feature)``, ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``) and, for the per-node table,
 ``diagnoser.classifier_.nodes_`` (nodes with ``.left``, ``.right``, ``.estimator``).
 
 The recalibrators are fitted on held-out data: on ``calibration_runs`` when given,
@@ -358,14 +358,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 def _build_diagnoser(method: str, seed: int) -> Any:
     """A fresh diagnoser of the chosen method (RVM defaults or SVM nodes)."""
-    try:
-        from bayes_fdi.diagnosis import FaultDiagnoser
-    except ImportError as err:  # pragma: no cover - until the diagnosis stream is merged
-        raise RuntimeError(f"bayes_fdi.diagnosis is not available: {err}") from None
+    from bayes_fdi.diagnosis import FaultDiagnoser, svm_fault_diagnoser
+
     if method == "rvm":
         return FaultDiagnoser(random_state=seed)
-    from bayes_fdi.diagnosis import svm_fault_diagnoser
-
     return svm_fault_diagnoser(random_state=seed)
 
 
