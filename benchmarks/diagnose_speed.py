@@ -1,5 +1,5 @@
 """Deployment benchmarks: ``bayes-fdi diagnose`` speed and memory, model round trips, simulate on
-workers (issue 12's targets).
+workers, against their targets.
 
     .venv/bin/python benchmarks/diagnose_speed.py [--model FILE | --stand-in] [--only ...]
 

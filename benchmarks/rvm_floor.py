@@ -1,5 +1,5 @@
 """The memory-traffic floor of a fast (Tipping & Faul) RVR fit on this machine, against the
-issue-11 speed targets (companion of ``rvm_fit.py``).
+RVM speed targets (companion of ``rvm_fit.py``).
 
 Usage::
 

@@ -110,8 +110,9 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
-#: 2: classes named by their stable registered names; 1 (bayes_fdi 0.1.0): by ``module:QualName``.
-FORMAT_VERSION = 2
+#: 3: the online diagnoser's components own their states; 2: classes named by their stable
+#: registered names; 1 (bayes_fdi 0.1.0): classes named by ``module:QualName``.
+FORMAT_VERSION = 3
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.
