@@ -83,12 +83,14 @@ def _file_hash(path: Path) -> str:
 def _simulator_hash() -> str:
     """SHA-256 over the simulator's source files (so a changed model never reuses a cache)."""
     from bayes_fdi import actuator
+    from bayes_fdi.campaigns import parsing as campaign_parsing
     from bayes_fdi.campaigns import simulation as campaigns
     from bayes_fdi.campaigns import spec as campaign_spec
 
     files = [
         *sorted(Path(actuator.__file__).parent.glob("*.py")),
         Path(campaign_spec.__file__),
+        Path(campaign_parsing.__file__),
         Path(campaigns.__file__),
     ]
     digest = hashlib.sha256()
