@@ -15,7 +15,7 @@ from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 from bayes_fdi.diagnosis.online import InputEnvelope
-from bayes_fdi.diagnosis.seva.windows import SevaRecord, SevaStatus
+from bayes_fdi.diagnosis.seva.record import SevaRecord, SevaStatus
 
 CHANNELS = ("CV", "P1", "P2", "T1", "X", "F")
 

@@ -22,7 +22,6 @@ from bayes_fdi.calibration.dirichlet import DEFAULT_REG_GRID, DirichletScaler
 from bayes_fdi.calibration.intervals import (
     DEFAULT_LEVELS,
     CoverageResult,
-    StdScaler,
     crps_gaussian,
     interval_coverage,
     pit_histogram,
@@ -39,6 +38,7 @@ from bayes_fdi.calibration.metrics import (
 from bayes_fdi.calibration.nodes import NodeCalibration, node_calibration
 from bayes_fdi.calibration.recalibration import cross_val_log_loss
 from bayes_fdi.calibration.temperature import TemperatureScaler
+from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
 
 __all__ = [
     "DEFAULT_LEVELS",

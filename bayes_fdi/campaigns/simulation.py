@@ -19,43 +19,20 @@ from typing import Any
 
 import numpy as np
 
-from bayes_fdi.campaigns.parsing import check_seed, load_campaign, parse_campaign, thaw
+from bayes_fdi.campaigns.parsing import check_seed, load_campaign, thaw
 from bayes_fdi.campaigns.spec import (
-    FAULT_DIRECTION,
-    FAULTS,
     LUBLIN_HOUR,
-    PROFILES,
-    SIGNED_FAULTS,
-    SOURCES,
-    STATES,
-    WINDOWS,
     Campaign,
     CampaignError,
-    FaultSpec,
     RunSpec,
-    Scenario,
 )
 from bayes_fdi.cli_arguments import UsageError, input_file, output_file
 from bayes_fdi.datasets.format import NETCDF_SUFFIXES
 from bayes_fdi.memory import check_memory
 
 __all__ = [
-    "FAULTS",
-    "FAULT_DIRECTION",
-    "PROFILES",
-    "SIGNED_FAULTS",
-    "SOURCES",
-    "STATES",
-    "WINDOWS",
-    "Campaign",
-    "CampaignError",
-    "FaultSpec",
-    "RunSpec",
-    "Scenario",
     "check_campaign_memory",
     "configure_parser",
-    "load_campaign",
-    "parse_campaign",
     "run_from_cli",
     "simulate_campaign",
     "window_starts",

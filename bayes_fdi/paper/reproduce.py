@@ -43,70 +43,20 @@ from bayes_fdi.atomic import write_text
 from bayes_fdi.campaigns.cache import (
     DATASETS,
     N_TRAIN,
-    SMALL_DURATION,
-    SMALL_RUNS_PER_STATE,
     campaign_file,
     load_or_simulate,
-    split_train_test,
 )
 from bayes_fdi.cli_arguments import UsageError
 from bayes_fdi.datasets import validate_dataset
 from bayes_fdi.paper.calibration_headlines import calibration_headlines
 from bayes_fdi.paper.pipeline import evaluate_dataset
-from bayes_fdi.paper.scores import classification_metrics, paired_comparison
-from bayes_fdi.paper.separability import (
-    PAPER_GROUPS,
-    SEPARABILITY_NEIGHBOURS,
-    SEPARABILITY_THRESHOLD,
-    find_groups,
-    group_metrics,
-    pairwise_separability,
-)
 from bayes_fdi.paper.setup import (
     ALL_STATES,
     DYNAMIC_LAGS,
-    NODE_WIDTH,
     PAPER_STATES,
-    REGRESSION_WIDTH_SAMPLES,
-    REGRESSION_WIDTHS,
-    node_classifier,
-    select_regression_width,
-    single_threaded,
-    tree_nodes,
 )
 
-__all__ = [
-    "ALL_STATES",
-    "DATASETS",
-    "DYNAMIC_LAGS",
-    "NODE_WIDTH",
-    "N_TRAIN",
-    "PAPER_GROUPS",
-    "PAPER_STATES",
-    "REGRESSION_WIDTHS",
-    "REGRESSION_WIDTH_SAMPLES",
-    "SEPARABILITY_NEIGHBOURS",
-    "SEPARABILITY_THRESHOLD",
-    "SMALL_DURATION",
-    "SMALL_RUNS_PER_STATE",
-    "calibration_headlines",
-    "campaign_file",
-    "classification_metrics",
-    "configure_parser",
-    "evaluate_dataset",
-    "find_groups",
-    "group_metrics",
-    "load_or_simulate",
-    "node_classifier",
-    "paired_comparison",
-    "pairwise_separability",
-    "reproduce",
-    "run_from_cli",
-    "select_regression_width",
-    "single_threaded",
-    "split_train_test",
-    "tree_nodes",
-]
+__all__ = ["configure_parser", "reproduce", "run_from_cli"]
 
 
 class _Progress:

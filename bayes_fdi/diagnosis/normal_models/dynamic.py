@@ -65,10 +65,9 @@ from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     NormalModelsState,
     dynamic_inputs,
     predict_seconds,
-    signed_root,
 )
 
-__all__ = ["DynamicNormalModels", "dynamic_inputs", "signed_root", "standardised_residuals"]
+__all__ = ["DynamicNormalModels", "standardised_residuals"]
 
 #: Output range of the sensors (DABLib clips every measurement to [0, 1]).
 SENSOR_RANGE = (0.0, 1.0)

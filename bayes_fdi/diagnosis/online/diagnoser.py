@@ -37,11 +37,11 @@ from bayes_fdi.diagnosis.online.step import (
     init_run_state,
     step,
 )
-from bayes_fdi.diagnosis.online.stream import FAULTS, assemble_stream, decide, stream_attrs
+from bayes_fdi.diagnosis.online.stream import assemble_stream, decide, stream_attrs
 from bayes_fdi.diagnosis.online.training import Runs, fit_detection, fit_isolation, stack_runs
 from bayes_fdi.diagnosis.seva.record import SevaRecord
 
-__all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
+__all__ = ["OnlineDiagnoser"]
 
 
 class OnlineDiagnoser(BaseEstimator):

@@ -61,9 +61,6 @@ from bayes_fdi.diagnosis.seva.record import (
     ClassDistribution,
     SevaRecord,
     SevaStatus,
-    to_frame,
-    to_json,
-    to_xarray,
 )
 from bayes_fdi.diagnosis.seva.rules import (
     DEFAULT_SATURATION_LIMITS,
@@ -74,20 +71,7 @@ from bayes_fdi.diagnosis.seva.rules import (
     screen_window,
 )
 
-__all__ = [
-    "DEFAULT_SATURATION_LIMITS",
-    "ClassDistribution",
-    "NoveltyReference",
-    "SevaRecord",
-    "SevaStatus",
-    "SevaThresholds",
-    "records_from_diagnosis",
-    "screen_measurements",
-    "seva_records",
-    "to_frame",
-    "to_json",
-    "to_xarray",
-]
+__all__ = ["records_from_diagnosis", "seva_records"]
 
 
 def _nanmean(a: np.ndarray) -> float:
