@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.campaigns.cache import N_TRAIN, split_train_test
+from bayes_fdi.campaigns.cache import split_train_test
 from bayes_fdi.diagnosis.isolation.tree import n_vectors
 from bayes_fdi.paper.report_tables import tree_text
 from bayes_fdi.paper.scores import classification_metrics, paired_comparison
@@ -28,6 +28,7 @@ from bayes_fdi.paper.separability import (
 )
 from bayes_fdi.paper.setup import (
     ALL_STATES,
+    N_TRAIN,
     PAPER_STATES,
     fit_tree,
     select_regression_width,

@@ -40,19 +40,16 @@ from typing import Any
 import xarray as xr
 
 from bayes_fdi.atomic import write_text
-from bayes_fdi.campaigns.cache import (
-    DATASETS,
-    N_TRAIN,
-    campaign_file,
-    load_or_simulate,
-)
+from bayes_fdi.campaigns.cache import campaign_file, load_or_simulate
 from bayes_fdi.cli_arguments import UsageError
 from bayes_fdi.datasets import validate_dataset
 from bayes_fdi.paper.calibration_headlines import calibration_headlines
 from bayes_fdi.paper.pipeline import evaluate_dataset
 from bayes_fdi.paper.setup import (
     ALL_STATES,
+    DATASETS,
     DYNAMIC_LAGS,
+    N_TRAIN,
     PAPER_STATES,
 )
 
