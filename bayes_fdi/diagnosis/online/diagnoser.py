@@ -346,6 +346,7 @@ class OnlineDiagnoser(BaseEstimator):
         return decide(
             arrays,
             out,
+            threshold=self.threshold_,
             group_labels=self._group_labels,
             novelty_ratio=self.novelty_ratio,
             p_fault=self.p_fault,
@@ -443,9 +444,13 @@ class OnlineDiagnoser(BaseEstimator):
 
             - ``DD`` (bool): the detection decision; ``FFID`` (bool): fault-free indication,
               not DD and no channel missing;
-            - ``state`` (str): the diagnosed group's label, ``"unknown"`` (detected, not
-              isolated with a known signature) or ``"fn"`` (no detection);
+            - ``state`` (str): the diagnosed group's label, ``"unknown"`` (detected, but no
+              fault library or a signature unlike every known fault), ``"mismatch"`` (a
+              detection that began while the inputs lay outside the normal models' envelope:
+              the model does not fit this valve, commission it) or ``"fn"`` (no detection);
               ``probability``: that group's calibrated probability (NaN unless isolated);
+              ``evidence`` (str): while DD is on, which residual raised it and its sign
+              (``"X high"``, ``"F low"``, ``"X low, F high"``), else ``""``;
             - ``status`` (str): the SEVA status ``CLEAR``, ``BLURRED``, ``DAZZLED`` or
               ``BLIND``;
             - ``indicated`` (bool, per group): the diagnosed group; ``group_proba`` (per

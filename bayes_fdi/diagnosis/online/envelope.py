@@ -9,7 +9,8 @@ the seconds without detection, and at each rising edge of DD that average is che
 envelope and the answer held until DD falls. The average of the seconds *before* the detection
 is what counts: a fault that itself moves an input (f7 makes T1 jump) is detected within
 seconds, before the average has moved, while a plant running outside the training range
-(another temperature, another pressure) is caught.
+(another temperature, another pressure) is caught. A detection from the stream's first second,
+before any second without one, is judged on the inputs of its first second.
 
 Written by hand: a training range and a compiled exponential average.
 """
@@ -70,6 +71,10 @@ def _onset_kernel(dd, inputs, low, high, alpha, state, out):  # pragma: no cover
             if state.average_set[0]:
                 for j in range(4):
                     if average[j] < low[j] or average[j] > high[j]:
+                        novel = True
+            else:  # detected since the stream began: judge the inputs of this second
+                for j in range(4):
+                    if inputs[t, j] < low[j] or inputs[t, j] > high[j]:
                         novel = True
             state.novel_at_onset[0] = novel
         state.detected[0] = True

@@ -42,22 +42,25 @@ def status_reasons(
             f"no detection (statistics X {out['stat_X'][0]:.3g}, F "
             f"{out['stat_F'][0]:.3g} <= threshold {threshold:.3g})",
         )
+    raised = f" ({dec['evidence'][0]})" if dec["evidence"][0] else ""
+    if dec["novel_onset"][0]:
+        return (
+            f"model mismatch: commission this valve (a detection{raised} began while the inputs "
+            "lay outside what the normal models were fitted on; it is not read as a fault)",
+        )
     if not isolating:
-        return ("fault detected; no isolation fitted",)
+        return (
+            f"fault detected{raised}; detection only: this model has no fault library and "
+            "cannot name the fault",
+        )
     if dec["novel_signature"][0]:
         return (
-            f"fault detected; signature unlike every known fault (novelty "
+            f"unknown fault{raised}: signature unlike every known fault (novelty "
             f"{out['novelty'][0]:.3g} > {novelty_ratio})",
         )
     p = dec["probability"][0]
-    if dec["novel_onset"][0]:
-        return (
-            f"fault detected while the inputs were outside the training envelope: the "
-            f"normal models extrapolate, P({dec['state'][0]}) = {p:.3f} is not "
-            f"trusted",
-        )
     need = ">=" if p >= p_fault else "<"
-    return (f"fault detected; P({dec['state'][0]}) = {p:.3f} {need} p_fault = {p_fault}",)
+    return (f"fault detected{raised}; P({dec['state'][0]}) = {p:.3f} {need} p_fault = {p_fault}",)
 
 
 def second_record(
@@ -113,4 +116,5 @@ def last_values(out: Mapping[str, Any], dec: Mapping[str, Any], t: float) -> dic
         "r_F": float(out["r_F"][0]),
         "fault_proba": out["fault_proba"][0].copy(),
         "group_proba": out["group_proba"][0].copy(),
+        "evidence": str(dec["evidence"][0]),
     }
