@@ -21,7 +21,7 @@ import arviz as az
 import numpy as np
 import torch
 
-from bayes_fdi.twin.model import TwinProblem, log_joint, score
+from bayes_fdi.twin.model import TwinProblem, log_joint, noise_estimate, score
 
 __all__ = ["ImportanceCheck", "LaplaceFit", "fit_laplace", "importance_check"]
 
@@ -66,26 +66,84 @@ def _potential(problem: TwinProblem, v: np.ndarray) -> float:
         return float(-log_joint(problem, torch.tensor(v, dtype=torch.float64)[None])[0])
 
 
+def _profiled(problem: TwinProblem, z: np.ndarray) -> tuple[float, np.ndarray]:
+    """Negative log density at ``z`` with the noise parameters at their least-squares AR(1)
+    values for the residual there (one simulation); returns it and the full latent vector."""
+    with torch.no_grad():
+        theta = problem.physical(torch.as_tensor(z, dtype=torch.float64))
+        outputs = problem.simulator.outputs(theta.numpy()[None])
+        noise = noise_estimate(problem.observed.numpy() - outputs[0], problem.mask.numpy())
+        v = np.concatenate([z, noise])
+        value, _ = score(problem, torch.as_tensor(v)[None], torch.as_tensor(outputs))
+    return float(-value[0]), v
+
+
 def fit_laplace(
     problem: TwinProblem,
     start: np.ndarray,
     *,
     max_iter: int = 40,
-    tol: float = 0.1,
+    tol: float = 0.01,
     rough_tol: float = 1.0,
 ) -> LaplaceFit:
-    """Levenberg-Marquardt to the posterior mode from ``start``; the Laplace covariance there.
+    """The posterior mode from ``start`` and the Laplace covariance there.
 
-    Converged when the Newton decrement ``g^T H^-1 g / 2`` (the log density the quadratic model
-    still promises) is below ``tol`` nats; or below ``rough_tol`` nats when two steps in a row
-    fail to deliver it (the simulator's dead zone and backlash make its output, hence the log
-    density, rough on that scale: the remaining gain is not there to take). Stops unconverged
-    after ``max_iter`` steps, accepted or rejected.
+    Two Levenberg-Marquardt stages: the actuator parameters with the AR(1) noise parameters
+    profiled out (set, after every step, to their least-squares values for the residual: far
+    from the mode a joint step lets ``phi`` run to 1 and absorb the misfit), then all latent
+    variables together, from which the curvature comes. A stage has converged when the Newton
+    decrement ``g^T H^-1 g / 2`` (the log density the quadratic model still promises) is below
+    ``tol`` nats, or below ``rough_tol`` nats when two steps in a row fail to deliver it (the
+    simulator's dead zone and backlash make the log density rough on that scale). Each stage
+    stops unconverged after ``max_iter`` steps, accepted or rejected.
     """
-    v = np.asarray(start, dtype=np.float64).copy()
-    value, grad, hess = _value_grad_hessian(problem, v)
-    damping = 1.0
+    p = problem.n_parameters
+    start = np.asarray(start, dtype=np.float64)
+
+    def profile_evaluate(z):
+        v = _profiled(problem, z)[1]
+        value, grad, hess = _value_grad_hessian(problem, v)
+        return value, grad[:p], hess[:p, :p], v
+
+    def profile_trial(z):
+        return _profiled(problem, z)[0]
+
+    _, first = _levenberg_marquardt(
+        profile_evaluate, profile_trial, start[:p], max_iter=max_iter, tol=tol,
+        rough_tol=rough_tol,
+    )  # fmt: skip
+
+    def joint_evaluate(v):
+        value, grad, hess = _value_grad_hessian(problem, v)
+        return value, grad, hess, v
+
+    mode, second = _levenberg_marquardt(
+        joint_evaluate, lambda v: _potential(problem, v), first.latent, max_iter=max_iter,
+        tol=tol, rough_tol=rough_tol,
+    )  # fmt: skip
+    covariance = _covariance(second.hess)
+    return LaplaceFit(
+        mode, covariance, -second.value, first.iterations + second.iterations,
+        first.converged and second.converged, second.decrement,
+    )  # fmt: skip
+
+
+class _Stage(NamedTuple):
+    value: float
+    hess: np.ndarray
+    latent: np.ndarray
+    iterations: int
+    converged: bool
+    decrement: float
+
+
+def _levenberg_marquardt(evaluate, trial_value, x, *, max_iter, tol, rough_tol):
+    """Minimise with Marquardt-damped Newton steps; ``evaluate(x)`` gives value, gradient,
+    curvature and the full latent vector, ``trial_value(x)`` the value only."""
+    x = np.asarray(x, dtype=np.float64).copy()
+    value, grad, hess, latent = evaluate(x)
     decrement = _decrement(grad, hess)
+    damping = 1.0
     converged = False
     rejected = 0
     iterations = 0
@@ -99,10 +157,10 @@ def fit_laplace(
         except np.linalg.LinAlgError:
             damping *= 10.0
             continue
-        trial = _potential(problem, v + step)
+        trial = trial_value(x + step)
         if math.isfinite(trial) and trial < value:
-            v = v + step
-            value, grad, hess = _value_grad_hessian(problem, v)
+            x = x + step
+            value, grad, hess, latent = evaluate(x)
             decrement = _decrement(grad, hess)
             damping = max(damping / 3.0, 1e-9)
             rejected = 0
@@ -111,8 +169,7 @@ def fit_laplace(
             rejected += 1
             if damping > 1e10:
                 break
-    covariance = _covariance(hess)
-    return LaplaceFit(v, covariance, -value, iterations, converged, decrement)
+    return x, _Stage(value, hess, latent, iterations, converged, decrement)
 
 
 def _decrement(grad: np.ndarray, hess: np.ndarray) -> float:

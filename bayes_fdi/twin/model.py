@@ -22,7 +22,23 @@ from bayes_fdi.twin.likelihood import StationaryAR1
 from bayes_fdi.twin.priors import NoisePrior, ParameterPrior
 from bayes_fdi.twin.simulator import OUTPUTS, WindowSimulator, simulated_outputs
 
-__all__ = ["TwinProblem", "log_joint", "score", "split_latent", "twin_model"]
+__all__ = ["TwinProblem", "log_joint", "noise_estimate", "score", "split_latent", "twin_model"]
+
+
+def noise_estimate(residual: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Least-squares AR(1) fit of residuals ``(..., W, T, 2)``: ``(..., 4)`` latent noise values
+    (``log sigma`` of X and F, then ``atanh phi``), the conditional mode up to the priors and
+    the first samples' terms."""
+    pairs = mask[:, 1:] & mask[:, :-1]
+    out = []
+    for c in range(residual.shape[-1]):
+        now = residual[..., 1:, c][..., pairs]
+        before = residual[..., :-1, c][..., pairs]
+        phi = np.sum(now * before, axis=-1) / np.maximum(np.sum(before**2, axis=-1), 1e-300)
+        phi = np.clip(phi, -0.99, 0.99)
+        var = np.mean((now - phi[..., None] * before) ** 2, axis=-1)
+        out.append((0.5 * np.log(np.maximum(var, 1e-300)), np.arctanh(phi)))
+    return np.stack([out[0][0], out[1][0], out[0][1], out[1][1]], axis=-1)
 
 
 class TwinProblem(NamedTuple):
@@ -56,8 +72,12 @@ class TwinProblem(NamedTuple):
         return low + (high - low) * torch.sigmoid(z)
 
 
-def twin_model(problem: TwinProblem) -> None:
-    """The Pyro model; batch the latents along a leading dimension to score several at once."""
+def twin_model(problem: TwinProblem, outputs: torch.Tensor | None = None) -> None:
+    """The Pyro model; batch the latents along a leading dimension to score several at once.
+
+    ``outputs``: the simulator's outputs at the latent parameters when already known (the
+    model then does not run the simulator again).
+    """
     n_out = len(OUTPUTS)
     z = pyro.sample("z", dist.Normal(problem.prior_loc(), problem.prior_spread()).to_event(1))
     noise = problem.noise
@@ -76,7 +96,8 @@ def twin_model(problem: TwinProblem) -> None:
         ).to_event(1),
     )
     theta = problem.physical(z)
-    outputs = simulated_outputs(theta, problem.simulator, problem.steps)
+    if outputs is None:
+        outputs = simulated_outputs(theta, problem.simulator, problem.steps)
     sigma = log_sigma.exp()
     phi = atanh_phi.tanh()
     for c, name in enumerate(OUTPUTS):
@@ -108,12 +129,15 @@ def log_joint(problem: TwinProblem, v: torch.Tensor) -> torch.Tensor:
     return score(problem, v)[0]
 
 
-def score(problem: TwinProblem, v: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """`log_joint` and the simulator's outputs ``(B, W, T, 2)`` at each latent vector."""
+def score(
+    problem: TwinProblem, v: torch.Tensor, outputs: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """`log_joint` and the simulator's outputs ``(B, W, T, 2)`` at each latent vector
+    (``outputs``: those outputs when already simulated)."""
     if v.ndim != 2 or v.shape[1] != problem.n_latent:
         raise ValueError(f"latent vectors must have shape (B, {problem.n_latent}), got {v.shape}")
     conditioned = poutine.condition(twin_model, data=split_latent(v, problem.n_parameters))
-    trace = poutine.trace(conditioned).get_trace(problem)
+    trace = poutine.trace(conditioned).get_trace(problem, outputs)
     total = torch.zeros(v.shape[0], dtype=v.dtype)
     for site in trace.nodes.values():
         if site["type"] != "sample":

@@ -21,6 +21,7 @@ import torch
 import xarray as xr
 
 from bayes_fdi.actuator import NOMINAL, ActuatorParameters
+from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.twin.checks import TwinCheck, predictive_check
 from bayes_fdi.twin.inference import inference_data
 from bayes_fdi.twin.laplace import fit_laplace, importance_check
@@ -84,7 +85,7 @@ class ActuatorTwin:
         n_draws: int = 400,
         fd_fraction: float = 0.002,
         max_iter: int = 40,
-        tol: float = 0.1,
+        tol: float = 0.01,
         integrator: str = "fast",
         hold: str = "linear",
         warmup: int = 30,
@@ -128,9 +129,15 @@ class ActuatorTwin:
     def _simulate_options(self) -> dict[str, Any]:
         return {"integrator": self.integrator, "hold": self.hold, "warmup": self.warmup}
 
+    @limit_fit_threads
     def fit(self, healthy: xr.Dataset) -> ActuatorTwin:
         """Fit the posterior on a healthy recording (channels CV, P1, P2, T1, X, F; NaN gaps are
-        cut out). Returns ``self``."""
+        cut out). Returns ``self``.
+
+        torch and the BLAS libraries run on `bayes_fdi.rvm.threads.get_fit_threads` threads
+        (default 1: the same numbers whatever the caller's thread settings); the simulations
+        run on numba's threads, one run each.
+        """
         t_start = time.perf_counter()
         priors = self._check_settings()
         names = tuple(priors)

@@ -29,7 +29,7 @@ import numpy as np
 import xarray as xr
 from sklearn.base import clone
 
-from bayes_fdi.datasets import CHANNELS, validate_dataset
+from bayes_fdi.datasets import CHANNELS, state_order, validate_dataset
 from bayes_fdi.diagnosis.detection.detectors import CUSUM, GLR
 from bayes_fdi.diagnosis.detection.thresholds import calibrate_threshold, cusum_threshold
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener
@@ -264,10 +264,10 @@ def fit_online(
         counts = {f: int(np.sum(y == f)) for f in rates}
         undetectable = sorted(
             (f for f in rates if rates[f] < diag.detect_rate or counts[f] < 5),
-            key=lambda f: int(f[1:]),
+            key=state_order,
         )
-        known = sorted(set(rates) - set(undetectable), key=lambda f: int(f[1:]))
-        diag.detection_rates_ = dict(sorted(rates.items(), key=lambda kv: int(kv[0][1:])))
+        known = sorted(set(rates) - set(undetectable), key=state_order)
+        diag.detection_rates_ = dict(sorted(rates.items(), key=lambda kv: state_order(kv[0])))
         diag.undetectable_ = tuple(undetectable)
         if len(known) >= 2:
             t0 = time.perf_counter()
