@@ -64,9 +64,7 @@ def reference_outputs() -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     mixed_inputs = benchmark_inputs(n_runs=len(MIXED), duration=200, seed=11, vary=True)
     for integrator in ("fast", "reference"):
-        ds, st = simulate(
-            mixed_inputs, MIXED, seed=5, integrator=integrator, return_states=True
-        )
+        ds, st = simulate(mixed_inputs, MIXED, seed=5, integrator=integrator, return_states=True)
         _add(out, f"mixed-{integrator}", ds, st)
     other_inputs = benchmark_inputs(n_runs=len(OTHERS), duration=160, seed=12, vary=True)
     ds, st = simulate(other_inputs, OTHERS, seed=6, return_states=True)
