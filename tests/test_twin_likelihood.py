@@ -103,3 +103,24 @@ def test_a_logit_normal_prior_has_its_nominal_value_as_median_and_stays_inside()
 def test_bad_priors_are_refused_by_name(priors, message):
     with pytest.raises(ValueError, match=message):
         check_priors(priors)
+
+
+def test_the_fixed_order_linear_algebra_agrees_with_lapack(rng):
+    from bayes_fdi.twin.fixed_order import (
+        NotPositiveDefinite,
+        cholesky,
+        inverse_spd,
+        matvec,
+        solve_spd,
+    )
+
+    m = rng.normal(size=(12, 12))
+    a = m @ m.T + 12 * np.eye(12)
+    b = rng.normal(size=12)
+    np.testing.assert_allclose(cholesky(a), np.linalg.cholesky(a), rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(solve_spd(a, b), np.linalg.solve(a, b), rtol=1e-11)
+    np.testing.assert_allclose(inverse_spd(a), np.linalg.inv(a), rtol=1e-10, atol=1e-14)
+    x = rng.normal(size=(5, 12))
+    np.testing.assert_allclose(matvec(a, x), x @ a.T, rtol=1e-12)
+    with pytest.raises(NotPositiveDefinite, match="pivot"):
+        cholesky(np.diag([1.0, -1.0]))

@@ -102,8 +102,12 @@ def inference_data(
 
 
 class ParameterIdentification(NamedTuple):
-    """What the data say about one parameter (physical units; ``ratio``: posterior over prior
-    standard deviation, small = identified)."""
+    """What the data say about one parameter, in its physical unit.
+
+    ``ratio`` is the posterior over the prior standard deviation (small: identified); the
+    ``weighted_`` moments are those of the Laplace draws under their Pareto-smoothed importance
+    weights, i.e. estimates of the exact posterior's (trust them when ``pareto_k < 0.7``).
+    """
 
     name: str
     prior_mean: float
@@ -111,6 +115,8 @@ class ParameterIdentification(NamedTuple):
     posterior_mean: float
     posterior_sd: float
     ratio: float
+    weighted_mean: float
+    weighted_sd: float
 
 
 def identification(
@@ -121,15 +127,16 @@ def identification(
     Returns the table, the variables' names and the correlation matrix of the posterior draws.
     """
     names = tuple(idata.posterior.data_vars)
+    weights = np.exp(idata.sample_stats["log_weight"].values.ravel())
+    weights = weights / weights.sum()
     table = []
     for name in names:
         prior = idata.prior[name].values.ravel()
         post = idata.posterior[name].values.ravel()
         prior_sd, post_sd = float(prior.std()), float(post.std())
-        table.append(
-            ParameterIdentification(
-                name, float(prior.mean()), prior_sd, float(post.mean()), post_sd, post_sd / prior_sd
-            )
-        )
+        w_mean = float(np.sum(weights * post))
+        w_sd = float(np.sqrt(np.sum(weights * (post - w_mean) ** 2)))
+        row = (float(prior.mean()), prior_sd, float(post.mean()), post_sd, post_sd / prior_sd)
+        table.append(ParameterIdentification(name, *row, w_mean, w_sd))
     draws = np.stack([idata.posterior[n].values.ravel() for n in names], axis=1)
     return table, names, np.corrcoef(draws, rowvar=False)

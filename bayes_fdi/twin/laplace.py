@@ -21,6 +21,13 @@ import arviz as az
 import numpy as np
 import torch
 
+from bayes_fdi.twin.fixed_order import (
+    NotPositiveDefinite,
+    cholesky,
+    inverse_spd,
+    matvec,
+    solve_spd,
+)
 from bayes_fdi.twin.model import TwinProblem, log_joint, noise_estimate, score
 
 __all__ = ["ImportanceCheck", "LaplaceFit", "fit_laplace", "importance_check"]
@@ -153,8 +160,8 @@ def _levenberg_marquardt(evaluate, trial_value, x, *, max_iter, tol, rough_tol):
             break
         scale = np.maximum(np.abs(np.diag(hess)), 1e-12)
         try:
-            step = np.linalg.solve(hess + damping * np.diag(scale), -grad)
-        except np.linalg.LinAlgError:
+            step = solve_spd(hess + damping * np.diag(scale), -grad)
+        except NotPositiveDefinite:
             damping *= 10.0
             continue
         trial = trial_value(x + step)
@@ -174,21 +181,19 @@ def _levenberg_marquardt(evaluate, trial_value, x, *, max_iter, tol, rough_tol):
 
 def _decrement(grad: np.ndarray, hess: np.ndarray) -> float:
     try:
-        out = 0.5 * float(grad @ np.linalg.solve(hess, grad))
-    except np.linalg.LinAlgError:
+        return 0.5 * float(np.sum(grad * solve_spd(hess, grad)))
+    except NotPositiveDefinite:
         return math.inf
-    return out if out >= 0.0 else math.inf
 
 
 def _covariance(hess: np.ndarray) -> np.ndarray:
-    values, vectors = np.linalg.eigh(hess)
-    if values.min() <= 0.0:
+    try:
+        return inverse_spd(hess)
+    except NotPositiveDefinite as exc:
         raise ValueError(
-            "the curvature of the log posterior at the mode is not positive definite (smallest "
-            f"eigenvalue {values.min():.3g}): the mode was not reached; raise max_iter or "
-            "narrow the priors"
-        )
-    return (vectors / values) @ vectors.T
+            f"the curvature of the log posterior at the mode is not positive definite ({exc}): "
+            "the mode was not reached; raise max_iter or narrow the priors"
+        ) from None
 
 
 def importance_check(
@@ -196,9 +201,9 @@ def importance_check(
 ) -> ImportanceCheck:
     """Draw ``n_draws`` latent vectors from the Laplace Gaussian and weight them by the exact
     posterior density over the Gaussian's (Pareto-smoothed importance sampling)."""
-    chol = np.linalg.cholesky(fit.covariance)
+    chol = cholesky(fit.covariance)
     eps = rng.standard_normal((int(n_draws), fit.mode.size))
-    draws = fit.mode + eps @ chol.T
+    draws = fit.mode + matvec(chol, eps)
     log_q = -0.5 * np.sum(eps**2, axis=1) - np.sum(np.log(np.diag(chol)))
     with torch.no_grad():
         log_p, outputs = score(problem, torch.tensor(draws, dtype=torch.float64))

@@ -5,8 +5,9 @@ DAMADICS fault is transplanted by driving the twin with the run's own recorded C
 twice, with and without the fault (noise-free), and adding the difference of every measured
 channel (X, F, and P1, P2, T1 where the fault changes what those sensors show: f17, f7) to the
 recorded data (`bayes_fdi.actuator.inject_faults` with the twin's parameters). The flow
-sensor's fault f19 acts on the recorded flow exactly: ``F' <- o + (F' - o)(1 - f)`` with ``o``
-the twin's F' offset (DABLib scales the reading, not the model's flow). f13, the stem
+sensor's fault f19 acts on the recorded flow exactly: ``F' <- F' - f (F' - o)``, i.e.
+``o + (F' - o)(1 - f)`` with ``o`` the twin's F' offset (DABLib scales the reading, not the
+model's flow). f13, the stem
 sensor's fault, stays inside the positioner loop as DABLib defines it (model difference).
 
 Faults of one measurement alone (:class:`MeasurementFault`, labels
@@ -144,8 +145,8 @@ def transplant(
     for r, fault in enumerate(resolved):
         if isinstance(fault, Fault) and fault.name == "f19":
             offset = float(records[r].f_offset)
-            scale = 1.0 - fault_value(time, fault.strength, fault.onset, fault.ramp)
-            arrays["F"][r] = np.clip(offset + (recorded_f[r] - offset) * scale, 0.0, 1.0)
+            value = fault_value(time, fault.strength, fault.onset, fault.ramp)
+            arrays["F"][r] = np.clip(recorded_f[r] - value * (recorded_f[r] - offset), 0.0, 1.0)
         elif isinstance(fault, MeasurementFault):
             channel = MEASURED_CHANNEL[fault.name]
             recorded = healthy[channel].transpose("run", "time").values[r]

@@ -23,6 +23,7 @@ import xarray as xr
 from bayes_fdi.actuator import NOMINAL, ActuatorParameters
 from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.twin.checks import TwinCheck, predictive_check
+from bayes_fdi.twin.fixed_order import cholesky, matvec
 from bayes_fdi.twin.inference import inference_data
 from bayes_fdi.twin.laplace import fit_laplace, importance_check
 from bayes_fdi.twin.likelihood import ar1_paths
@@ -178,8 +179,8 @@ class ActuatorTwin:
     def sample_latent(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """``n`` draws ``(n, p + 4)`` of the latent vector from the Laplace posterior."""
         self._check_fitted()
-        chol = np.linalg.cholesky(self.laplace_.covariance)
-        return self.laplace_.mode + rng.standard_normal((int(n), chol.shape[0])) @ chol.T
+        chol = cholesky(self.laplace_.covariance)
+        return self.laplace_.mode + matvec(chol, rng.standard_normal((int(n), chol.shape[0])))
 
     def latent_to_parameters(self, latent: np.ndarray) -> list[ActuatorParameters]:
         """Parameter records of latent vectors ``(n, p + 4)`` (unfitted fields from ``base``)."""
@@ -264,7 +265,8 @@ def _start(problem: TwinProblem, windows) -> np.ndarray:
     log_sigma, atanh_phi = [], []
     for c in range(len(OUTPUTS)):
         e = residual[..., c][windows.mask]
-        r1 = float(np.clip(np.corrcoef(e[1:], e[:-1])[0, 1], -0.9, 0.9))
+        e = e - np.mean(e)
+        r1 = float(np.clip(np.sum(e[1:] * e[:-1]) / np.sum(e * e), -0.9, 0.9))
         log_sigma.append(np.log(max(float(np.std(e)), 1e-6) * np.sqrt(1.0 - r1 * r1)))
         atanh_phi.append(np.arctanh(r1))
     return np.concatenate([z, log_sigma, atanh_phi])
