@@ -112,9 +112,9 @@ def test_transplant_refuses_what_it_cannot_do(hour):
     window = hour.isel(time=slice(0, 100))
     with pytest.raises(ValueError, match="one fault \\(or None\\) per run"):
         transplant(window, [None, None], NOMINAL)
-    with pytest.raises(ValueError, match="MeasurementFault.name must be one of"):
+    with pytest.raises(ValueError, match=r"MeasurementFault\.name must be one of"):
         transplant(window, [MeasurementFault("bias_Q", 0.1)], NOMINAL)
-    with pytest.raises(ValueError, match="run 0: Fault.strength"):
+    with pytest.raises(ValueError, match=r"run 0: MeasurementFault\.strength must lie in"):
         transplant(window, [MeasurementFault("bias_X", 1.5)], NOMINAL)
     with pytest.raises(ValueError, match="got 2 parameter records for 1 runs"):
         transplant(window, [None], [NOMINAL, NOMINAL])

@@ -75,8 +75,12 @@ class MeasurementFault(NamedTuple):
             raise ValueError(
                 f"MeasurementFault.name must be one of {MEASUREMENT_FAULTS}, got {self.name!r}"
             )
-        # the same field rules as a signed DAMADICS fault (checked by Fault itself)
-        checked = Fault("f19", self.strength, self.onset, self.profile, self.ramp).validated()
+        # the field rules of a signed DAMADICS fault, checked by Fault and told in this name
+        try:
+            checked = Fault("f19", self.strength, self.onset, self.profile, self.ramp).validated()
+        except ValueError as exc:
+            message = str(exc).replace("Fault.", "MeasurementFault.").replace(" of f19", "")
+            raise ValueError(message) from None
         return MeasurementFault(self.name, *checked[1:])
 
     def bias_at(self, t) -> np.ndarray:
