@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     from bayes_fdi.twin import ActuatorTwin, identification
 
     hour = load_lublin_example()
-    ActuatorTwin(window=300, n_draws=20, max_iter=1).fit(hour.isel(time=slice(0, 300)))  # compile
+    ActuatorTwin(window=300, n_draws=20).fit(hour.isel(time=slice(0, 300)))  # compile, warm up
     print(f"cpus: {os.cpu_count()}, load average {os.getloadavg()[0]:.1f}")
 
     first, second = hour.isel(time=slice(0, 1800)), hour.isel(time=slice(1800, 3600))

@@ -191,6 +191,11 @@ def _simulate_run(u_read, fidx, fstr, fon, framp, scheme, steps, hold, n_warm, p
     mass = par[IDX_MASS]
     volume0 = par[IDX_VOLUME]
     k_in = par[IDX_K_IN]
+    backlash = par[IDX_BACKLASH]
+    spring_k = par[IDX_SPRING]
+    kp = par[IDX_KP]
+    plug_area = par[IDX_PLUG_AREA]
+    supply = par[IDX_SUPPLY]
     dt_tick = 1.0 / steps
     ctrl = round(T_CTRL * steps)
     f = np.zeros(19)
@@ -255,10 +260,10 @@ def _simulate_run(u_read, fidx, fstr, fon, framp, scheme, steps, hold, n_warm, p
             hb = clip_value(X0 * (1.0 - 0.2 * f[F2]), 0.0, X0)
             hb = clip_value(hb * (1.0 - f[F1]), 0.0, X0)
             hb = max(hb * (1.0 + 0.1 * f[F3]), 0.0)
-            db = clip_value(X0 * (par[IDX_BACKLASH] + f[F4]), 0.0, X0)
+            db = clip_value(X0 * (backlash + f[F4]), 0.0, X0)
             dbf = clip_value(db * (1.0 + 0.5 * f[F8] * (1.0 - x_prev / X0)), 0.0, X0)
             aef = area * (1.0 - f[F10])
-            kf = par[IDX_SPRING] * (1.0 - f[F11])
+            kf = spring_k * (1.0 - f[F11])
             xb = _play(xb, xr, dbf)
             x = min(max(xb, 0.0), hb)
             # --- positioner ---------------------------------------------------------------
@@ -266,7 +271,7 @@ def _simulate_run(u_read, fidx, fstr, fon, framp, scheme, steps, hold, n_warm, p
             xfb = _play(xfb, clip_value(xm, LEVER_MIN, LEVER_MAX), f[F15] * X0)
             if tick % ctrl == 0:
                 pv_pos = 0.5 + math.asin((xfb - 0.01905) / 0.0381) * (180.0 / math.pi) / 60.0
-                cvi = clip_value(par[IDX_KP] * (s2 - pv_pos), -1.0, 1.0)
+                cvi = clip_value(kp * (s2 - pv_pos), -1.0, 1.0)
                 cvp = clip_value(_ep(cvi) * (1.0 - f[F12]), -1.0, 1.0)
             # --- outputs at the 1 s sampling instants -----------------------------------
             if j == 0 and sec >= 0:
@@ -284,10 +289,10 @@ def _simulate_run(u_read, fidx, fstr, fon, framp, scheme, steps, hold, n_warm, p
                 extra[sec, 3] = cvi
             # --- valve plug force -------------------------------------------------------
             xv = valve_position(x / X0, f[F2], f[F3])
-            fvc = dp_valve / interp_table(100.0 * xv, KM_X, KM_V) * par[IDX_PLUG_AREA]
+            fvc = dp_valve / interp_table(100.0 * xv, KM_X, KM_V) * plug_area
             # --- chamber air flow (pressure at the step's start) --------------------------
             ps = p - PATM
-            pz = par[IDX_SUPPLY] * (1.0 - f[F16])
+            pz = supply * (1.0 - f[F16])
             if pz < PZ_MIN:
                 pz = 0.0
             psrc = pz if cvp > 0.0 else 0.0

@@ -35,6 +35,9 @@ __all__ = [
 #: Full scales of the measured channels: P1', P2' [Pa], T1' [°C], F' [t/h].
 P_RANGE, T_RANGE, F_RANGE = 4e6, 200.0, 40.0
 
+#: Largest damping / mass [1/s]: RK4 at 2.5 ms is stable for c/m < 2.78/0.0025 = 1114 1/s.
+MAX_DAMPING_RATE = 1000.0
+
 #: atmospheric pressure [Pa], gas constant [J/(kg K)] and temperature [K] of the chamber's air
 #: (the initial air mass is that of the dead volume at atmospheric pressure)
 _PATM, _R_AIR, _T_AIR = 101325.0, 287.0, 293.0
@@ -110,7 +113,14 @@ class ActuatorParameters(NamedTuple):
                     f"physical bounds [{info.low:g}, {info.high:g}] ({info.description})"
                 )
             values.append(value)
-        return ActuatorParameters(*values)
+        out = ActuatorParameters(*values)
+        if out.damping / out.mass > MAX_DAMPING_RATE:
+            raise ValueError(
+                f"ActuatorParameters: damping / mass = {out.damping / out.mass:.4g} 1/s exceeds "
+                f"{MAX_DAMPING_RATE:g} 1/s: the stem's time constant m/c must be at least 1 ms "
+                "for the simulator's 2.5 ms RK4 steps to be stable"
+            )
+        return out
 
     def as_vector(self) -> np.ndarray:
         """The float64 vector the compiled kernels read (fields, then derived constants)."""

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 import xarray as xr
+from sklearn.base import BaseEstimator
 
 from bayes_fdi.actuator import NOMINAL, ActuatorParameters
 from bayes_fdi.rvm.threads import limit_fit_threads
@@ -43,7 +44,7 @@ __all__ = ["ActuatorTwin"]
 STREAM_FIT, STREAM_PREDICT = 0, 1
 
 
-class ActuatorTwin:
+class ActuatorTwin(BaseEstimator):
     """Bayesian digital twin of an actuator: a posterior over its identifiable parameters.
 
     Parameters
@@ -84,7 +85,7 @@ class ActuatorTwin:
         settle: int = 10,
         max_fit_seconds: int | None = 3600,
         n_draws: int = 400,
-        fd_fraction: float = 0.002,
+        fd_fraction: float = 0.01,
         max_iter: int = 40,
         tol: float = 0.01,
         integrator: str = "fast",
@@ -243,10 +244,6 @@ class ActuatorTwin:
         """Score the posterior predictive on held-out healthy data (`predictive_check`)."""
         self._check_fitted()
         return predictive_check(self, heldout, n_draws=n_draws, seed=seed, level=level)
-
-    def __repr__(self) -> str:
-        names = list(DEFAULT_PRIORS if self.priors is None else self.priors)
-        return f"ActuatorTwin(parameters={names}, window={self.window}, n_draws={self.n_draws})"
 
 
 def _noise(latent: np.ndarray, n_parameters: int) -> tuple[np.ndarray, np.ndarray]:
