@@ -44,6 +44,7 @@ FLOORS: dict[str, int] = {
 FOUNDATION = ("atomic", "memory", "progress", "cli_arguments", "reporting", "distributed")
 #: The concepts of `bayes_fdi.diagnosis`, in the order they may import one another.
 DIAGNOSIS_FLOORS: dict[str, int] = {
+    "component_state": 0,
     "normal_models": 0,
     "detection": 1,
     "isolation": 2,

@@ -112,7 +112,7 @@ def test_metadata_nested_beyond_reason_is_refused_naming_the_file(tmp_path):
     saved = FIXTURES / "offline-svm.npz"
     deep = tmp_path / "deep.npz"
     for depth in (100_000, 500):
-        text = '{"format":"bayes_fdi.model","format_version":2,"arrays":{},"root_class":' \
+        text = '{"format":"bayes_fdi.model","format_version":3,"arrays":{},"root_class":' \
             '"FaultDiagnoser","root":' + '{"__tuple__":[' * depth + "]}" * depth + "}"  # fmt: skip
         with zipfile.ZipFile(deep, "w") as dst:
             import io

@@ -1,6 +1,8 @@
 """Equations of the DAMADICS (DABLib v1.22) actuator, compiled with numba.
 
-The model follows DABLib's model file (Bartyś & Syfert, 2002): a positioner (set-point
+The model follows DABLib v1.22 (Bartyś & Syfert, Warsaw University of Technology, 2002; the
+equations as read from its model file, summarised with their citations on the DAMADICS page of
+the documentation, ``docs/damadics.md``, and in ``docs/actuator.md``): a positioner (set-point
 filter, P controller sampled every 35 ms, E/P transducer with dead zone, lever feedback), a
 pneumatic chamber (isothermal air mass and pressure, supply, vent, leaks), a spring-diaphragm
 servomotor (mass, viscous damping, backlash friction, end stops), an equal-percentage valve on

@@ -54,7 +54,8 @@ CSV_COLUMNS: tuple[str, ...] = (
     "X", "X_hat", "X_hat_std", "r_X", "stat_X", "VMV_X", "VU_X",
     "F", "F_hat", "F_hat_std", "r_F", "stat_F", "VMV_F", "VU_F",
 )  # fmt: skip
-#: Stream variables every diagnoser must give (``ONLINE_CONTRACT.md``).
+#: Stream variables every diagnoser must give: those of the stream of
+#: :meth:`bayes_fdi.diagnosis.OnlineDiagnoser.run` (listed in ``docs/online.md``).
 STREAM_VARIABLES: tuple[str, ...] = (
     "DD", "FFID", "indicated", "group_proba", "fault_proba", "state", "probability", "status",
     "X_hat", "X_hat_std", "F_hat", "F_hat_std", "r_X", "r_F", "stat_X", "stat_F",
@@ -76,7 +77,10 @@ def check_stream(stream: xr.Dataset, chunk: xr.Dataset) -> xr.Dataset:
     """Check that ``stream`` follows the contract for ``chunk``; returns it with dims ordered."""
     missing = [v for v in STREAM_VARIABLES if v not in stream]
     if missing:
-        raise ValueError(f"the diagnoser's stream lacks variable(s) {missing} (ONLINE_CONTRACT)")
+        raise ValueError(
+            f"the diagnoser's stream lacks variable(s) {missing}: a diagnoser must give every "
+            "variable of OnlineDiagnoser.run's stream"
+        )
     for name in ("group", "fault"):
         if name not in stream.coords:
             raise ValueError(f"the diagnoser's stream has no {name!r} coordinate")

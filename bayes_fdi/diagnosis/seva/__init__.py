@@ -5,6 +5,8 @@
 - `bayes_fdi.diagnosis.seva.rules`: thresholds, measurement screening and the status rules.
 - `bayes_fdi.diagnosis.seva.novelty`: whether the inputs are novel (nearest-neighbour ratio).
 - `bayes_fdi.diagnosis.seva.windows`: the records of the offline diagnoser's runs or windows.
+- `bayes_fdi.diagnosis.seva.empty_windows`: diagnosing runs of which a window holds no complete
+  sample.
 
 May import `bayes_fdi.datasets`, `bayes_fdi.diagnosis.isolation` (features) and the foundation.
 """
