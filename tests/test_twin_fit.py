@@ -158,5 +158,24 @@ def test_an_unfitted_twin_and_bad_settings_are_refused(hour):
         ActuatorTwin(n_draws=5).fit(hour)
     with pytest.raises(ValueError, match="window must be at least"):
         ActuatorTwin(window=30).fit(hour)
+    faulty = hour.assign_coords(state=("run", ["f1"]))
+    with pytest.raises(ValueError, match=r"healthy runs only; found states \['f1'\]"):
+        ActuatorTwin().fit(faulty)
     with pytest.raises(ValueError, match="no gap-free stretch"):
         ActuatorTwin(window=300).fit(hour.isel(time=slice(0, 50)))
+
+
+def test_windows_avoid_gaps_and_long_recordings_keep_evenly_spaced_windows(hour):
+    gappy = hour.copy(deep=True)
+    gappy["F"][0, 1000:1010] = np.nan
+    windows = cut_windows(gappy, window=600, settle=10, max_seconds=None)
+    starts = [t for _, t in windows.origin]
+    assert starts == [0.0, 600.0, 1010.0, 1610.0, 2210.0, 2810.0, 3410.0]
+    assert np.all(np.isfinite(windows.observed))
+    # the window before the gap holds 400 samples: padded, not fitted beyond them
+    assert windows.mask[1].sum() == 400 - 10 and not windows.mask[1, 400:].any()
+    assert windows.mask[6].sum() == 190 - 10
+    day = hour.isel(run=[0] * 24).assign_coords(run=np.arange(24))
+    kept = cut_windows(day, window=900, settle=10, max_seconds=3600)
+    assert [r for r, _ in kept.origin] == [0, 8, 15, 23]
+    assert [t for _, t in kept.origin] == [0.0, 0.0, 2700.0, 2700.0]

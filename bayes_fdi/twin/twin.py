@@ -142,6 +142,10 @@ class ActuatorTwin(BaseEstimator):
         """
         t_start = time.perf_counter()
         priors = self._check_settings()
+        if "state" in healthy.coords:
+            faulty = sorted(set(map(str, healthy["state"].values)) - {"fn"})
+            if faulty:
+                raise ValueError(f"the twin is fitted on healthy runs only; found states {faulty}")
         names = tuple(priors)
         windows = cut_windows(
             healthy, window=int(self.window), settle=int(self.settle),
