@@ -9,7 +9,7 @@ import xarray as xr
 
 from bayes_fdi.actuator import model
 from bayes_fdi.actuator.faults import FAULT_NAMES, Fault
-from bayes_fdi.actuator.parameters import ActuatorParameters, parameter_matrix
+from bayes_fdi.actuator.parameters import P_RANGE, T_RANGE, ActuatorParameters, parameter_matrix
 from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS, validate_dataset
 from bayes_fdi.memory import check_memory
 
@@ -20,7 +20,7 @@ __all__ = ["NOISE_STD", "inject_faults", "simulate", "simulate_replicas"]
 #: 0.0025 sin(2 pi 50 t), which is exactly 0 at the 1 s sampling instants.
 NOISE_STD = float(np.sqrt(5e-9 / 0.0025))
 
-_SCALE = {"CV": 1.0, "P1": model.P_RANGE, "P2": model.P_RANGE, "T1": model.T_RANGE}
+_SCALE = {"CV": 1.0, "P1": P_RANGE, "P2": P_RANGE, "T1": T_RANGE}
 #: float64 values held per (run, second) at the peak of `simulate` / `inject_faults`: inputs (4),
 #: model outputs (5) and states (4), noise (5), the output dataset (6) and its deep copy (6)
 _VALUES_PER_SAMPLE = 30
