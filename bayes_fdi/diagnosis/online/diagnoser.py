@@ -440,7 +440,8 @@ class OnlineDiagnoser(BaseEstimator):
             The decision stream, with the recording's ``run`` and ``time`` coordinates (and
             its other coordinates over them; one named like a variable, such as the truth
             label ``state``, is renamed ``true_<name>``), ``group`` (the isolability groups'
-            labels, members joined by ``|``) and ``fault`` (f1 .. f19). Per run and second:
+            labels, members joined by ``|``) and ``fault`` (f1 .. f19, then the faults of one
+            reading the model knows, such as ``bias_X``). Per run and second:
 
             - ``DD`` (bool): the detection decision; ``FFID`` (bool): fault-free indication,
               not DD and no channel missing;

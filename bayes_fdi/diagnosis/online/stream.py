@@ -178,8 +178,9 @@ def assemble_stream(
     ``recording``, which has a ``run`` dimension).
 
     ``faults`` are the columns of the quantities' ``fault_proba`` (the classifier's faults):
-    the stream's ``fault_proba`` has one column per fault of `FAULTS`, 0 once detected for a
-    fault the classifier does not know. Coordinates of ``recording`` over ``run`` and ``time``
+    the stream's ``fault_proba`` has one column per fault of `FAULTS` (0 once detected for a
+    fault the classifier does not know), then one per other fault it knows (a fault of one
+    reading, such as ``bias_X``). Coordinates of ``recording`` over ``run`` and ``time``
     are kept, those named like a stream variable (a truth label such as ``state``) renamed
     ``true_<name>``.
     """
@@ -190,10 +191,11 @@ def assemble_stream(
     z = per_run[0][1]["z"] if per_run else 1.96
     dims = ("run", "time")
     fault_cols = {f: j for j, f in enumerate(faults)}
-    fault = np.full((len(per_run), n_times, len(FAULTS)), np.nan)
+    axis = (*FAULTS, *(f for f in faults if f not in FAULTS))  # then faults of one reading
+    fault = np.full((len(per_run), n_times, len(axis)), np.nan)
     if per_run and faults:
         fq = stack("fault_proba", 0)
-        for k, f in enumerate(FAULTS):
+        for k, f in enumerate(axis):
             if f in fault_cols:
                 fault[:, :, k] = fq[:, :, fault_cols[f]]
             else:  # undetectable or untrained faults: probability 0 once detected
@@ -220,7 +222,7 @@ def assemble_stream(
     for k in [k for k in coords if k in data]:  # a truth label such as `state` is kept
         coords[f"true_{k}"] = coords.pop(k)
     coords["group"] = np.asarray(group_labels, dtype=str)
-    coords["fault"] = np.asarray(FAULTS, dtype=str)
+    coords["fault"] = np.asarray(axis, dtype=str)
     out = xr.Dataset(data, coords=coords)
     out.attrs.update(attrs)
     return out
