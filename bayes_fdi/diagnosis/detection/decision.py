@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import check_state, working_state
 
 __all__ = ["DecisionState", "DetectionDecision", "detection_decision"]
 
@@ -114,11 +114,7 @@ class DetectionDecision:
         s = np.ascontiguousarray(np.asarray(stats, dtype=np.float64))
         if s.ndim != 2 or s.shape[1] != self.n_channels:
             raise ValueError(f"stats must be (n, {self.n_channels}), got shape {s.shape}")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        state = working_state(self, state)
         dd = np.zeros(s.shape[0], dtype=np.bool_)
         _decision_kernel(s, float(self.threshold), float(self.clear), state, dd)
         return dd, state

@@ -39,7 +39,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import (
+    check_state,
+    one_sequence,
+    working_state,
+)
 from bayes_fdi.diagnosis.detection.thresholds import calibrate_threshold, cusum_threshold
 
 __all__ = [
@@ -184,14 +188,8 @@ class _SequentialTest:
             The state after the last innovation.
         """
         self._check_params()
-        x = np.ascontiguousarray(np.asarray(e, dtype=np.float64))
-        if x.ndim != 1:
-            raise ValueError(f"expected one sequence (1-D), got shape {x.shape}")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        x = one_sequence(e)
+        state = working_state(self, state)
         stat = np.empty_like(x)
         since = np.empty(x.size, dtype=np.float64)
         self._kernel(x, state, stat, since)

@@ -58,7 +58,7 @@ import xarray as xr
 from sklearn.base import BaseEstimator
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import check_state, working_state
 from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     NormalModelsParams,
@@ -415,11 +415,7 @@ class DynamicNormalModels(BaseEstimator):
         )
         if cv.ndim != 1 or p1.shape != cv.shape or p2.shape != cv.shape:
             raise ValueError("CV, P1 and P2 must be (n,) sequences of one length")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        state = working_state(self, state)
         out = np.empty((cv.size, 5))
         predict_seconds(cv, p1, p2, self.params_, state, out)
         return out, state

@@ -23,7 +23,7 @@ import numpy as np
 import xarray as xr
 from numba import njit
 
-from bayes_fdi.diagnosis.component_state import check_state, writable_copy
+from bayes_fdi.diagnosis.component_state import check_state, working_state
 from bayes_fdi.diagnosis.isolation.signatures import INPUT_REFERENCE_SECONDS
 
 __all__ = ["ENVELOPE_CHANNELS", "INPUT_MARGIN_FLOOR", "EnvelopeState", "InputEnvelope"]
@@ -186,11 +186,7 @@ class InputEnvelope:
         dd = np.ascontiguousarray(np.asarray(detected, dtype=np.bool_))
         if x.ndim != 2 or x.shape[1] != 4 or dd.shape != (x.shape[0],):
             raise ValueError(f"inputs must be (n, 4) and detected (n,), got {x.shape}, {dd.shape}")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        state = working_state(self, state)
         out = np.zeros(dd.size, dtype=np.bool_)
         low, high = np.ascontiguousarray(self.low_), np.ascontiguousarray(self.high_)
         _onset_kernel(dd, x, low, high, 1.0 / self.reference_seconds, state, out)
