@@ -54,12 +54,13 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.datasets.csv_columns import read_csv_columns
 from bayes_fdi.datasets.format import CHANNELS, validate_dataset
 from bayes_fdi.datasets.time_grid import (
     RESAMPLE_METHODS,
@@ -71,13 +72,14 @@ from bayes_fdi.datasets.time_grid import (
     warn_gaps,
 )
 from bayes_fdi.datasets.units import (
-    _ALIASES,
     PHYSICAL_UNITS,
+    UNIT_ALIASES,
     UNITS,
-    _units_attr,
+    check_plausible_units,
     normalise,
     parse_units,
     to_physical,
+    units_attribute,
 )
 
 __all__ = [
@@ -119,15 +121,22 @@ def _build(
     source: str,
     fmt: str,
     attrs: Mapping[str, Any] | None = None,
+    check_units: bool = True,
+    label: Callable[[int], str] | None = None,
 ) -> xr.Dataset:
     """Normalise, put on the 1-s grid, and wrap into an unlabelled one-run dataset."""
     unit_of = parse_units(units)
+    name_of = label or (lambda i: f"sample {i + 1}")
     for name, values in raw.items():
         if np.isinf(values).any():
             row = int(np.flatnonzero(np.isinf(values))[0])
-            raise ValueError(f"{source}: {name} of sample {row + 1} is infinite")
-    normalised = {name: normalise(raw[name], name, unit_of[name]) for name in CHANNELS}
-    grid, channels, info = to_second_grid(time, normalised, resample, source)
+            raise ValueError(f"{source}: {name} of {name_of(row)} is infinite")
+    # the raw values are let go one by one (the readers hand over their arrays)
+    normalised = {name: normalise(raw.pop(name), name, unit_of[name]) for name in CHANNELS}
+    if check_units:
+        check_plausible_units(xr.Dataset({c: ("time", v) for c, v in normalised.items()}),
+                              unit_of, source)  # fmt: skip
+    grid, channels, info = to_second_grid(time, normalised, resample, source, label, copy=False)
     gaps = gap_summary(grid, channels)
     ds = xr.Dataset(
         {name: (("run", "time"), channels[name][None, :]) for name in CHANNELS},
@@ -135,7 +144,7 @@ def _build(
         attrs={
             "source": source,
             "format": fmt,
-            "units": _units_attr(unit_of),
+            "units": units_attribute(unit_of),
             "sampling_step": info["sampling_step"],
             "resampled": info["resampled"],
             "gaps": json.dumps(gaps),
@@ -195,6 +204,7 @@ def read_csv(
     resample: str | None = None,
     rate: float | None = None,
     delimiter: str | None = None,
+    check_units: bool = True,
 ) -> xr.Dataset:
     """Read a CSV recording (see the module docstring for the rules).
 
@@ -212,64 +222,26 @@ def read_csv(
         Samples per second, for a file without a time column.
     delimiter
         Column separator; default ``","`` (``"\\t"`` for ``.tsv``).
+    check_units
+        Refuse values implausible in the declared units
+        (`bayes_fdi.datasets.units.check_plausible_units`); ``False`` reads them as they are.
 
     Returns
     -------
     xarray.Dataset
         An unlabelled one-run dataset (attrs ``source``, ``format``, ``units``, ``gaps``,
-        ``ignored_columns``, ``resampled``, ``sampling_step``, and ``time_origin`` for
-        date-times).
+        ``ignored_columns``, ``resampled``, ``sampling_step``, and for date-times
+        ``time_origin``, with ``time_offsets`` where they carry UTC offsets).
     """
-    import pandas as pd
-
     source = os.fspath(path)
+    if not os.path.exists(source):
+        raise FileNotFoundError(2, "no such file", source)
     sep = delimiter or ("\t" if source.lower().endswith(".tsv") else ",")
-    try:
-        frame = pd.read_csv(
-            source, sep=sep, dtype=str, keep_default_na=False, skipinitialspace=True
-        )
-    except pd.errors.EmptyDataError:
-        raise ValueError(f"{source}: the file is empty") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{source}: not a readable CSV file ({exc})") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
-    chosen, ignored = _pick_columns(list(frame.columns), columns, source, rate)
-    raw = {name: _numbers(frame[chosen[name]], chosen[name], source) for name in CHANNELS}
-    attrs: dict[str, Any] = {"ignored_columns": json.dumps(ignored)}
-    if "time" in chosen:
-        column = frame[chosen["time"]].str.strip()
-        if (column == "").any():
-            row = int(np.flatnonzero((column == "").to_numpy())[0])
-            raise ValueError(f"{source}: line {row + 2}: the time cell is empty")
-        try:
-            time = column.astype(np.float64).to_numpy()
-            origin = ""
-        except ValueError:
-            time, origin = to_seconds(column.to_numpy(dtype=object), source)
-        if origin:
-            attrs["time_origin"] = origin
-    else:
-        time = _rate_time(len(frame), rate)
-    return _build(time, raw, units, resample, source, "csv", attrs)
-
-
-def _numbers(column: Any, name: str, source: str) -> np.ndarray:
-    """Cells as floats: empty or NaN cells are NaN; anything else must be a number."""
-    text = column.str.strip()
-    blank = text.isin(["", "NaN", "nan", "NA", "N/A"]).to_numpy()
-    values = np.full(len(text), np.nan)
-    import pandas as pd
-
-    parsed = pd.to_numeric(text.where(~blank), errors="coerce").to_numpy(dtype=np.float64)
-    bad = np.isnan(parsed) & ~blank
-    if bad.any():
-        row = int(np.flatnonzero(bad)[0])
-        raise ValueError(
-            f"{source}: line {row + 2}, column {name!r}: {text.iloc[row]!r} is not a number "
-            "(write gaps as an empty cell or NaN)"
-        )
-    values[~blank] = parsed[~blank]
-    return values
+    read = read_csv_columns(source, sep, lambda names: _pick_columns(names, columns, source, rate))
+    time = read.time if read.time is not None else _rate_time(read.lines.size, rate)
+    return _build(
+        time, read.channels, units, resample, source, "csv", read.attrs, check_units, read.label
+    )
 
 
 def read_mat(
@@ -279,6 +251,7 @@ def read_mat(
     units: str | Mapping[str, str] = "normalised",
     resample: str | None = None,
     rate: float | None = None,
+    check_units: bool = True,
 ) -> xr.Dataset:
     """Read a MATLAB recording: one vector variable per channel (v5 via scipy, v7.3 via h5py).
 
@@ -324,7 +297,7 @@ def read_mat(
     n = next(iter(lengths.values()))
     time = vectors.pop("time") if "time" in vectors else _rate_time(n, rate)
     attrs = {"ignored_columns": json.dumps(ignored)}
-    return _build(time, vectors, units, resample, source, fmt, attrs)
+    return _build(time, vectors, units, resample, source, fmt, attrs, check_units)
 
 
 def read_netcdf(
@@ -334,12 +307,15 @@ def read_netcdf(
     units: str | Mapping[str, str] = "normalised",
     resample: str | None = None,
     chunks: Mapping[str, int] | None = None,
+    check_units: bool = True,
 ) -> xr.Dataset:
     """Read a netCDF recording (see the module docstring).
 
     Parameters are those of :func:`read_csv`, plus ``chunks`` (e.g. ``{"time": 86400}``): keep
     the data lazy in dask chunks (needs dask; the 1-s grid and units are checked, the values are
-    read chunk by chunk by the diagnosis). A lazy recording must already be on the 1-s grid.
+    read chunk by chunk by the diagnosis). A lazy recording must already be on the 1-s grid;
+    its units are checked on its first :data:`LAZY_UNITS_SAMPLE` seconds. A dataset already in
+    the project's format is taken as normalised (its units are not checked).
     """
     source = os.fspath(path)
     if not os.path.exists(source):
@@ -361,7 +337,7 @@ def read_netcdf(
     unit_of = parse_units(units)
     for name in CHANNELS:
         declared = opened[chosen[name]].attrs.get("units")
-        if declared is not None and _ALIASES.get(str(declared), str(declared)) != unit_of[name]:
+        if declared is not None and UNIT_ALIASES.get(str(declared), str(declared)) != unit_of[name]:
             raise ValueError(
                 f"{source}: variable {chosen[name]!r} declares units {declared!r} but "
                 f"{name} was given as {unit_of[name]!r} ('1' = normalised); pass units= to match"
@@ -371,12 +347,18 @@ def read_netcdf(
     if origin:
         attrs["time_origin"] = origin
     if chunks:
-        return _lazy(opened, chosen, unit_of, time, source, attrs)
+        lazy = _lazy(opened, chosen, unit_of, time, source, attrs)
+        if check_units:
+            head = lazy.isel(time=slice(0, LAZY_UNITS_SAMPLE)).load()
+            check_plausible_units(head, unit_of, source)
+        return lazy
     raw = {name: np.asarray(opened[chosen[name]].values, dtype=np.float64) for name in CHANNELS}
     opened.close()
-    return _build(time, raw, unit_of, resample, source, "netcdf", attrs)
+    return _build(time, raw, unit_of, resample, source, "netcdf", attrs, check_units)
 
 
+#: Seconds at the start of a lazily read recording whose units are checked.
+LAZY_UNITS_SAMPLE = 86400
 #: Chunk cache (bytes) of each variable of a lazily read netCDF file: netCDF's default of 64 MB
 #: per variable fills up as a long recording is read chunk by chunk (384 MB for six channels).
 LAZY_CHUNK_CACHE = 16 * 2**20
@@ -446,7 +428,7 @@ def _lazy(
         attrs={
             "source": source,
             "format": "netcdf",
-            "units": _units_attr(unit_of),
+            "units": units_attribute(unit_of),
             "sampling_step": 1.0,
             "resampled": "no",
             **attrs,
