@@ -2,8 +2,8 @@
 
 Arbitrary finite values (with NaN gaps) written to a CSV file at 1 Hz come back exactly, in
 the project's format, whatever their magnitude (read with ``check_units=False``: values
-implausible in their declared units are refused otherwise, see ``test_readers_bad_inputs.py``). A short
-profile in the default run and a seeded long one under the ``fuzz`` marker (also ``slow``).
+implausible in their declared units are refused otherwise, see ``test_bad_inputs_readers.py``).
+A short profile in the default run and a seeded long one under the ``fuzz`` marker (also ``slow``).
 """
 
 from __future__ import annotations

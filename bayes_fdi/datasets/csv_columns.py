@@ -12,7 +12,7 @@
 - the file is read as text in chunks of :data:`CHUNK_ROWS` lines, each chunk's used columns turned
   into numbers at once: memory holds the numbers (8 bytes a cell) and one chunk of text, never
   the whole file as text; the memory this needs, estimated from the file's size, is checked
-  before reading (`bayes_fdi.memory.check_memory`);
+  before reading (`bayes_fdi.datasets.time_grid.check_recording_memory`);
 - empty lines are skipped; every message names the file's line;
 - the time column holds seconds or ISO date-times (`bayes_fdi.datasets.time_grid.parse_date_times`:
   with UTC offsets they are instants in UTC, the offsets met kept in ``time_offsets``).
@@ -32,8 +32,11 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from bayes_fdi.datasets.format import CHANNELS
-from bayes_fdi.datasets.time_grid import date_time_origin, parse_date_times
-from bayes_fdi.memory import InsufficientMemoryError, check_memory
+from bayes_fdi.datasets.time_grid import (
+    check_recording_memory,
+    date_time_origin,
+    parse_date_times,
+)
 
 __all__ = ["BLANK_CELLS", "CHUNK_ROWS", "CsvColumns", "read_csv_columns"]
 
@@ -116,14 +119,9 @@ def _check_memory(source: str, n_used: int) -> None:
     size = os.path.getsize(source)
     with open(source, "rb") as handle:
         sample = handle.read(_SAMPLE_BYTES)
-    rows = size / max(len(sample), 1) * max(sample.count(b"\n"), 1)
-    try:
-        check_memory(rows * (n_used + 1) * 8 * 3, f"reading {source} (about {rows:.3g} rows)")
-    except InsufficientMemoryError as exc:
-        raise InsufficientMemoryError(
-            f"{exc}: split the recording into shorter files, or write it as netCDF on the 1-s "
-            "grid and read it lazily (chunks=)"
-        ) from None
+    whole = sample[: sample.rfind(b"\n") + 1]  # the lines read whole
+    rows = size / max(len(whole), 1) * max(whole.count(b"\n"), 1)
+    check_recording_memory(rows * (n_used + 1) * 8 * 3, f"reading {source} (about {rows:.3g} rows)")
 
 
 def _numbers(text: Any, name: str, source: str, lines: np.ndarray) -> np.ndarray:
@@ -237,7 +235,8 @@ def read_csv_columns(
             f"header names {width} columns"
         )
     stripped = [n.strip() for n in names]
-    chosen, ignored = choose([n for n in dict.fromkeys(stripped) if n])
+    chosen, _ = choose([n for n in dict.fromkeys(stripped) if n])
+    ignored = [n for n in stripped if n and n not in chosen.values()]  # each column once
     for positions in _duplicates(names).values():
         used = [c for c, column in chosen.items() if column == stripped[positions[0]]]
         if used:

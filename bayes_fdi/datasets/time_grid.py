@@ -9,7 +9,7 @@ with a `RecordingGapWarning`.
 
 Before the grid is allocated, `to_second_grid` refuses a time span that one jump makes far longer
 than the samples suggest (a mistyped timestamp: :data:`MAX_SPAN_RATIO`) and checks the grid's
-memory against the memory available (`bayes_fdi.memory.check_memory`).
+memory against the memory available (`check_recording_memory`).
 
 Date-times with UTC offsets are instants: they are converted to UTC, so that seconds between them
 are exact across a daylight-saving switch (``+01:00`` then ``+02:00``); the first timestamp (with
@@ -30,7 +30,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from bayes_fdi.datasets.format import CHANNELS
-from bayes_fdi.memory import InsufficientMemoryError, check_memory
+from bayes_fdi.memory import InsufficientMemoryError, available_memory, format_bytes
 
 __all__ = [
     "MAX_SPAN_RATIO",
@@ -39,6 +39,7 @@ __all__ = [
     "TIME_TOLERANCE",
     "DateTimes",
     "RecordingGapWarning",
+    "check_recording_memory",
     "date_time_origin",
     "gap_summary",
     "parse_date_times",
@@ -180,18 +181,27 @@ def _check_span(time: np.ndarray, typical: float, source: str, name: Callable[[i
     )
 
 
+def check_recording_memory(n_bytes: float, what: str) -> None:
+    """Raise `InsufficientMemoryError` if reading a recording needs more than is available.
+
+    As `bayes_fdi.memory.check_memory`, with advice for recordings: shorter files, or netCDF
+    read lazily.
+    """
+    available = available_memory()
+    if available is not None and n_bytes > available:
+        raise InsufficientMemoryError(
+            f"{what} needs about {format_bytes(n_bytes)} of memory, more than the "
+            f"{format_bytes(available)} available: split the recording into shorter files, or "
+            "write it as netCDF on the 1-s grid and read it lazily (chunks=)"
+        )
+
+
 def _check_grid_memory(n_seconds: float, n_channels: int, source: str) -> None:
     """The grid's channels, its time and the temporaries of the gap summary must fit."""
-    try:
-        check_memory(
-            n_seconds * 8.0 * (n_channels + 2),
-            f"{source}: {n_seconds:.6g} s on the 1-s grid x {n_channels} channels",
-        )
-    except InsufficientMemoryError as exc:
-        raise InsufficientMemoryError(
-            f"{exc}: split the recording into shorter files, or write it as netCDF on the 1-s "
-            "grid and read it lazily (chunks=)"
-        ) from None
+    check_recording_memory(
+        n_seconds * 8.0 * (n_channels + 2),
+        f"{source}: {n_seconds:.6g} s on the 1-s grid x {n_channels} channels",
+    )
 
 
 def to_second_grid(
