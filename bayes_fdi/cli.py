@@ -43,6 +43,14 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "rvm-demo": ("bayes_fdi.rvm.demo", "fit an RVM on a small sinc problem and print it"),
     "fit": ("bayes_fdi.deployment.fitting", "fit an online diagnoser and save it to a file"),
     "diagnose": ("bayes_fdi.deployment.diagnose", "diagnose recordings, 1 s at a time"),
+    "serve": (
+        "bayes_fdi.deployment.serve.service",
+        "diagnose valves live over OPC UA: read the plant, publish SEVA records, log, live page",
+    ),
+    "simulate-plant": (
+        "bayes_fdi.deployment.serve.plant_simulator",
+        "run the actuator model as an OPC UA plant server (1 Hz or faster, scheduled faults)",
+    ),
 }
 
 

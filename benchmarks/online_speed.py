@@ -1,4 +1,4 @@
-"""Speed of the online diagnoser (issue 13's targets): ``run`` samples per CPU second and
+"""Speed of the online diagnoser against its targets: ``run`` samples per CPU second and
 ``update`` milliseconds per sample, one thread.
 
     OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/online_speed.py \

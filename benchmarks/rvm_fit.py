@@ -228,7 +228,7 @@ OURS = "bayes_fdi"
 
 @dataclass(frozen=True)
 class Targets:
-    """Acceptance targets for bayes_fdi (issue text).
+    """Acceptance targets for bayes_fdi's fits.
 
     ``fit_seconds``: CPU seconds at N; ``peak_mb``: peak RSS at N; ``rmse_ratio``: test RMSE /
     the best peer's at every N; ``speedup``: at N, the fastest peer's CPU seconds / ours;

@@ -1,4 +1,4 @@
-"""A small test double of the online diagnoser's contract (``ONLINE_CONTRACT.md``), for tests only.
+"""A test double of the online diagnoser (the stream of ``OnlineDiagnoser.run``), for tests only.
 
 Linear normal models of X and F (least squares on fault-free runs), a two-sided CUSUM on the
 standardised residuals with hysteresis, and a two-group isolation by which residual moved more

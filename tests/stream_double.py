@@ -1,6 +1,7 @@
-"""A small stand-in for the online diagnoser (``ONLINE_CONTRACT.md``), for the tests of the
-recording pipeline only: it produces every variable of the decision stream and carries its
-stream state across time chunks (``run(chunk, state=..., return_state=True)``).
+"""A small stand-in for the online diagnoser (the stream of ``OnlineDiagnoser.run``, listed in
+``docs/online.md``), for the tests of the recording pipeline only: it produces every variable of
+the decision stream and carries its stream state across time chunks
+(``run(chunk, state=..., return_state=True)``).
 
 Linear normal models of X and F on (1, CV, CV one second earlier, sqrt(P1 - P2), T1), fitted by
 least squares on fault-free runs; a one-sided CUSUM of each absolute standardised residual

@@ -14,7 +14,7 @@ from bayes_fdi.actuator import (
 from bayes_fdi.datasets.lublin import load_lublin_example
 
 #: Mean change of X' / F' at strength 0.75 under DGen inputs over a 200 s window, from
-#: shared/reference/damadics-actuator-model.md §3 (measured on DABLib). f15: "not yet measured".
+#: the table of docs/damadics.md (measured on DABLib v1.22's model). f15: not measured there.
 REFERENCE_SIGNATURES = {
     "f1": (-0.26, 0.36),
     "f2": (0.0, -0.25),

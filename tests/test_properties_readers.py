@@ -1,4 +1,4 @@
-"""Property-based tests of the recording readers (`bayes_fdi.datasets.readers`, deploy branch).
+"""Property-based tests of the recording readers (`bayes_fdi.datasets.readers`).
 
 Arbitrary finite values (with NaN gaps) written to a CSV file at 1 Hz come back exactly, in
 the project's format, whatever their magnitude (read with ``check_units=False``: values

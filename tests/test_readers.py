@@ -23,7 +23,7 @@ from bayes_fdi.datasets.readers import (
     to_physical,
 )
 
-# DABLib's ranges (shared/reference/damadics-actuator-model.md §1): P' = P / 4 MPa,
+# DABLib's ranges (docs/damadics.md, "Signals and their normalisation"): P' = P / 4 MPa,
 # T1' = T1 / 200 degC, F' = F / 40 t/h, X' and CV' = % / 100.
 RANGES = {"CV": 100.0, "P1": 4000.0, "P2": 4000.0, "T1": 200.0, "X": 100.0, "F": 40.0}
 

@@ -2,12 +2,13 @@
 
 :func:`write_report` takes the results dictionary of
 :func:`bayes_fdi.benchmark.harness.run_benchmark` and writes ``benchmark.json`` and
-``benchmark.md`` atomically: the targets of issue 13 against what was measured, the median and
+``benchmark.md`` atomically: the product's targets against what was measured, the median and
 spread over seeds of every PICalc index per scenario, what each fault does to the measured
 signals against the noise (and so which faults no method can detect from CV, P1, P2, T1, X, F),
 the group-level calibration of the per-second isolation probabilities, the false alarms on
 simulated fault-free hours and on the real Lublin hour, and the published DAMADICS results side by
-side (from ``shared/reference/damadics-benchmark-protocol.md`` §1.5).
+side (:data:`PUBLISHED`, listed with their citations on the DAMADICS page of the documentation,
+``docs/damadics.md``).
 """
 
 from __future__ import annotations
@@ -33,7 +34,8 @@ __all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "render_report", "summarise", "
 #: (alpha = 1 / 28 800, z = 3.97) and detecting with 84 % probability needs d >= 3.97 + 1.
 DETECTABLE_DEFLECTION = 5.0
 
-#: Published DAMADICS results, as the protocol file lists them (method, source, data, figures).
+#: Published DAMADICS results (method, source, data, figures), as the DAMADICS page of the
+#: documentation (``docs/damadics.md``) lists them with their citations.
 PUBLISHED: tuple[tuple[str, str, str, str], ...] = (
     (
         "RVM residuals + k-means tree of RVCs",
@@ -391,7 +393,7 @@ def render_report(results: Mapping[str, Any]) -> str:
         f"{timing['run_samples']:,} samples"
         + (f"; training took {s['fit_wall_s']:.0f} s wall." if "fit_wall_s" in s else "."),
         "",
-        "## Targets (issue 13)",
+        "## Targets",
         "",
         markdown_table(["target", "measured", "met"], _targets(results, summary)),
         "## Indices per scenario",

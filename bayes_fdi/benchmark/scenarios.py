@@ -1,7 +1,9 @@
 """The 44 Step-I scenarios of the DAMADICS benchmark and its fault-free false-alarm hours.
 
-The scenarios follow the benchmark's own definition ([MAN] Tables 28-29 and the PICalc mask
-of DABLib, summarised in ``shared/reference/damadics-benchmark-protocol.md`` §1.2):
+The scenarios follow the benchmark's own definition (the DABLib v1.22 manual, Bartyś & Syfert,
+Warsaw University of Technology, 2002, Tables 28-29, and the mask of DABLib's PICalc block),
+summarised with their citations on the DAMADICS page of the documentation
+(``docs/damadics.md``, "The 44 Step-I scenarios"):
 
 - the actuator stands alone, driven by DGen's sines without variation
   (:func:`bayes_fdi.actuator.benchmark_inputs`);

@@ -14,11 +14,13 @@
 from bayes_fdi.datasets.format import (
     CHANNELS,
     INPUT_CHANNELS,
+    MEASUREMENT_FAULTS,
     OUTPUT_CHANNELS,
     STATES,
     load_dataset,
     make_dataset,
     save_dataset,
+    state_order,
     validate_dataset,
 )
 from bayes_fdi.datasets.lublin import (
@@ -33,6 +35,7 @@ __all__ = [
     "CHANNELS",
     "INPUT_CHANNELS",
     "LUBLIN_FAULT_EVENTS",
+    "MEASUREMENT_FAULTS",
     "OUTPUT_CHANNELS",
     "STATES",
     "find_gaps",
@@ -42,5 +45,6 @@ __all__ = [
     "make_dataset",
     "read_recording",
     "save_dataset",
+    "state_order",
     "validate_dataset",
 ]

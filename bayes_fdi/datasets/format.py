@@ -33,11 +33,13 @@ from bayes_fdi.memory import format_bytes
 __all__ = [
     "CHANNELS",
     "INPUT_CHANNELS",
+    "MEASUREMENT_FAULTS",
     "OUTPUT_CHANNELS",
     "STATES",
     "load_dataset",
     "make_dataset",
     "save_dataset",
+    "state_order",
     "validate_dataset",
 ]
 
@@ -45,6 +47,11 @@ INPUT_CHANNELS: tuple[str, ...] = ("CV", "P1", "P2", "T1")
 OUTPUT_CHANNELS: tuple[str, ...] = ("X", "F")
 CHANNELS: tuple[str, ...] = INPUT_CHANNELS + OUTPUT_CHANNELS
 STATES: tuple[str, ...] = ("fn", *(f"f{i}" for i in range(1, 20)))
+#: Faults of one measurement alone, beside the DAMADICS faults: the reading of X, F, P1 or P2
+#: offset by a bias (profile "abrupt") or a drift (profile "incipient"); made by
+#: `bayes_fdi.twin.transplant` (DAMADICS's own sensor faults are f13, in the positioner's loop,
+#: and f19, a gain of the flow reading).
+MEASUREMENT_FAULTS: tuple[str, ...] = ("bias_X", "bias_F", "bias_P1", "bias_P2")
 PROFILES: tuple[str, ...] = ("abrupt", "incipient")
 RUN_COORDS: tuple[str, ...] = ("state", "strength", "onset", "profile", "ramp")
 #: File-name endings :func:`save_dataset` accepts (netCDF).
@@ -244,9 +251,12 @@ def validate_dataset(
             if not np.all(np.isfinite(values)):
                 raise ValueError(f"coordinate {name!r} contains NaN or inf")
     if "state" in ds.coords:
-        bad = sorted(set(map(str, ds["state"].values)) - set(STATES))
+        bad = sorted(set(map(str, ds["state"].values)) - set(STATES) - set(MEASUREMENT_FAULTS))
         if bad:
-            raise ValueError(f"unknown state label(s) {bad}; states are fn, f1..f19")
+            raise ValueError(
+                f"unknown state label(s) {bad}; states are fn, f1..f19, "
+                + ", ".join(MEASUREMENT_FAULTS)
+            )
     if "profile" in ds.coords:
         bad = sorted(set(map(str, ds["profile"].values)) - set(PROFILES))
         if bad:
@@ -342,3 +352,15 @@ def load_dataset(path: str | os.PathLike) -> xr.Dataset:
         if name in ds.coords:
             ds = ds.assign_coords({name: ("run", ds[name].values.astype(str))})
     return validate_dataset(ds, require=(), allow_nan=True)
+
+
+def state_order(state: str) -> tuple[int, int, str]:
+    """Sort key of state labels: ``fn``, then ``f1`` .. ``f19`` by number, then the measurement
+    faults in the order of `MEASUREMENT_FAULTS`, then any other label alphabetically."""
+    if state == "fn":
+        return (0, 0, state)
+    if state in STATES:
+        return (1, int(state[1:]), state)
+    if state in MEASUREMENT_FAULTS:
+        return (2, MEASUREMENT_FAULTS.index(state), state)
+    return (3, 0, state)

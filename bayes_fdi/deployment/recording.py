@@ -33,6 +33,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.atomic import atomic_folder
 from bayes_fdi.datasets import CHANNELS, validate_dataset
 from bayes_fdi.deployment.lublin_events import (
     event_summary,
@@ -53,6 +54,7 @@ __all__ = [
     "DEFAULT_CHUNK_SECONDS",
     "RecordingResult",
     "diagnose_recording",
+    "isolation_summary",
     "supports_chunks",
 ]
 
@@ -150,11 +152,66 @@ def diagnose_recording(
             f"{name}: {n_t} s is longer than one chunk ({chunk} s) and {type(diagnoser).__name__}"
             ".run cannot carry its state across chunks; give a larger chunk_seconds"
         )
-    folder = Path(out) / name
-    folder.mkdir(parents=True, exist_ok=True)
-    csv = StreamCSVWriter(folder / "seva.csv", several_runs=n_runs > 1)
+    destination = Path(out) / name
+    with atomic_folder(destination) as folder:
+        counts, found, files = _write_outputs(
+            diagnoser,
+            recording,
+            folder,
+            name,
+            attrs,
+            chunk,
+            chunked,
+            collector,
+            figure,
+            progress,
+            model_info,
+        )
+    return RecordingResult(
+        name, os.fspath(destination), int(n_t), int(n_runs), len(found), counts, tuple(files)
+    )
+
+
+def isolation_summary(diagnoser: Any) -> dict[str, Any]:
+    """What the model can name: ``detection_only`` (no fault library), its isolability
+    groups and the faults it treats as undetectable."""
+    detection_only = getattr(diagnoser, "isolator_", True) is None
+    groups = [list(g) for g in getattr(diagnoser, "groups_", ())]
+    return {
+        "detection_only": bool(detection_only),
+        "note": (
+            "detection only: this model has no fault library, so every alarm is an unknown "
+            "fault; commission the valve with faults (bayes-fdi commission) to name them"
+            if detection_only
+            else f"faults named up to {len(groups)} isolability groups"
+        ),
+        "groups": groups,
+        "undetectable": list(getattr(diagnoser, "undetectable_", ())),
+    }
+
+
+def _write_outputs(
+    diagnoser: Any,
+    recording: xr.Dataset,
+    folder: Path,
+    name: str,
+    attrs: Mapping[str, Any],
+    chunk: int,
+    chunked: bool,
+    collector: FigureCollector,
+    figure: bool,
+    progress: bool,
+    model_info: Mapping[str, Any] | None,
+) -> tuple[dict[str, int], list, list[str]]:
+    """Diagnose ``recording`` chunk by chunk into the files of ``folder``."""
+    n_runs, n_t = recording.sizes["run"], recording.sizes["time"]
+    isolation = isolation_summary(diagnoser)
+    detection_only = isolation["detection_only"]
+    csv = StreamCSVWriter(
+        folder / "seva.csv", several_runs=n_runs > 1, detection_only=detection_only
+    )
     nc = StreamNetCDFWriter(folder / "seva.nc", attrs={"recording": name})
-    alarms = AlarmCollector()
+    alarms = AlarmCollector(detection_only=detection_only)
     counts: dict[str, int] = {}
     bar = None
     if progress:
@@ -209,6 +266,7 @@ def diagnose_recording(
         "alarms": len(found),
         "alarm_seconds": float(sum(al.duration for al in found)),
         "model": dict(model_info or {}),
+        "isolation": isolation,
         "recording_attrs": {k: _json_value(v) for k, v in attrs.items()},
     }
     events = fault_events(attrs)
@@ -220,8 +278,7 @@ def diagnose_recording(
     files.append("summary.json")
     summary["files"] = files
     _write_json(summary, folder / "summary.json")
-    return RecordingResult(name, os.fspath(folder), int(n_t), int(n_runs), len(found), counts,
-                           tuple(files))  # fmt: skip
+    return counts, found, files
 
 
 def _json_value(value: Any) -> Any:

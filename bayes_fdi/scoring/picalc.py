@@ -2,8 +2,10 @@
 
 Written by hand: PICalc is a Simulink block of DABLib v1.22 and no maintained Python library
 computes the benchmark's indices. The definitions are those of the Benchmark Definition
-(App. II) and the DABLib manual (Table 35), summarised in
-``shared/reference/damadics-benchmark-protocol.md`` §1.4.
+([BD]: DAMADICS Research Training Network, Benchmark Definition v1.0, 2002, App. II) and the
+DABLib manual ([MAN]: Bartyś & Syfert, DABLib v1.22, Warsaw University of Technology, 2002,
+Table 35), summarised with their citations on the DAMADICS page of the documentation
+(``docs/damadics.md``, "Performance indices").
 
 Time zones (Step I): the set-up zone ``[0, t_on)`` is ignored; the benchmark zone is
 ``[t_on, t_hor)``, its fault-free part ``[t_on, t_from)`` and its faulty part ``[t_from, t_hor)``.
