@@ -11,6 +11,9 @@ giving the unit of every channel, e.g. ``{"CV": "%", "X": "%", "P1": "MPa", "P2"
 "T1": "K", "F": "kg/s"}`` (known units: :data:`UNITS`). The normalisation is DABLib's:
 ``P' = P / 4 MPa``, ``T1' = T1 / 200 degC``, ``F' = F / 40 t/h``, ``CV' = CV / 100 %``,
 ``X' = X / 100 %``. Nothing is clipped: a value outside the nominal range stays outside ``[0, 1]``.
+Values implausible by orders of magnitude in their declared units are refused, naming the likely
+units (`bayes_fdi.datasets.units.check_plausible_units`; ``check_units=False`` reads them as they
+are): the default ``"normalised"`` has no silent effect on physical-looking data.
 
 Sampling: the model runs at 1 Hz. A recording at another rate is an error unless the caller asks
 for resampling (``resample="mean"``: the mean of the samples in each second, for faster
@@ -20,16 +23,20 @@ most two sampling steps apart, for slower ones). A second whose samples include 
 no sample covers, is NaN. Missing timestamps at 1 Hz become NaN rows: gaps stay gaps (listed in
 the ``gaps`` attribute, warned with :class:`RecordingGapWarning`; the diagnosis marks those
 seconds BLIND). Nothing is filled or dropped; columns a reader does not use are listed in the
-``ignored_columns`` attribute.
+``ignored_columns`` attribute. A span that one jump makes over ten times what the samples cover
+(a mistyped timestamp) is refused, naming the sample, and a 1-s grid beyond the memory available
+too, before it is allocated (`bayes_fdi.datasets.time_grid`).
 
 Formats
 -------
 CSV (:func:`read_csv`)
     A header row naming the columns ``time, CV, P1, P2, T1, X, F`` (any order, other columns
     allowed), or a ``columns`` mapping from the file's names to the channels. ``time`` holds
-    seconds (or date-times, converted to seconds from the first row; the first is kept in the
-    ``time_origin`` attribute); without a time column give ``rate`` (Hz). Empty cells and ``NaN``
-    are gaps; any other non-number is an error naming its line and column.
+    seconds (or ISO date-times, converted to seconds from the first row; the first is kept in
+    the ``time_origin`` attribute; with UTC offsets they are instants in UTC, the offsets met
+    in ``time_offsets``); without a time column give ``rate`` (Hz). Empty cells and ``NaN``
+    are gaps; any other non-number is an error naming its line and column. Read in chunks;
+    duplicate names, trailing delimiters and shifted columns: `bayes_fdi.datasets.csv_columns`.
 MATLAB (:func:`read_mat`)
     One vector variable per channel (and ``time``), named as the channels or through
     ``columns``. v4/v5/v7 files are read with scipy, v7.3 (HDF5) files with h5py.
