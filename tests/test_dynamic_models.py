@@ -9,10 +9,9 @@ from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.diagnosis.normal_models.dynamic import (
     RAIL_TOL,
     DynamicNormalModels,
-    dynamic_inputs,
-    signed_root,
     standardised_residuals,
 )
+from bayes_fdi.diagnosis.normal_models.dynamic_kernel import dynamic_inputs, signed_root
 
 
 @pytest.fixture(scope="module")

@@ -92,7 +92,7 @@ def test_signature_state_is_checked_by_field():
 
 
 def test_groups_equal_the_paper_pipelines_find_groups(rng):
-    from bayes_fdi.paper.reproduce import find_groups
+    from bayes_fdi.paper.separability import find_groups
 
     states = [f"f{i}" for i in range(1, 9)]
     for _ in range(20):

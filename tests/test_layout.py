@@ -34,6 +34,7 @@ FLOORS: dict[str, int] = {
     "calibration": 7,
     "scoring": 7,
     "default_diagnoser": 8,
+    "commissioning": 8,
     # the applications, then the command line
     "paper": 9,
     "benchmark": 9,

@@ -15,7 +15,7 @@ from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 from bayes_fdi.diagnosis.online import InputEnvelope
-from bayes_fdi.diagnosis.seva.windows import SevaRecord, SevaStatus
+from bayes_fdi.diagnosis.seva.record import SevaRecord, SevaStatus
 
 CHANNELS = ("CV", "P1", "P2", "T1", "X", "F")
 
@@ -320,4 +320,36 @@ def test_a_detection_outside_the_training_envelope_is_dazzled(fitted, recording)
     records = [fitted.update({c: float(shifted[c].values[0, t]) for c in CHANNELS})
                for t in range(shifted.sizes["time"])]  # fmt: skip
     first = int(np.flatnonzero(dd)[0])
-    assert "outside the training envelope" in records[first].reasons[0]
+    assert records[first].reasons[0].startswith("model mismatch: commission this valve")
+    # a mismatch names no fault and indicates no group
+    assert set(s["state"].values[0][dd].astype(str)) == {"mismatch"}
+    assert not s["indicated"].values[0][dd].any()
+    assert np.isnan(s["probability"].values[0][dd]).all()
+
+
+def test_a_detection_from_the_first_second_is_judged_on_its_inputs(fitted, recording):
+    """The default model on a plant it never saw alarms at once: with no second without
+    detection to average, the first second's inputs decide whether the model fits."""
+    from bayes_fdi.diagnosis.online.envelope import InputEnvelope
+
+    envelope = InputEnvelope.from_bounds([0, 0, 0, 0], [1, 0.5, 0.5, 0.5])
+    inputs = np.full((5, 4), 0.2)
+    inputs[:, 3] = 0.7  # T1 above the envelope from the start
+    novel, _ = envelope.run(inputs, np.ones(5, dtype=bool))
+    assert novel.all()
+    inside, _ = envelope.run(np.full((5, 4), 0.2), np.ones(5, dtype=bool))
+    assert not inside.any()
+
+
+def test_evidence_names_the_residual_that_raised_the_detection_and_its_sign(fitted, recording):
+    s = fitted.run(recording)
+    dd = s["DD"].values
+    ev = s["evidence"].values.astype(str)
+    assert (ev[~dd] == "").all() and (ev[dd] != "").all()
+    # f1 (valve clogging) holds the stem below its command: X reads low; f18 (bypass open)
+    # adds flow: F reads high
+    onset = {1: 100, 2: 120}
+    for run, word in ((1, "X low"), (2, "F high")):
+        after = dd[run] & (s["time"].values >= onset[run] + 30)
+        values, counts = np.unique(ev[run][after], return_counts=True)
+        assert word in values[np.argmax(counts)], (run, dict(zip(values, counts, strict=True)))

@@ -26,8 +26,10 @@ __all__ = [
     "as_stack_of_one",
     "check_stacked_state",
     "check_state",
+    "one_sequence",
     "stack_states",
     "state_of_run",
+    "working_state",
     "writable_copy",
 ]
 
@@ -86,6 +88,23 @@ def check_stacked_state(state: Any, fresh: tuple, n_runs: int, what: str) -> Non
 def writable_copy(state: State) -> State:
     """A copy of ``state`` whose arrays a compiled kernel may update in place."""
     return type(state)(*(v.copy() if type(v) is np.ndarray else writable_copy(v) for v in state))
+
+
+def working_state(component: Any, state: Any) -> Any:
+    """The state a component's ``run`` starts from: its fresh state when ``state`` is None,
+    else a checked writable copy (the caller's state is never changed)."""
+    if state is None:
+        return component.init_state()
+    component.check_state(state)
+    return writable_copy(state)
+
+
+def one_sequence(values: Any) -> np.ndarray:
+    """``values`` as a contiguous float64 1-D array (a `ValueError` for another shape)."""
+    x = np.ascontiguousarray(np.asarray(values, dtype=np.float64))
+    if x.ndim != 1:
+        raise ValueError(f"expected one sequence (1-D), got shape {x.shape}")
+    return x
 
 
 def stack_states(states: Sequence[State]) -> State:

@@ -96,7 +96,7 @@ import numpy as np
 
 from bayes_fdi.atomic import atomic_path
 from bayes_fdi.model_files.codec import ModelDecoder, ModelEncoder
-from bayes_fdi.model_files.registry import register_persistable, resolve_class, stable_name
+from bayes_fdi.model_files.registry import resolve_class, stable_name
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
@@ -105,7 +105,6 @@ __all__ = [
     "MAX_METADATA_BYTES",
     "load",
     "read_metadata",
-    "register_persistable",
     "save",
 ]
 

@@ -21,6 +21,7 @@ from numba import njit
 from bayes_fdi.diagnosis.component_state import (
     check_stacked_state,
     check_state,
+    working_state,
     writable_copy,
 )
 
@@ -126,11 +127,7 @@ class DetectionDecision:
         s = np.ascontiguousarray(np.asarray(stats, dtype=np.float64))
         if s.ndim != 2 or s.shape[1] != self.n_channels:
             raise ValueError(f"stats must be (n, {self.n_channels}), got shape {s.shape}")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        state = working_state(self, state)
         dd = np.zeros(s.shape[0], dtype=np.bool_)
         _decision_kernel(s, float(self.threshold), float(self.clear), state, dd)
         return dd, state

@@ -42,6 +42,8 @@ from numba import njit
 from bayes_fdi.diagnosis.component_state import (
     check_stacked_state,
     check_state,
+    one_sequence,
+    working_state,
     writable_copy,
 )
 from bayes_fdi.diagnosis.detection.thresholds import calibrate_threshold, cusum_threshold
@@ -209,14 +211,8 @@ class _SequentialTest:
             The state after the last innovation.
         """
         self._check_params()
-        x = np.ascontiguousarray(np.asarray(e, dtype=np.float64))
-        if x.ndim != 1:
-            raise ValueError(f"expected one sequence (1-D), got shape {x.shape}")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        x = one_sequence(e)
+        state = working_state(self, state)
         stat = np.empty_like(x)
         since = np.empty(x.size, dtype=np.float64)
         self._kernel(x, state, stat, since)

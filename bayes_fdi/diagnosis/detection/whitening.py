@@ -26,6 +26,8 @@ from numba import njit
 from bayes_fdi.diagnosis.component_state import (
     check_stacked_state,
     check_state,
+    one_sequence,
+    working_state,
     writable_copy,
 )
 
@@ -215,14 +217,8 @@ class ARWhitener:
             The state after the last residual.
         """
         self._check()
-        x = np.ascontiguousarray(np.asarray(z, dtype=np.float64))
-        if x.ndim != 1:
-            raise ValueError(f"expected one sequence (1-D), got shape {x.shape}")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        x = one_sequence(z)
+        state = working_state(self, state)
         out = np.empty_like(x)
         _whiten_kernel(x, self.mean_, self.predictors_, self.innovation_std_, state, out)
         return out, state

@@ -4,6 +4,8 @@
   diagnoser (a registry; the paper's mean residuals by default).
 - `bayes_fdi.diagnosis.isolation.tree`: the k-means designed binary tree of probabilistic
   classifiers (RVCs by default), whose leaf probabilities are products along the paths.
+- `bayes_fdi.diagnosis.isolation.tree_design`: the tree's design by recursive 2-means on the
+  class centroids.
 - `bayes_fdi.diagnosis.isolation.svm`: the paper's SVM node classifier (the baseline).
 - `bayes_fdi.diagnosis.isolation.signatures`: the online diagnoser's signatures over the window
   since a detection (`SignatureWindow`, an online component with its `SignatureState`).
@@ -35,12 +37,8 @@ from bayes_fdi.diagnosis.isolation.signatures import (
     SignatureWindow,
 )
 from bayes_fdi.diagnosis.isolation.svm import SVMClassifier, svm_classifier
-from bayes_fdi.diagnosis.isolation.tree import (
-    PAPER_TREE,
-    HierarchicalClassifier,
-    TreeNode,
-    design_tree,
-)
+from bayes_fdi.diagnosis.isolation.tree import PAPER_TREE, HierarchicalClassifier, TreeNode
+from bayes_fdi.diagnosis.isolation.tree_design import design_tree
 
 __all__ = [
     "DEFAULT_FEATURES",

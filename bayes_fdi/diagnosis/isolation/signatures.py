@@ -38,6 +38,7 @@ from numba import njit
 from bayes_fdi.diagnosis.component_state import (
     check_stacked_state,
     check_state,
+    working_state,
     writable_copy,
 )
 
@@ -257,11 +258,7 @@ class SignatureWindow:
         n = flags.size
         if flags.ndim != 1 or any(a.shape != (n,) for a in values):
             raise ValueError("SignatureWindow: every input must be a (n,) sequence")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        state = working_state(self, state)
         out = np.empty((n, len(ISOLATION_FEATURES)))
         alpha = 1.0 / self.reference_seconds
         _signature_kernel(SignatureInputs(flags, *values), alpha, self.slope_ridge, state, out)

@@ -6,6 +6,8 @@
   over a grid; the paper's GA).
 - `bayes_fdi.diagnosis.normal_models.static`: `NormalModels`, the paper's static RVR models of
   the offline diagnoser.
+- `bayes_fdi.diagnosis.normal_models.fit_steps`: the training samples and the kernel width of
+  each output, steps of `NormalModels.fit`.
 - `bayes_fdi.diagnosis.normal_models.dynamic`: `DynamicNormalModels`, the online diagnoser's
   models (position from the command's dynamics, flow from the predicted position), an online
   component with ``update``/``run`` and its own state;

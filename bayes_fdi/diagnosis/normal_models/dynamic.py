@@ -61,6 +61,7 @@ from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
 from bayes_fdi.diagnosis.component_state import (
     check_stacked_state,
     check_state,
+    working_state,
     writable_copy,
 )
 from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR
@@ -70,10 +71,9 @@ from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     dynamic_inputs,
     predict_runs,
     predict_seconds,
-    signed_root,
 )
 
-__all__ = ["DynamicNormalModels", "dynamic_inputs", "signed_root", "standardised_residuals"]
+__all__ = ["DynamicNormalModels", "standardised_residuals"]
 
 #: Output range of the sensors (DABLib clips every measurement to [0, 1]).
 SENSOR_RANGE = (0.0, 1.0)
@@ -421,11 +421,7 @@ class DynamicNormalModels(BaseEstimator):
         )
         if cv.ndim != 1 or p1.shape != cv.shape or p2.shape != cv.shape:
             raise ValueError("CV, P1 and P2 must be (n,) sequences of one length")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        state = working_state(self, state)
         out = np.empty((cv.size, 5))
         predict_seconds(cv, p1, p2, self.params_, state, out)
         return out, state

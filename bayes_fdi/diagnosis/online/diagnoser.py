@@ -38,25 +38,25 @@ from bayes_fdi.diagnosis.online.step import (
     step,
     step_runs,
 )
-from bayes_fdi.diagnosis.online.stream import FAULTS, assemble_stream, decide, stream_attrs
+from bayes_fdi.diagnosis.online.stream import assemble_stream, decide, stream_attrs
 from bayes_fdi.diagnosis.online.training import Runs, fit_detection, fit_isolation, stack_runs
 from bayes_fdi.diagnosis.seva.record import SevaRecord
 
-__all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
+__all__ = ["OnlineDiagnoser"]
 
 
 class OnlineDiagnoser(BaseEstimator):
     """Online detection, isolation and SEVA validation of an actuator, one second at a time.
 
     Per second: the dynamic normal models' predictions of X and F with calibrated standard
-    deviations; the standardised residuals, whitened by an AR filter; a sequential test per
-    output (CUSUM or GLR) with a threshold for a false-alarm budget and the detection decision DD
-    with hysteresis; after a detection, the isolation signature since the detection and its
-    fault and group probabilities with novelty; and the SEVA status
-    (`bayes_fdi.diagnosis.online.stream.decide`): BLIND (a channel missing), CLEAR (no
-    detection, inputs within the training envelope), BLURRED (a detected fault isolated with
-    probability >= ``p_fault``), DAZZLED (otherwise: a detection not yet isolated with
-    confidence, a novel signature, or inputs outside the training envelope).
+    deviations; the standardised residuals, whitened by an AR filter; a sequential test per output
+    (CUSUM or GLR) with a threshold for a false-alarm budget and the detection decision DD with
+    hysteresis; after a detection, the isolation signature since the detection and its fault and
+    group probabilities with novelty; and the SEVA status
+    (`bayes_fdi.diagnosis.online.stream.decide`): BLIND (a channel missing), CLEAR (no detection,
+    inputs within the training envelope), BLURRED (a detected fault isolated with probability >=
+    ``p_fault``), DAZZLED (otherwise: a detection not yet isolated with confidence, a novel
+    signature, or inputs outside the training envelope).
 
     Parameters
     ----------
@@ -347,6 +347,7 @@ class OnlineDiagnoser(BaseEstimator):
         return decide(
             arrays,
             out,
+            threshold=self.threshold_,
             group_labels=self._group_labels,
             novelty_ratio=self.novelty_ratio,
             p_fault=self.p_fault,
@@ -440,26 +441,29 @@ class OnlineDiagnoser(BaseEstimator):
             The decision stream, with the recording's ``run`` and ``time`` coordinates (and
             its other coordinates over them; one named like a variable, such as the truth
             label ``state``, is renamed ``true_<name>``), ``group`` (the isolability groups'
-            labels, members joined by ``|``) and ``fault`` (f1 .. f19). Per run and second:
+            labels, members joined by ``|``) and ``fault`` (f1 .. f19, then the faults of one
+            reading the model knows, such as ``bias_X``). Per run and second:
 
-            - ``DD`` (bool): the detection decision; ``FFID`` (bool): fault-free indication,
-              not DD and no channel missing;
-            - ``state`` (str): the diagnosed group's label, ``"unknown"`` (detected, not
-              isolated with a known signature) or ``"fn"`` (no detection);
-              ``probability``: that group's calibrated probability (NaN unless isolated);
-            - ``status`` (str): the SEVA status ``CLEAR``, ``BLURRED``, ``DAZZLED`` or
-              ``BLIND``;
-            - ``indicated`` (bool, per group): the diagnosed group; ``group_proba`` (per
-              group) and ``fault_proba`` (per fault: the group's probability shared in
-              proportion to the classifier's, 0 for a fault it does not know): calibrated
-              probabilities, NaN while there is no signature; ``novelty``: the signature's
-              class-novelty score;
-            - ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``: the normal models'
-              predictions and predictive standard deviations; ``VMV_X``, ``VMV_F`` (the
-              same predictions, the validated measurement values) and ``VU_X``, ``VU_F``
-              (validated uncertainties, ``z`` standard deviations for the ``coverage``);
-            - ``r_X``, ``r_F``: the whitened innovations; ``stat_X``, ``stat_F``: the
-              sequential test statistics (NaN in a gap).
+            - ``DD`` (bool): the detection decision; ``FFID`` (bool): fault-free indication, not DD
+              and no channel missing;
+            - ``state`` (str): the diagnosed group's label, ``"unknown"`` (detected, but no fault
+              library or a signature unlike every known fault), ``"mismatch"`` (a detection that
+              began while the inputs lay outside the normal models' envelope: the model does not fit
+              this valve, commission it) or ``"fn"`` (no detection); ``probability``: that group's
+              calibrated probability (NaN unless isolated); ``evidence`` (str): while DD is on,
+              which residual raised it and its sign (``"X high"``, ``"F low"``, ``"X low, F
+              high"``), else ``""``;
+            - ``status`` (str): the SEVA status ``CLEAR``, ``BLURRED``, ``DAZZLED`` or ``BLIND``;
+            - ``indicated`` (bool, per group): the diagnosed group; ``group_proba`` (per group) and
+              ``fault_proba`` (per fault: the group's probability shared in proportion to the
+              classifier's, 0 for a fault it does not know): calibrated probabilities, NaN while
+              there is no signature; ``novelty``: the signature's class-novelty score;
+            - ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``: the normal models' predictions and
+              predictive standard deviations; ``VMV_X``, ``VMV_F`` (the same predictions, the
+              validated measurement values) and ``VU_X``, ``VU_F`` (validated uncertainties, ``z``
+              standard deviations for the ``coverage``);
+            - ``r_X``, ``r_F``: the whitened innovations; ``stat_X``, ``stat_F``: the sequential
+              test statistics (NaN in a gap).
 
             Attributes: ``groups`` (JSON: label -> members), ``undetectable`` (JSON list, DGN0),
             ``detector``, ``threshold``, ``clear_level``, ``coverage`` and ``features`` (the
@@ -467,8 +471,7 @@ class OnlineDiagnoser(BaseEstimator):
             has none either.
         """
         self._check_fitted()
-        single = "run" not in recording.dims
-        ds = recording
+        ds, single = recording, "run" not in recording.dims
         if single:  # one run: scalar coordinates (a selected run's labels) are not carried
             ds = ds.drop_vars([c for c in ds.coords if ds[c].ndim == 0]).expand_dims("run")
         channels = ds[[c for c in CHANNELS if c in ds.data_vars]].reset_coords(drop=True)
@@ -481,9 +484,7 @@ class OnlineDiagnoser(BaseEstimator):
             state = StreamState.of_runs([init_run_state(components)] * n_runs)
         else:
             check_stream_state(components, state, n_runs)
-        data = {
-            c: np.asarray(ds[c].transpose("run", "time").values, dtype=np.float64) for c in CHANNELS
-        }
+        data = {c: channels[c].transpose("run", "time").values.astype(np.float64) for c in CHANNELS}
         out, end = step_runs(components, data, state)  # every run at once
 
         def rows(arrays: Mapping[str, Any]) -> dict[str, Any]:  # (runs, time, ...) -> rows

@@ -9,7 +9,8 @@ the seconds without detection, and at each rising edge of DD that average is che
 envelope and the answer held until DD falls. The average of the seconds *before* the detection
 is what counts: a fault that itself moves an input (f7 makes T1 jump) is detected within
 seconds, before the average has moved, while a plant running outside the training range
-(another temperature, another pressure) is caught.
+(another temperature, another pressure) is caught. A detection from the stream's first second,
+before any second without one, is judged on the inputs of its first second.
 
 Written by hand: a training range and a compiled exponential average.
 """
@@ -25,6 +26,7 @@ from numba import njit
 from bayes_fdi.diagnosis.component_state import (
     check_stacked_state,
     check_state,
+    working_state,
     writable_copy,
 )
 from bayes_fdi.diagnosis.isolation.signatures import INPUT_REFERENCE_SECONDS
@@ -74,6 +76,10 @@ def _onset_kernel(dd, inputs, low, high, alpha, state, out):  # pragma: no cover
             if state.average_set[0]:
                 for j in range(4):
                     if average[j] < low[j] or average[j] > high[j]:
+                        novel = True
+            else:  # detected since the stream began: judge the inputs of this second
+                for j in range(4):
+                    if inputs[t, j] < low[j] or inputs[t, j] > high[j]:
                         novel = True
             state.novel_at_onset[0] = novel
         state.detected[0] = True
@@ -195,11 +201,7 @@ class InputEnvelope:
         dd = np.ascontiguousarray(np.asarray(detected, dtype=np.bool_))
         if x.ndim != 2 or x.shape[1] != 4 or dd.shape != (x.shape[0],):
             raise ValueError(f"inputs must be (n, 4) and detected (n,), got {x.shape}, {dd.shape}")
-        if state is None:
-            state = self.init_state()
-        else:
-            self.check_state(state)
-            state = writable_copy(state)
+        state = working_state(self, state)
         out = np.zeros(dd.size, dtype=np.bool_)
         low, high = np.ascontiguousarray(self.low_), np.ascontiguousarray(self.high_)
         _onset_kernel(dd, x, low, high, 1.0 / self.reference_seconds, state, out)

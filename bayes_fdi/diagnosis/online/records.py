@@ -46,22 +46,25 @@ def status_reasons(
             f"no detection (statistics X {out['stat_X'][i]:.3g}, F "
             f"{out['stat_F'][i]:.3g} <= threshold {threshold:.3g})",
         )
+    raised = f" ({dec['evidence'][i]})" if dec["evidence"][i] else ""
+    if dec["novel_onset"][i]:
+        return (
+            f"model mismatch: commission this valve (a detection{raised} began while the inputs "
+            "lay outside what the normal models were fitted on; it is not read as a fault)",
+        )
     if not isolating:
-        return ("fault detected; no isolation fitted",)
+        return (
+            f"fault detected{raised}; detection only: this model has no fault library and "
+            "cannot name the fault",
+        )
     if dec["novel_signature"][i]:
         return (
-            f"fault detected; signature unlike every known fault (novelty "
+            f"unknown fault{raised}: signature unlike every known fault (novelty "
             f"{out['novelty'][i]:.3g} > {novelty_ratio})",
         )
     p = dec["probability"][i]
-    if dec["novel_onset"][i]:
-        return (
-            f"fault detected while the inputs were outside the training envelope: the "
-            f"normal models extrapolate, P({dec['state'][i]}) = {p:.3f} is not "
-            f"trusted",
-        )
     need = ">=" if p >= p_fault else "<"
-    return (f"fault detected; P({dec['state'][i]}) = {p:.3f} {need} p_fault = {p_fault}",)
+    return (f"fault detected{raised}; P({dec['state'][i]}) = {p:.3f} {need} p_fault = {p_fault}",)
 
 
 def stream_reasons(stream: xr.Dataset) -> np.ndarray:
@@ -74,7 +77,7 @@ def stream_reasons(stream: xr.Dataset) -> np.ndarray:
         return np.asarray(stream[name].values).reshape(-1)
 
     out = {k: flat(k) for k in ("DD", "stat_X", "stat_F", "novelty")}
-    dec = {k: flat(k) for k in (*NOVELTY_FLAGS, "probability", "state")}
+    dec = {k: flat(k) for k in (*NOVELTY_FLAGS, "evidence", "probability", "state")}
     dec["blind"] = flat("status") == SevaStatus.BLIND.value
     isolating = stream.sizes.get("group", 0) > 0
     a = stream.attrs
@@ -140,4 +143,5 @@ def last_values(out: Mapping[str, Any], dec: Mapping[str, Any], t: float) -> dic
         "r_F": float(out["r_F"][0]),
         "fault_proba": out["fault_proba"][0].copy(),
         "group_proba": out["group_proba"][0].copy(),
+        "evidence": str(dec["evidence"][0]),
     }

@@ -23,7 +23,8 @@ from bayes_fdi.diagnosis.component_state import as_stack_of_one
 from bayes_fdi.diagnosis.detection.decision import DetectionDecision
 from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
 from bayes_fdi.diagnosis.isolation.signatures import SignatureInputs, SignatureWindow
-from bayes_fdi.diagnosis.normal_models.dynamic import signed_root, standardised_residuals
+from bayes_fdi.diagnosis.normal_models.dynamic import standardised_residuals
+from bayes_fdi.diagnosis.normal_models.dynamic_kernel import signed_root
 from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, InputEnvelope
 from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
 from bayes_fdi.diagnosis.online.stream import MODEL_OUTPUTS

@@ -25,6 +25,7 @@ from bayes_fdi.diagnosis.seva.record import SevaStatus
 
 __all__ = [
     "FAULTS",
+    "MISMATCH",
     "MODEL_OUTPUTS",
     "NOVELTY_FLAGS",
     "assemble_stream",
@@ -35,6 +36,11 @@ __all__ = [
 
 #: The fault names of the stream's ``fault`` coordinate.
 FAULTS: tuple[str, ...] = tuple(f"f{i}" for i in range(1, 20))
+#: The state of a detection that began while the inputs lay outside the normal models' envelope:
+#: the model does not fit this valve or operating point, which is not a fault.
+MISMATCH = "mismatch"
+#: A statistic at or above this share of the threshold counts as raising the detection.
+RAISED_SHARE = 0.5
 #: The normal models' outputs in the stream.
 MODEL_OUTPUTS = ("X_hat", "X_hat_std", "F_hat", "F_hat_std")
 #: The stream's flags of what makes a second DAZZLED (with a detection not yet isolated).
@@ -47,10 +53,42 @@ def coverage_quantile(coverage: float) -> float:
     return float(sps.norm.ppf(0.5 + coverage / 2.0))
 
 
+def evidence(out: Mapping[str, Any], threshold: float) -> np.ndarray:
+    """Per second of detection, which residual raised it and its sign: ``"X high"``,
+    ``"F low"``, ``"X low, F high"``; ``""`` while DD is off.
+
+    An output counts when its detector statistic is at least `RAISED_SHARE` of the threshold,
+    or when its statistic is the larger one; its sign is that of its mean residual over the
+    window since the detection (the isolation signature's ``mean_rX``, ``mean_rF``), or of the
+    second's innovation before the window has a value.
+    """
+    dd = np.asarray(out["DD"], dtype=bool)
+    stats = np.column_stack([out["stat_X"], out["stat_F"]])
+    feats = np.asarray(out["features"])
+    means = (
+        feats[:, :2] if feats.ndim == 2 and feats.shape[1] >= 2 else np.full(stats.shape, np.nan)
+    )
+    innovations = np.column_stack([out["r_X"], out["r_F"]])
+    sign = np.where(np.isfinite(means), np.sign(means), np.sign(innovations))
+    with np.errstate(invalid="ignore"):
+        top = np.nanargmax(np.where(np.isfinite(stats), stats, -np.inf), axis=1)
+        raised = (stats >= RAISED_SHARE * threshold) | (np.arange(2)[None, :] == top[:, None])
+    words = np.full(dd.size, "", dtype=object)
+    for t in np.flatnonzero(dd):
+        parts = [
+            f"{c} {'high' if sign[t, j] > 0 else 'low'}"
+            for j, c in enumerate(("X", "F"))
+            if raised[t, j] and sign[t, j] != 0 and np.isfinite(sign[t, j])
+        ]
+        words[t] = ", ".join(parts)
+    return words.astype(str)
+
+
 def decide(
     channels: Mapping[str, np.ndarray],
     out: Mapping[str, Any],
     *,
+    threshold: float,
     group_labels: Sequence[str],
     novelty_ratio: float,
     p_fault: float,
@@ -68,6 +106,8 @@ def decide(
         began outside it).
     group_labels
         The isolability groups' labels, columns of ``group_proba``.
+    threshold
+        The detector's threshold (for `evidence`).
     novelty_ratio, p_fault, coverage
         The diagnoser's parameters.
 
@@ -75,8 +115,13 @@ def decide(
     -------
     dict
         ``state``, ``probability``, ``status``, ``indicated`` ``(n, n_groups)``, ``FFID``,
-        ``blind``, ``novel_inputs``, ``novel_signature``, ``novel_onset`` (arrays of ``n``) and
-        ``z`` (the normal quantile of ``coverage``).
+        ``blind``, ``novel_inputs``, ``novel_signature``, ``novel_onset``, ``evidence``
+        (arrays of ``n``) and ``z`` (the normal quantile of ``coverage``).
+
+    A detection is named ``"mismatch"`` when it began while the inputs lay outside the normal
+    models' envelope (the model does not fit this valve: commission it), ``"unknown"`` when no
+    isolator is fitted or the signature is unlike every known fault, else by the most probable
+    isolability group.
     """
     n = channels["CV"].size
     blind = np.zeros(n, dtype=bool)
@@ -84,7 +129,7 @@ def decide(
         blind |= ~np.isfinite(channels[c])
     novel_in = out["novel_inputs"]
     dd = out["DD"]
-    labels = np.asarray((*group_labels, "unknown", "fn"), dtype=object)
+    labels = np.asarray((*group_labels, MISMATCH, "unknown", "fn"), dtype=object)
     gq = out["group_proba"]
     isolated = np.isfinite(gq).all(axis=1) & (gq.shape[1] > 0) & dd
     if gq.shape[1]:
@@ -92,13 +137,14 @@ def decide(
     else:
         top = np.zeros(n, dtype=np.int64)
     prob = np.where(isolated, gq[np.arange(n), top] if gq.shape[1] else np.nan, np.nan)
-    novel_sig = isolated & (out["novelty"] > novelty_ratio)
-    known = isolated & ~novel_sig
     novel_onset = out["novel_onset"]
-    code = np.where(~dd, len(labels) - 1, np.where(known, top, len(labels) - 2))
+    novel_sig = isolated & (out["novelty"] > novelty_ratio) & ~novel_onset
+    known = isolated & ~novel_sig & ~novel_onset
+    unnamed = np.where(novel_onset, len(labels) - 3, len(labels) - 2)
+    code = np.where(~dd, len(labels) - 1, np.where(known, top, unnamed))
     state = labels[code].astype(str)
     prob = np.where(known, prob, np.nan)
-    trusted = known & (prob >= p_fault) & ~novel_onset
+    trusted = known & (prob >= p_fault)
     detected_status = np.where(trusted, SevaStatus.BLURRED.value, SevaStatus.DAZZLED.value)
     quiet_status = np.where(novel_in, SevaStatus.DAZZLED.value, SevaStatus.CLEAR.value)
     status = np.where(blind, SevaStatus.BLIND.value, np.where(dd, detected_status, quiet_status))
@@ -116,6 +162,7 @@ def decide(
         "novel_inputs": novel_in,
         "novel_signature": novel_sig,
         "novel_onset": novel_onset,
+        "evidence": evidence(out, threshold),
         "z": z,
     }
 
@@ -134,18 +181,20 @@ def assemble_stream(
     array over the runs of ``recording`` (which has a ``run`` dimension).
 
     ``faults`` are the columns of the quantities' ``fault_proba`` (the classifier's faults):
-    the stream's ``fault_proba`` has one column per fault of `FAULTS`, 0 once detected for a
-    fault the classifier does not know. Coordinates of ``recording`` over ``run`` and ``time``
+    the stream's ``fault_proba`` has one column per fault of `FAULTS` (0 once detected for a
+    fault the classifier does not know), then one per other fault it knows (a fault of one
+    reading, such as ``bias_X``). Coordinates of ``recording`` over ``run`` and ``time``
     are kept, those named like a stream variable (a truth label such as ``state``) renamed
     ``true_<name>``.
     """
     z = decisions["z"]
     dims = ("run", "time")
     fault_cols = {f: j for j, f in enumerate(faults)}
-    fault = np.full((*out["DD"].shape, len(FAULTS)), np.nan)
+    axis = (*FAULTS, *(f for f in faults if f not in FAULTS))  # then faults of one reading
+    fault = np.full((*out["DD"].shape, len(axis)), np.nan)
     if faults:
         fq = out["fault_proba"]
-        for k, f in enumerate(FAULTS):
+        for k, f in enumerate(axis):
             if f in fault_cols:
                 fault[:, :, k] = fq[:, :, fault_cols[f]]
             else:  # undetectable or untrained faults: probability 0 once detected
@@ -157,7 +206,7 @@ def assemble_stream(
         "indicated": ((*dims, "group"), decisions["indicated"]),
         "group_proba": ((*dims, "group"), out["group_proba"]),
         "fault_proba": ((*dims, "fault"), fault),
-        **{k: (dims, decisions[k]) for k in ("state", "probability", "status")},
+        **{k: (dims, decisions[k]) for k in ("state", "evidence", "probability", "status")},
         "novelty": (dims, out["novelty"]),
         **{k: (dims, out[k]) for k in quantities},
         "VMV_X": (dims, out["X_hat"]),
@@ -170,7 +219,7 @@ def assemble_stream(
     for k in [k for k in coords if k in data]:  # a truth label such as `state` is kept
         coords[f"true_{k}"] = coords.pop(k)
     coords["group"] = np.asarray(group_labels, dtype=str)
-    coords["fault"] = np.asarray(FAULTS, dtype=str)
+    coords["fault"] = np.asarray(axis, dtype=str)
     stream = xr.Dataset(data, coords=coords)
     stream.attrs.update(attrs)
     return stream

@@ -22,7 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.datasets import CHANNELS, validate_dataset
+from bayes_fdi.datasets import CHANNELS, state_order, validate_dataset
 from bayes_fdi.diagnosis.detection.decision import DetectionDecision
 from bayes_fdi.diagnosis.detection.thresholds import fit_threshold
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener
@@ -318,10 +318,10 @@ def fit_isolation(
     seconds["signatures"] = time.perf_counter() - t0
     counts = {f: int(np.sum(y == f)) for f in rates}
     undetectable = sorted(
-        (f for f in rates if rates[f] < detect_rate or counts[f] < 5), key=lambda f: int(f[1:])
+        (f for f in rates if rates[f] < detect_rate or counts[f] < 5), key=state_order
     )
-    known = sorted(set(rates) - set(undetectable), key=lambda f: int(f[1:]))
-    rates = dict(sorted(rates.items(), key=lambda kv: int(kv[0][1:])))
+    known = sorted(set(rates) - set(undetectable), key=state_order)
+    rates = dict(sorted(rates.items(), key=lambda kv: state_order(kv[0])))
     if len(known) < 2:
         return IsolationFit(None, tuple(undetectable), rates, None)
     t0 = time.perf_counter()
