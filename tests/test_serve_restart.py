@@ -1,13 +1,16 @@
 """``kill -9`` of ``bayes-fdi serve`` (a real subprocess, SIGKILL) and a restart: the log holds
 every second once; the seconds it was down (and at most the last uncommitted second before the
 kill) are BLIND; every record equals the batch ``run`` of the logged samples, i.e. the stream of
-an uninterrupted run that missed those seconds; and the records before the kill equal those of
-an uninterrupted ``serve`` of the same plant."""
+an uninterrupted run that missed those seconds; the records before the kill equal those of an
+uninterrupted ``serve`` of the same plant; and the restarted process's live page holds the log's
+records from before the kill as well as its own."""
 
 from __future__ import annotations
 
+import json
 import signal
 import time
+import urllib.request
 
 import numpy as np
 import pytest
@@ -25,7 +28,7 @@ DURATION = 150
 @pytest.mark.slow
 def test_kill_9_and_restart_resume_the_stream(tmp_path):
     model = fit_tiny_model(tmp_path / "tiny.npz")
-    plant_port, seva_a, seva_b = free_ports(3)
+    plant_port, seva_a, seva_b, http_port = free_ports(4)
     valves = {"V1": 'fault = {name = "f18", strength = 0.8, onset = 110}', "V2": ""}
     sim = f"duration = {DURATION}"
     folders = {name: tmp_path / name for name in ("killed", "whole")}
@@ -60,11 +63,14 @@ def test_kill_9_and_restart_resume_the_stream(tmp_path):
     killed_at = time.time()
     assert killed.stop(signal.SIGKILL) == -signal.SIGKILL
     time.sleep(4.0)  # 8 plant seconds down
-    restarted = Process(args["killed"], folders["killed"])
+    restarted = Process([*args["killed"], "--http", str(http_port)], folders["killed"])
     restarted.wait_for("serve: 2 valve(s)", 120)
     restarted_at = time.time()
     plant.wait_for("all seconds written", 180)
     time.sleep(1.0)
+    url = f"http://127.0.0.1:{http_port}/api/state?valve=V1"
+    with urllib.request.urlopen(url, timeout=10) as response:
+        page = json.load(response)["history"]["V1"]
     assert restarted.stop() == 0 and whole.stop() == 0
     plant.stop()
     down = (restarted_at - killed_at) * SPEED  # plant seconds, an upper bound of the gap
@@ -86,6 +92,10 @@ def test_kill_9_and_restart_resume_the_stream(tmp_path):
             np.testing.assert_array_equal(log[name].values[before], ref[name].values[before])
         if valve == "V1":
             assert "BLURRED" in log["status"].values[k > 115]
+            seconds = np.array(page["t"]) // 1000 - int(start)  # the page: the log's records
+            shown = k <= seconds[-1]
+            np.testing.assert_array_equal(seconds, k[shown])
+            np.testing.assert_array_equal(page["status"], log["status"].values[shown])
 
 
 def _equals_batch(log, model):

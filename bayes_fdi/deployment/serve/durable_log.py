@@ -19,7 +19,8 @@ two places; `recover` finishes the step at start and the readers drop repeated s
 The netCDF files are in the project's recording format along ``time`` (date-times, one row a
 second): channels ``CV .. F`` (normalised), so ``bayes-fdi diagnose`` reads a day file as a
 recording, and the record's columns (`bayes_fdi.deployment.serve.records.ROW_COLUMNS`). `read_log`
-reads a valve's whole log back (daily files, segments and journal) as one dataset.
+reads a valve's whole log back (daily files, segments and journal) as one dataset; `read_recent`
+its last seconds (the live page's history after a restart).
 
 Written by hand: the journal/segment/day layering is this project's; Parquet (pyarrow) and
 netCDF (xarray) do the file formats.
@@ -43,7 +44,7 @@ from bayes_fdi.atomic import atomic_path
 from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.deployment.serve.records import FLOAT_COLUMNS, ROW_COLUMNS
 
-__all__ = ["Checkpoint", "DurableLog", "read_log", "rows_to_dataset"]
+__all__ = ["Checkpoint", "DurableLog", "read_log", "read_recent", "rows_to_dataset"]
 
 _META_KEY = b"bayes_fdi.checkpoints"
 _TEXT = ("status", "state", "reason", "note")
@@ -344,3 +345,30 @@ def read_log(folder: str | os.PathLike[str], valve: str) -> xr.Dataset:
     if not parts:
         raise FileNotFoundError(f"no log of valve {valve!r} in {folder}")
     return _concat(parts)
+
+
+def read_recent(folder: str | os.PathLike[str], valve: str, seconds: int) -> xr.Dataset | None:
+    """The last ``seconds`` seconds of a valve's segments and daily files, newest file first
+    until they are covered (None: the valve has none). The journal is not read: call it when
+    the journal is flushed (after `DurableLog.recover`, or in the log's writer thread)."""
+    base = os.path.join(os.path.abspath(os.fspath(folder)), valve)
+    if not os.path.isdir(base):
+        return None
+    days = sorted(d for d in os.listdir(base) if os.path.isdir(os.path.join(base, d)))
+    files = [p for day in days for p in _sorted_segments(os.path.join(base, day))]
+    files = sorted(glob.glob(os.path.join(base, f"{glob.escape(valve)}_*.nc"))) + files
+    parts: list[xr.Dataset] = []
+    newest: np.datetime64 | None = None
+    for path in reversed(files):
+        part = _open(path)
+        if part.sizes["time"] == 0:
+            continue
+        parts.insert(0, part)
+        newest = part["time"].values[-1] if newest is None else max(newest, part["time"].values[-1])
+        if part["time"].values[0] <= newest - np.timedelta64(int(seconds) - 1, "s"):
+            break
+    if not parts:
+        return None
+    merged = _concat(parts)
+    first = merged["time"].values[-1] - np.timedelta64(int(seconds) - 1, "s")
+    return merged.sel(time=slice(first, None))

@@ -4,7 +4,8 @@
 (measured X and F, their validated values and uncertainty bands, the status, the diagnosed fault
 and its probability) and the alarm list (an alarm is a detection: it opens when DD rises, shows
 the fault or group it is isolated as and its probability while it lasts, and closes when DD
-falls; a BLIND second is no alarm). `live_app` is the Starlette application:
+falls; a BLIND second is no alarm). After a restart `LiveHub.load` puts the log's last hour back
+in front of the new records. `live_app` is the Starlette application:
 
 - ``/``: the page (``?valve=NAME`` draws one valve; the overview draws the first ``panels``);
 - ``/api/state``: the history and alarms as JSON (what the page draws first);
@@ -12,8 +13,9 @@ falls; a BLIND second is no alarm). `live_app` is the Starlette application:
 - ``/static/plotly.min.js``: plotly.js as shipped inside the ``plotly`` Python package (the page
   needs no network).
 
-The charts are plotly.js's (``Plotly.newPlot``, ``Plotly.extendTraces``); the page's own script
-only feeds them. Served by uvicorn in ``serve``'s event loop, on 127.0.0.1 unless told otherwise.
+The charts are plotly.js's (``Plotly.react``); the page's own script only feeds them (a second
+missing from the records breaks the lines and the VMV +- VU band there). Served by uvicorn in
+``serve``'s event loop, on 127.0.0.1 unless told otherwise.
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ __all__ = ["LiveHub", "live_app", "plotly_js_path"]
 
 _FIELDS = ("t", "X", "F", "X_vmv", "X_vu", "F_vmv", "F_vu", "status", "state", "p", "DD")
 _FLOATS = ("X", "F", "X_vmv", "X_vu", "F_vmv", "F_vu", "p")
+_RECORD_COLUMNS = ("X", "F", "VMV_X", "VU_X", "VMV_F", "VU_F", "status", "state", "probability")
+_RECORD_COLUMNS += ("DD",)
 _MAX_ALARMS = 200
 
 
@@ -50,6 +54,11 @@ def plotly_js_path() -> str:
 
 def _clean(v: Any) -> Any:
     return None if isinstance(v, float) and not math.isfinite(v) else v
+
+
+def _scalar(v: Any) -> Any:
+    """A numpy scalar as the Python value (the object columns hold Python values already)."""
+    return v.item() if isinstance(v, np.generic) else v
 
 
 def _json_floats(values: np.ndarray) -> list[float | None]:
@@ -161,20 +170,31 @@ class LiveHub:
         self._alarm(valve, point)
 
     def load(self, valve: str, records: Mapping[str, Any]) -> None:
-        """Records from before this process (the log's last hour, columns of record rows
-        oldest first): put before the points added since, alarms replayed."""
+        """Records from before this process (the log's last hour: columns of record rows, or
+        `~bayes_fdi.deployment.serve.durable_log.read_recent`'s dataset; oldest first): put
+        before the points added since; the valve's alarms in that window replayed from them."""
+        if np.asarray(records["time"]).dtype.kind == "M":  # the log's date-times
+            seconds = np.asarray(records["time"]).astype("datetime64[s]").astype(np.int64)
+            records = {k: np.asarray(records[k]) for k in _RECORD_COLUMNS} | {"time": seconds}
         cols = self._points(valve, records)
         history = self.history[valve]
         now = history.ordered()
         older = cols["t"] < (now["t"][0] if history.n else np.iinfo(np.int64).max)
         merged = {k: np.concatenate([cols[k][older], now[k]]) for k in cols}
         history.replace(merged)
-        active = self.active.pop(valve, None)
-        if active is not None:  # replayed from the older points on
-            self.alarms.remove(active)
+        if not merged["t"].size:
+            return
+        first = merged["t"][0]
+        self.active.pop(valve, None)
+        kept = [a for a in self.alarms if a["valve"] != valve or a["start"] < first]
+        self.alarms.clear()
+        self.alarms.extend(kept)
         dd = merged["DD"]
         for i in np.flatnonzero(dd | np.concatenate([[False], dd[:-1]])):
-            self._alarm(valve, {k: _clean(v[i].item()) for k, v in merged.items()})
+            self._alarm(valve, {k: _clean(_scalar(v[i])) for k, v in merged.items()})
+        newest_first = sorted(self.alarms, key=lambda a: a["start"], reverse=True)
+        self.alarms.clear()
+        self.alarms.extend(newest_first)
 
     def _alarm(self, valve: str, point: Mapping[str, Any]) -> None:
         alarm = self.active.get(valve)

@@ -15,7 +15,8 @@
    (`~bayes_fdi.deployment.serve.opcua_server.SevaPublisher.publish_many`), handed to the live
    page (`~bayes_fdi.deployment.serve.live_page.LiveHub`) and queued for the log; every
    ``commit_seconds`` the queued rows and each valve's checkpoint are committed (one journal
-   part; the checkpoints' texts and the part are made in a writer thread);
+   part; the checkpoints' texts and the part are made in a writer thread); after a restart the
+   live page's history is read back from the log meanwhile;
 4. SIGTERM or Ctrl-C: the readers stop, the last rows are committed and the journal flushed into
    the valves' files.
 
@@ -141,6 +142,7 @@ class Service:
             asyncio.create_task(self._process_loop(), name="process"),
             asyncio.create_task(self._commit_loop(), name="commit"),
             asyncio.create_task(self.hub.broadcast(), name="page-feed"),
+            asyncio.create_task(self._page_history([v for v in units if v in checkpoints])),
         ]
         if self.http is not None:
             from bayes_fdi.deployment.serve.live_page import serve_page
@@ -152,6 +154,18 @@ class Service:
             task = asyncio.create_task(reader.run(), name=f"read {reader.endpoint}")
             task.add_done_callback(self._reader_done)
             self.tasks.append(task)
+
+    async def _page_history(self, valves: list[str]) -> None:
+        """The live page's history from the log (a restart), one valve at a time in the log's
+        writer thread (between commits, never beside a flush), while the valves run."""
+        from bayes_fdi.deployment.serve.durable_log import read_recent
+
+        loop = asyncio.get_running_loop()
+        folder, seconds = self.log.folder, self.config.http.history_seconds
+        for valve in valves:
+            recent = await loop.run_in_executor(self.writer, read_recent, folder, valve, seconds)
+            if recent is not None:
+                self.hub.load(valve, recent)
 
     def _readers(self) -> list[Any]:
         from bayes_fdi.deployment.serve.opcua_client import PlantReader
