@@ -14,7 +14,8 @@ every second, stops both, and reads the valves' logs:
   scheduled outage (``--outage START SECONDS``, reported apart: the BLIND seconds in it per
   valve, and the valves whose DD rises from its start to 60 s after it while the model detects
   nothing there on the same simulated plant without the outage: alarms the outage raised);
-- CPU (% of one core) and resident memory of serve, in all and per valve; the load average.
+- CPU (% of one core) and resident memory of serve, in all and per valve (and its growth over
+  the run); the load average.
 
     python benchmarks/serve_load.py --valves 200 --seconds 600
     python benchmarks/serve_load.py --valves 20 --seconds 120 --outage 40 5
@@ -198,6 +199,9 @@ def report(folder: Path, args, start: float, cpu, samples) -> None:
         f"serve memory (peak RSS): {rss:.0f} MiB in all, {rss / n:.2f} MiB per valve "
         "(including the interpreter and libraries)"
     )
+    marks = [(i, samples[i][2] / 2**20) for i in sorted({0, min(59, len(samples) - 1)})]
+    marks.append((len(samples) - 1, samples[-1][2] / 2**20))
+    print("serve RSS over the run: " + ", ".join(f"{m:.0f} MiB at {i + 1} s" for i, m in marks))
 
 
 def _clean_dd(folder: Path, args) -> np.ndarray:

@@ -1,9 +1,11 @@
 """Outages of the plant's OPC UA server (the simulated plant stops its server for 5 s and for 60 s;
 ``serve`` and the plant are real subprocesses on 127.0.0.1, 2x real time): the log has every
-second; the BLIND seconds are exactly those of the outages; no alarm comes from them (DD stays
-off wherever the same plant's uninterrupted recording, diagnosed in one batch ``run``, has none);
-the records note the lost and the regained connection; and every record equals the batch
-``run`` of the logged samples."""
+second; the BLIND seconds are exactly those of the outages; on this (seeded) plant, whose
+uninterrupted recording diagnosed in one batch ``run`` has no detection, none comes from the
+outages either (the detector's statistic is held through a gap, so a valve whose statistic
+stood near the threshold can alarm sooner after an outage: ``docs/plant.md``); the records note
+the lost and the regained connection; and every record equals the batch ``run`` of the logged
+samples."""
 
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ OUTAGES = ((20, 5), (40, 60))  # (first plant second, seconds)
 
 
 @pytest.mark.slow  # about 100 s: 170 plant seconds at 2x
-def test_outages_of_5_and_60_s_are_blind_exactly_and_raise_no_alarm(tmp_path):
+def test_outages_of_5_and_60_s_are_blind_exactly_and_the_stream_goes_on(tmp_path):
     model = fit_tiny_model(tmp_path / "tiny.npz")
     plant_port, seva_port = free_ports(2)
     outages = ", ".join(f"{{start = {a}, seconds = {n}}}" for a, n in OUTAGES)
