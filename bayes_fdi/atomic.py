@@ -14,6 +14,11 @@ is then re-delivered with the handler that was in place before (``KeyboardInterr
 netCDF write instead leaves xarray's file-manager lock held and the process deadlocks in its
 clean-up, which is why the write is never interrupted half-way.
 
+:func:`atomic_folder` does the same for a folder of files written together (a diagnosed
+recording's outputs): they are written into a hidden folder beside the destination, which then
+replaces the destination as a whole, so an interruption leaves the old folder or the new one,
+never a mix.
+
 :func:`write_text` and :func:`save_figure` are the two writes most modules need.
 
 :func:`check_output_path` validates a destination before any long work (the command line calls it
@@ -35,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "atomic_folder",
     "atomic_path",
     "check_output_path",
     "deferred_signals",
@@ -144,6 +150,36 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[str]:
             if not committed:
                 with contextlib.suppress(FileNotFoundError):
                     os.remove(tmp)
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Write a folder as a whole: yields a hidden empty folder beside ``path`` to fill.
+
+    When the block returns, the new folder replaces ``path`` (an older folder there is moved
+    aside and removed; the swap runs with ``SIGINT``/``SIGTERM`` deferred and the parent folder
+    synced); if the block raises, the new folder is removed and ``path`` is left as it was.
+    """
+    import shutil
+
+    destination = Path(path)
+    parent = destination.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{destination.name}.", suffix=".partial", dir=parent))
+    try:
+        yield staging
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    old = None
+    with deferred_signals():
+        if destination.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{destination.name}.", suffix=".old", dir=parent))
+            os.replace(destination, old / destination.name)
+        os.replace(staging, destination)
+        _fsync_dir(os.fspath(parent))
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def write_text(path: str | os.PathLike[str], text: str) -> Path:

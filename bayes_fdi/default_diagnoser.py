@@ -23,7 +23,9 @@ from typing import Any
 
 import xarray as xr
 
-from bayes_fdi.campaigns.simulation import Campaign, load_campaign, simulate_campaign
+from bayes_fdi.campaigns.parsing import load_campaign
+from bayes_fdi.campaigns.simulation import simulate_campaign
+from bayes_fdi.campaigns.spec import Campaign
 
 __all__ = [
     "CAMPAIGNS",

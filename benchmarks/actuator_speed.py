@@ -24,7 +24,7 @@ TARGET_S = 60.0
 
 def _campaign(n_per_state: int, duration: int, seed: int):
     from bayes_fdi.actuator import FAULT_NAMES, Fault, benchmark_inputs
-    from bayes_fdi.campaigns.simulation import FAULT_DIRECTION
+    from bayes_fdi.campaigns.spec import FAULT_DIRECTION
 
     states = ["fn", *FAULT_NAMES]
     n = n_per_state * len(states)

@@ -196,10 +196,10 @@ def bench_roundtrip(args, work: Path, model) -> dict:
     from bayes_fdi.campaigns.simulation import simulate_campaign
     from bayes_fdi.datasets import load_lublin_example
     from bayes_fdi.diagnosis import FaultDiagnoser
-    from bayes_fdi.diagnosis.seva.windows import to_frame
+    from bayes_fdi.diagnosis.seva.record import to_frame
 
     torch.set_num_threads(1)
-    from bayes_fdi.campaigns.simulation import load_campaign
+    from bayes_fdi.campaigns.parsing import load_campaign
 
     campaign = load_campaign(campaign_path("paper-simulated"), runs_per_state=6,
                              states=["fn", "f1", "f2", "f17", "f18"])  # fmt: skip

@@ -27,7 +27,7 @@ from bayes_fdi.calibration.summaries import normal_model_summary, split_in_time
 from bayes_fdi.campaigns.cache import split_train_test
 from bayes_fdi.datasets import load_dataset, load_lublin_example
 from bayes_fdi.diagnosis import NormalModels
-from bayes_fdi.paper.setup import PAPER_STATES, select_regression_width
+from bayes_fdi.paper.setup import N_TRAIN, PAPER_STATES, select_regression_width
 from bayes_fdi.rvm import RVR
 
 CONFIGS = {
@@ -49,7 +49,7 @@ def main() -> None:
         files = sorted(Path(args.cache_dir).glob(f"{args.data}-*.nc"))
         if not files:
             raise SystemExit(f"no cached {args.data} in {args.cache_dir}: run bayes-fdi reproduce")
-        train, test = split_train_test(load_dataset(files[0]), states=PAPER_STATES)
+        train, test = split_train_test(load_dataset(files[0]), n_train=N_TRAIN, states=PAPER_STATES)
         fit_runs = train.isel(run=np.flatnonzero(train["state"].values.astype(str) == "fn"))
         test_runs = test.isel(run=np.flatnonzero(test["state"].values.astype(str) == "fn"))
     regressor = None

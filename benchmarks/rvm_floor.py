@@ -15,10 +15,11 @@ actions, and times the fastest way this machine does each piece, in the same pro
   kernel matrix, which reads one triangle (from ``N`` about 15 800 on, the screening copy's
   product, ``docs/rvm.md``);
 * every **iteration** updates the factors ``S, Q`` of all ``N_B`` candidates, which reads the
-  ``N_B x M`` cache once (``v_j = beta B^T Phi Sigma_j``, shared reference ``fast-sbl.md``). The
-  active-set size ``M`` of each iteration is recorded, and a float64 GEMV of ``N_B x M_max`` is
-  timed; ``t(M) = t(M_max) M / M_max`` understates a GEMV of ``M`` columns (its fixed cost does
-  not scale down), so the sum over iterations is a lower bound.
+  ``N_B x M`` cache once (``v_j = beta B^T Phi Sigma_j``; Tipping & Faul 2003, "Fast marginal
+  likelihood maximisation for sparse Bayesian models", AISTATS). The active-set size ``M`` of
+  each iteration is recorded, and a float64 GEMV of ``N_B x M_max`` is timed;
+  ``t(M) = t(M_max) M / M_max`` understates a GEMV of ``M`` columns (its fixed cost does not scale
+  down), so the sum over iterations is a lower bound.
 
 The floor is the sum of the two. It leaves out everything else (noise updates, Cholesky,
 candidate selection, Python), so a fit cannot be faster than it on this machine and path;
@@ -72,9 +73,9 @@ def measure(problem: str, n: int) -> dict[str, float]:
     docstring)."""
     import torch
 
-    import bayes_fdi.rvm.sbl_gaussian as sbl_gaussian
+    import bayes_fdi.rvm.sbl.gaussian as gaussian_module  # the module whose decision is counted
     from bayes_fdi.rvm import RVR
-    from bayes_fdi.rvm.design import Design
+    from bayes_fdi.rvm.sbl import Design
 
     torch.set_num_threads(1)
     spec = PROBLEMS[problem]
@@ -84,7 +85,7 @@ def measure(problem: str, n: int) -> dict[str, float]:
     products = [0]
     sizes: list[int] = []
     designs: list[Design] = []
-    rmatmul, decide = Design.rmatmul, sbl_gaussian.lazy_verified_action
+    rmatmul, decide = Design.rmatmul, gaussian_module.lazy_verified_action
 
     def counted_rmatmul(self, V, *, exact=True):
         # the screening products B^T b_i: the first column's and one per addition (B^T t is
@@ -106,14 +107,14 @@ def measure(problem: str, n: int) -> dict[str, float]:
         return decide(*args, **kwargs)
 
     Design.rmatmul = counted_rmatmul
-    sbl_gaussian.lazy_verified_action = counted_decide
+    gaussian_module.lazy_verified_action = counted_decide
     try:
         c0 = time.process_time()
         model = RVR(kernel="rbf", width=spec.sigma, method="fast", bias=True).fit(X, y)
         cpu = time.process_time() - c0
     finally:
         Design.rmatmul = rmatmul
-        sbl_gaussian.lazy_verified_action = decide
+        gaussian_module.lazy_verified_action = decide
 
     design = designs[0]
     v = torch.randn(n, 1, dtype=torch.float64, generator=torch.Generator().manual_seed(0))

@@ -22,12 +22,9 @@ from sklearn.exceptions import NotFittedError
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, inject_faults, simulate
 from bayes_fdi.calibration import intervals, nodes
-from bayes_fdi.campaigns.simulation import (
-    CampaignError,
-    load_campaign,
-    parse_campaign,
-    simulate_campaign,
-)
+from bayes_fdi.campaigns.parsing import load_campaign, parse_campaign
+from bayes_fdi.campaigns.simulation import simulate_campaign
+from bayes_fdi.campaigns.spec import CampaignError
 from bayes_fdi.datasets import load_dataset, make_dataset, save_dataset, validate_dataset
 from bayes_fdi.datasets.plotting import plot_runs, select_runs
 from bayes_fdi.memory import InsufficientMemoryError

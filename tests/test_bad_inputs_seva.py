@@ -15,12 +15,9 @@ from sklearn.linear_model import LogisticRegression
 
 from bayes_fdi.datasets import make_dataset
 from bayes_fdi.diagnosis import FaultDiagnoser, KernelRidgeRegressor
-from bayes_fdi.diagnosis.seva.windows import (
-    NoveltyReference,
-    SevaStatus,
-    records_from_diagnosis,
-    seva_records,
-)
+from bayes_fdi.diagnosis.seva.novelty import NoveltyReference
+from bayes_fdi.diagnosis.seva.record import SevaStatus
+from bayes_fdi.diagnosis.seva.windows import records_from_diagnosis, seva_records
 
 CLASSES = ["fn", "f1", "f2", "f3"]
 T = 200

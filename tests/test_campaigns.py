@@ -8,12 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bayes_fdi.campaigns.simulation import (
-    Campaign,
-    CampaignError,
-    load_campaign,
-    parse_campaign,
-)
+from bayes_fdi.campaigns.parsing import load_campaign, parse_campaign
+from bayes_fdi.campaigns.spec import Campaign, CampaignError
 
 SIM = Path(__file__).parents[1] / "sim"
 ALL_STATES = ["fn", *(f"f{i}" for i in range(1, 20))]
@@ -216,7 +212,7 @@ def test_label_tables_agree_with_the_model_and_the_dataset_format():
     # campaigns keeps its own copies (it imports neither xarray nor the numba model at import
     # time); they must not drift from the tables they copy
     from bayes_fdi.actuator import FAULT_NAMES, SIGNED_FAULTS
-    from bayes_fdi.campaigns import simulation as campaigns
+    from bayes_fdi.campaigns import spec as campaigns
     from bayes_fdi.datasets.format import PROFILES, STATES
 
     assert campaigns.STATES == STATES

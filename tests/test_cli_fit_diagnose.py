@@ -206,8 +206,12 @@ def test_default_model_is_fitted_once_and_cached(tmp_path, monkeypatch, capsys):
     monkeypatch.delenv(model_fitting.SMALL_ENV, raising=False)
     monkeypatch.setattr(model_fitting, "_default_fitter", lambda: fake_fitter)
     out = tmp_path / "out"
-    assert main(["diagnose", "--example", "--out", str(out), "--quiet", "--no-figure"]) == 0
-    assert main(["diagnose", "--example", "--out", str(out), "--quiet", "--no-figure"]) == 0
+    from bayes_fdi.datasets import load_lublin_example
+
+    load_lublin_example().to_netcdf(tmp_path / "lublin-example.nc")
+    argv = ["diagnose", str(tmp_path / "lublin-example.nc"), "--out", str(out), "--quiet"]
+    assert main([*argv, "--no-figure"]) == 0
+    assert main([*argv, "--no-figure"]) == 0
     assert calls == [(0, False)]  # fitted on first use only
     cached = model_fitting.default_model_path()
     assert cached.parent == tmp_path / "cache" and cached.exists()
@@ -317,7 +321,7 @@ def test_progress_on_stderr_and_quiet(model, tmp_path, rng, capsys):
 
     with busy("a long step", interval=0.01):
         time.sleep(0.05)
-    assert "a long step: 00:0" in capsys.readouterr().err
+    assert capsys.readouterr().err.splitlines()[-1].startswith("a long step: done in ")
     with busy("silent", enabled=False):
         pass
     assert capsys.readouterr().err == ""
@@ -341,4 +345,62 @@ def test_interruption_leaves_no_files(model, tmp_path, rng):
     broken = Interrupted().fit(recording(rng, 300, faults=()))
     with pytest.raises(KeyboardInterrupt):
         diagnose_recording(broken, recording(rng, 600), tmp_path, name="r", chunk_seconds=250)
-    assert os.listdir(tmp_path / "r") == []  # neither the files nor their partial copies
+    assert os.listdir(tmp_path) == []  # neither the files nor their partial copies
+
+
+def test_an_interrupted_diagnosis_leaves_the_older_results_whole(model, tmp_path, rng):
+    """Interrupted near its end, a diagnosis into a folder that holds an older result leaves
+    the older files exactly as they were: the outputs are replaced as a whole or not at all."""
+
+    class InterruptedAtTheEnd(StreamDouble):
+        def run(self, recording, state=None, return_state=False):
+            if state is not None and int(recording["time"].values[0]) >= 500:  # the last chunk
+                raise KeyboardInterrupt
+            return super().run(recording, state=state, return_state=return_state)
+
+    runs = recording(rng, 600)
+    diagnose_recording(model, runs, tmp_path, name="r", chunk_seconds=250, figure=True)
+    before = {f: (tmp_path / "r" / f).read_bytes() for f in os.listdir(tmp_path / "r")}
+    assert {"seva.csv", "alarms.csv", "summary.json", "timeline.png"} <= set(before)
+    broken = InterruptedAtTheEnd().fit(recording(rng, 300, faults=()))
+    with pytest.raises(KeyboardInterrupt):
+        diagnose_recording(broken, runs, tmp_path, name="r", chunk_seconds=250, figure=True)
+    assert os.listdir(tmp_path) == ["r"]  # no hidden partial folder or file left
+    after = {f: (tmp_path / "r" / f).read_bytes() for f in os.listdir(tmp_path / "r")}
+    assert after == before
+
+
+def test_a_detection_only_model_says_so_and_names_the_residuals(tmp_path):
+    """A model fitted on fault-free data only can detect but not name a fault: the alarm says
+    so, names the residual that raised it and its sign, and so do ``seva.csv`` and
+    ``summary.json``. The fault here adds flow (f18, bypass opened): F reads high."""
+    from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
+    from bayes_fdi.diagnosis import DynamicNormalModels, OnlineDiagnoser
+
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    models = DynamicNormalModels(
+        x_widths=(8.0,),
+        f_widths=(0.1,),
+        evidence_max_samples=200,
+        max_train_samples=300,
+        calibration_folds=2,
+        random_state=0,
+    )
+    diag = OnlineDiagnoser(models).fit(normal)
+    faulty = simulate(
+        benchmark_inputs(1, 400, seed=3, vary=True), [Fault("f18", 0.7, 150.0)], seed=3
+    ).isel(run=0)
+    diagnose_recording(diag, faulty, tmp_path, name="r", figure=False)
+    alarms = pd.read_csv(tmp_path / "r" / "alarms.csv", keep_default_na=False)
+    fault_alarm = alarms[alarms["start"] >= 150].iloc[0]
+    assert fault_alarm["state"] == "unknown"
+    assert "detection only" in fault_alarm["description"]
+    assert "F high" in fault_alarm["evidence"]
+    seva = pd.read_csv(tmp_path / "r" / "seva.csv", keep_default_na=False)
+    dd = seva["DD"].to_numpy().astype(bool)
+    assert (seva["description"][~dd] == "fn: no fault detected").all()
+    assert seva["description"][dd].str.contains("detection only").all()
+    assert (seva["evidence"][~dd] == "").all()
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert summary["isolation"]["detection_only"] is True
+    assert summary["isolation"]["note"].startswith("detection only")

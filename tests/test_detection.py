@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.linalg import solve_toeplitz
 
-from bayes_fdi.diagnosis.detection.detectors import CUSUM, GLR, detection_decision
+from bayes_fdi.diagnosis.detection.decision import DetectionDecision, detection_decision
+from bayes_fdi.diagnosis.detection.detectors import CUSUM, GLR, CUSUMState, GLRState
 from bayes_fdi.diagnosis.detection.thresholds import (
     calibrate_threshold,
     cusum_arl,
@@ -51,19 +52,19 @@ def test_cusum_equals_the_hand_recursion_with_cap_and_gaps(rng):
     e[1000:1020] = np.nan
     e[2000:2300] += 3.0  # a shift that reaches the cap
     det = CUSUM(k=0.5, threshold=8.0, cap=20.0)
-    got = det.run(e)
+    out, state = det.run(e)
     want = _hand_cusum(e, 0.5, 20.0)
     # same additions and comparisons in the same order: identical by construction
-    np.testing.assert_array_equal(got, want)
-    assert np.nanmax(got) == 20.0
-    assert det.drift_detected == (want[-1] > 8.0)
+    np.testing.assert_array_equal(out.statistic, want)
+    assert np.nanmax(out.statistic) == 20.0
+    assert max(state.sums) == want[-1]  # the state holds the last sums
 
 
 def test_glr_equals_brute_force(rng):
     e = rng.normal(size=700)
     e[300:320] = np.nan
     e[400:] += 1.0
-    got = GLR(window=25, threshold=10.0).run(e)
+    got = GLR(window=25, threshold=10.0).run(e)[0].statistic
     want = _hand_glr(e, 25)
     # the kernel sums the same samples in the same (newest-first) order, but the brute force
     # sums oldest-first: agreement to rounding of a 25-term sum of O(1) numbers
@@ -74,21 +75,41 @@ def test_glr_equals_brute_force(rng):
 def test_run_equals_update(rng, make):
     e = rng.normal(size=500)
     e[100:105] = np.nan
-    a, b = make(), make()
-    whole = a.run(e)
-    stepwise = np.array([b.update(v) for v in e])
-    np.testing.assert_array_equal(whole, stepwise)
-    assert a.statistic == b.statistic and a.drift_detected == b.drift_detected
-    # an explicit state continues exactly where it stopped
-    c = make()
-    st = c.new_state()
-    halves = np.concatenate([c.advance(e[:250], st)[0], c.advance(e[250:], st)[0]])
-    np.testing.assert_array_equal(halves, whole)
+    det = make()
+    whole, end = det.run(e)
+    state, stepwise = det.init_state(), []
+    for v in e:
+        out, state = det.update(v, state)
+        stepwise.append(out.statistic)
+    # the same compiled kernel on the same state, one sample at a time: identical
+    np.testing.assert_array_equal(whole.statistic, stepwise)
+    for a, b in zip(end, state, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # a state continues exactly where it stopped, and the state passed in is not changed
+    first, middle = det.run(e[:250])
+    kept = [a.copy() for a in middle]
+    second, _ = det.run(e[250:], middle)
+    joined = np.concatenate([first.statistic, second.statistic])
+    np.testing.assert_array_equal(joined, whole.statistic)
+    for a, b in zip(middle, kept, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_detector_states_are_checked_by_field():
+    cusum, glr = CUSUM(), GLR(window=10)
+    with pytest.raises(ValueError, match="CUSUMState"):
+        cusum.run([0.0], glr.init_state())
+    with pytest.raises(ValueError, match=r"buffer must be a float64 array of shape \(10,\)"):
+        glr.run([0.0], GLR(window=12).init_state())
+    with pytest.raises(ValueError, match="lengths"):
+        cusum.run([0.0], CUSUMState(np.zeros(2), np.zeros(3)))
+    with pytest.raises(ValueError, match="stored must be a int64"):
+        glr.run([0.0], GLRState(np.zeros(10), np.zeros(1), np.zeros(1, dtype=np.int64)))
 
 
 def test_cusum_onset_estimate_counts_from_the_last_zero(rng):
     e = np.concatenate([np.zeros(50), np.full(10, 3.0)])
-    stat, since = CUSUM(k=0.5, threshold=20.0).run_with_onsets(e)
+    stat, since = CUSUM(k=0.5, threshold=20.0).run(e)[0]
     assert since[49] == 0 and since[-1] == 10  # S+ left 0 at sample 50
     assert stat[-1] == pytest.approx(10 * 2.5)
 
@@ -163,7 +184,7 @@ def test_whitener_recovers_a_known_ar2_process(rng):
     # Yule-Walker estimates have standard error ~ 1/sqrt(80 000) = 0.0035: 5 SE
     np.testing.assert_allclose(w.coef_, phi, atol=0.02)
     assert w.innovation_std_[-1] == pytest.approx(0.7, rel=0.02)
-    e = w.run(z[0])
+    e = w.run(z[0])[0]
     assert np.std(e[10:]) == pytest.approx(1.0, rel=0.02)
     r1 = np.corrcoef(e[10:-1], e[11:])[0, 1]
     assert abs(r1) < 0.03  # white: lag-1 correlation within ~4 SE of 0
@@ -179,10 +200,16 @@ def test_whitener_restarts_after_a_gap_and_update_equals_run(rng):
     z = rng.normal(size=300)
     w = ARWhitener(order=3).fit(rng.normal(size=(2, 2000)))
     z[100] = np.nan
-    whole = w.reset().run(z)
-    w.reset()
-    stepwise = np.array([w.update(v) for v in z])
+    whole, end = w.run(z)
+    state, stepwise = w.init_state(), []
+    for v in z:
+        e, state = w.update(v, state)
+        stepwise.append(e)
     np.testing.assert_array_equal(whole, stepwise)
+    np.testing.assert_array_equal(end.history, state.history)
+    assert end.valid[0] == state.valid[0] == 3  # 199 samples since the gap: full order
+    with pytest.raises(ValueError, match=r"history must be a float64 array of shape \(3,\)"):
+        w.run(z, ARWhitener(order=2).fit(rng.normal(size=(2, 2000))).init_state())
     assert np.isnan(whole[100])
     # the first sample after the gap is predicted at order 0: its own scaled deviation
     assert whole[101] == pytest.approx((z[101] - w.mean_) / w.innovation_std_[0], rel=1e-12)
@@ -198,6 +225,16 @@ def test_detection_decision_hysteresis():
     assert dd.tolist() == [False, False, True, True, True, False, True, False, False]
     with pytest.raises(ValueError, match="clear"):
         detection_decision(stats, threshold=1.0, clear=2.0)
+    # second by second from a carried state: the same
+    rule = DetectionDecision(10.0, 0.0)
+    state, stepwise = rule.init_state(), []
+    for row in stats:
+        on, state = rule.update(row, state)
+        stepwise.append(on)
+    assert stepwise == dd.tolist()
+    np.testing.assert_array_equal(state.held, [0.0, 0.0])
+    with pytest.raises(ValueError, match="held"):
+        DetectionDecision(10.0, 0.0, n_channels=3).run(np.zeros((2, 3)), state)
 
 
 def test_bad_parameters_are_named():

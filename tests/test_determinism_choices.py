@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayes_fdi.diagnosis.isolation.tree import INERTIA_RTOL, design_tree
+from bayes_fdi.diagnosis.isolation.tree_design import INERTIA_RTOL, design_tree
 from bayes_fdi.diagnosis.normal_models.width_search import EVIDENCE_TIE_NATS, evidence_grid_search
 
 CORNERS = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])

@@ -145,7 +145,7 @@ def test_seva_output_statuses(data, rng):
     """The diagnoser's SEVA records: confident fn -> CLEAR, confident fault -> BLURRED,
     missing signals -> BLIND, inputs far outside training -> DAZZLED; VMV/VU from the
     normal models at the stated coverage."""
-    from bayes_fdi.diagnosis.seva.windows import SevaStatus, to_frame
+    from bayes_fdi.diagnosis.seva.record import SevaStatus, to_frame
 
     normal, labelled, _ = data
     # A tree of logistic regressions: confident on these well-separated residual offsets.

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bayes_fdi.campaigns.simulation import load_campaign, simulate_campaign
+from bayes_fdi.campaigns.parsing import load_campaign
+from bayes_fdi.campaigns.simulation import simulate_campaign
 from bayes_fdi.diagnosis import FaultDiagnoser, svm_fault_diagnoser
 from bayes_fdi.rvm import RVR
 

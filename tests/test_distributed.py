@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from bayes_fdi.campaigns.simulation import load_campaign, simulate_campaign
+from bayes_fdi.campaigns.parsing import load_campaign
+from bayes_fdi.campaigns.simulation import simulate_campaign
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import load_dataset
 from bayes_fdi.distributed import cluster_client, run_tasks

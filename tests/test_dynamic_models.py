@@ -9,10 +9,9 @@ from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.diagnosis.normal_models.dynamic import (
     RAIL_TOL,
     DynamicNormalModels,
-    dynamic_inputs,
-    signed_root,
     standardised_residuals,
 )
+from bayes_fdi.diagnosis.normal_models.dynamic_kernel import dynamic_inputs, signed_root
 
 
 @pytest.fixture(scope="module")
@@ -67,14 +66,27 @@ def test_stream_equals_the_regressions_on_the_vectorised_inputs(models):
 def test_stream_state_carries_across_calls(models):
     nm, _ = models
     test = simulate(benchmark_inputs(1, 120, seed=13, vary=True), seed=13)
-    cv, p1, p2 = (np.ascontiguousarray(test[c].values[0]) for c in ("CV", "P1", "P2"))
-    whole = np.empty((120, 5))
-    nm.stream(cv, p1, p2, nm.new_state(), whole)
-    st = nm.new_state()
-    parts = [np.empty((1, 5)) for _ in range(120)]
+    channels = {c: test[c].values[0] for c in ("CV", "P1", "P2")}
+    whole, end = nm.run(channels)
+    state, parts = nm.init_state(), []
     for t in range(120):
-        nm.stream(cv[t : t + 1], p1[t : t + 1], p2[t : t + 1], st, parts[t])
+        row, state = nm.update({c: v[t] for c, v in channels.items()}, state)
+        parts.append(row)
+    # the same compiled kernel on the same state, one second at a time: identical
     np.testing.assert_array_equal(np.vstack(parts), whole)
+    np.testing.assert_array_equal(state.history, end.history)
+    # the history holds the last two values of CV and of the signed root of the pressure drop
+    np.testing.assert_array_equal(end.history[0], channels["CV"][[-1, -2]])
+    np.testing.assert_array_equal(
+        end.history[1], signed_root(channels["P1"], channels["P2"])[[-1, -2]]
+    )
+    # the state passed in is not changed; a state of other models is refused, naming the field
+    kept = end.history.copy()
+    nm.run(channels, end)
+    np.testing.assert_array_equal(end.history, kept)
+    assert state.seen[0] == 1
+    with pytest.raises(ValueError, match=r"history must be a float64 array of shape \(2, 2\)"):
+        nm.run(channels, end._replace(history=np.zeros((2, 3))))
 
 
 def test_out_of_fold_residuals_are_standardised(models):

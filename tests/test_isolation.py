@@ -1,24 +1,29 @@
-"""Isolation features, groups, novelty and the fault isolator
-(bayes_fdi.diagnosis.isolation.isolator), and the compiled predictors they use
-(bayes_fdi.diagnosis.normal_models.compiled)."""
+"""Isolation signatures, groups, novelty and the fault isolator (bayes_fdi.diagnosis.isolation:
+signatures, isolator, class_novelty), and the compiled predictors they use (compiled_tree,
+bayes_fdi.diagnosis.normal_models.compiled)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from bayes_fdi.diagnosis.isolation.class_novelty import ClassNovelty
+from bayes_fdi.diagnosis.isolation.compiled_tree import LeanTree
 from bayes_fdi.diagnosis.isolation.isolator import (
+    FaultIsolator,
+    isolability_groups,
+    pairwise_confusion,
+)
+from bayes_fdi.diagnosis.isolation.signatures import (
     INPUT_REFERENCE_SECONDS,
     ISOLATION_FEATURES,
     SLOPE_RIDGE,
-    ClassNovelty,
-    FaultIsolator,
-    isolability_groups,
-    isolation_features,
-    pairwise_confusion,
+    SignatureInputs,
+    SignatureState,
+    SignatureWindow,
 )
 from bayes_fdi.diagnosis.isolation.tree import HierarchicalClassifier
-from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR, LeanTree
+from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR
 from bayes_fdi.rvm import RVC, RVR
 
 
@@ -45,7 +50,8 @@ def test_features_equal_direct_window_statistics(rng):
     dd = np.zeros(n, dtype=bool)
     dd[150:260] = True
     dd[300:330] = True
-    feats = isolation_features(dd, *cols)
+    window = SignatureWindow()
+    feats, _ = window.run(SignatureInputs(dd, *cols))
     assert feats.shape == (n, len(ISOLATION_FEATURES))
     assert np.isnan(feats[~dd]).all() and np.isfinite(feats[dd]).all()
     # the input reference: an exponential average over the seconds without detection
@@ -62,17 +68,31 @@ def test_features_equal_direct_window_statistics(rng):
         ref += alpha * (np.array([cols[5][t], cols[6][t], cols[7][t]]) - ref)
     np.testing.assert_allclose(feats[320], _reference_features(320, 300, cols, ref),
                                rtol=1e-9, atol=1e-12)  # fmt: skip
-    # continuing from a carried state equals processing the whole run
-    from bayes_fdi.diagnosis.isolation.isolator import new_feature_state
+    # continuing from a carried state equals processing the whole run, second by second too
+    first, state = window.run(SignatureInputs(dd[:200], *(c[:200] for c in cols)))
+    second, _ = window.run(SignatureInputs(dd[200:], *(c[200:] for c in cols)), state)
+    np.testing.assert_array_equal(np.vstack([first, second]), feats)
+    state, rows = window.init_state(), []
+    for t in range(n):
+        row, state = window.update(SignatureInputs(dd[t], *(c[t] for c in cols)), state)
+        rows.append(row)
+    np.testing.assert_array_equal(np.array(rows), feats)
 
-    st = new_feature_state()
-    first = isolation_features(dd[:200], *(c[:200] for c in cols), state=st)
-    halves = np.vstack([first, isolation_features(dd[200:], *(c[200:] for c in cols), state=st)])
-    np.testing.assert_array_equal(halves, feats)
+
+def test_signature_state_is_checked_by_field():
+    window = SignatureWindow()
+    fresh = window.init_state()
+    with pytest.raises(ValueError, match=r"signature state.sums must be a float64 array"):
+        window.check_state(fresh._replace(sums=np.zeros(15)))
+    with pytest.raises(ValueError, match="reference_set must be a bool array"):
+        window.check_state(fresh._replace(reference_set=np.zeros(1)))
+    with pytest.raises(ValueError, match="must be a SignatureState"):
+        window.check_state(tuple(fresh))
+    assert isinstance(fresh, SignatureState)
 
 
 def test_groups_equal_the_paper_pipelines_find_groups(rng):
-    from bayes_fdi.paper.reproduce import find_groups
+    from bayes_fdi.paper.separability import find_groups
 
     states = [f"f{i}" for i in range(1, 9)]
     for _ in range(20):
@@ -147,3 +167,30 @@ def test_isolator_groups_and_probabilities(rng):
     gp = p @ iso.membership_
     np.testing.assert_allclose(gp[:, 0], p[:, 0] + p[:, 1], rtol=1e-12)
     assert iso.temperature() is not None and iso.temperature() > 0
+
+
+def test_isolator_run_equals_the_temperature_scaled_group_sums(rng):
+    from bayes_fdi.calibration import TemperatureScaler
+
+    centres = [(0, 0), (0, 0), (5, 5)]
+    X, y = _blobs(rng, centres, 40)
+    iso = FaultIsolator(calibrator=TemperatureScaler()).fit(
+        X, y, validation=_blobs(rng, centres, 40), calibration=_blobs(rng, centres, 40)
+    )
+    rows = _blobs(rng, centres, 10)[0]
+    rows[3] = np.nan  # no signature this second
+    out = iso.run(rows)
+    assert np.isnan(out.fault_proba[3]).all() and np.isnan(out.novelty[3])
+    ok = np.arange(rows.shape[0]) != 3
+    # second implementation: the calibrator's own transform of the tree's group sums, shared
+    # back to the faults in proportion
+    p = iso.fault_proba(rows[ok])
+    gp = p @ iso.membership_
+    g = iso.calibrator_.transform(gp)
+    share = p / gp[:, iso.group_of_]
+    np.testing.assert_allclose(out.group_proba[ok], g, rtol=1e-10, atol=1e-15)
+    np.testing.assert_allclose(out.fault_proba[ok], g[:, iso.group_of_] * share, rtol=1e-10)
+    np.testing.assert_array_equal(out.novelty[ok], iso.novelty_.score(rows[ok]))
+    one = iso.update(rows[5])
+    np.testing.assert_array_equal(one.group_proba, out.group_proba[5])
+    assert one.novelty == out.novelty[5]

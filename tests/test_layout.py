@@ -34,6 +34,7 @@ FLOORS: dict[str, int] = {
     "calibration": 7,
     "scoring": 7,
     "default_diagnoser": 8,
+    "commissioning": 8,
     # the applications, then the command line
     "paper": 9,
     "benchmark": 9,
@@ -44,6 +45,7 @@ FLOORS: dict[str, int] = {
 FOUNDATION = ("atomic", "memory", "progress", "cli_arguments", "reporting", "distributed")
 #: The concepts of `bayes_fdi.diagnosis`, in the order they may import one another.
 DIAGNOSIS_FLOORS: dict[str, int] = {
+    "component_state": 0,
     "normal_models": 0,
     "detection": 1,
     "isolation": 2,

@@ -14,7 +14,8 @@ from sklearn.base import clone
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
-from bayes_fdi.diagnosis.seva.windows import SevaRecord, SevaStatus
+from bayes_fdi.diagnosis.online import InputEnvelope
+from bayes_fdi.diagnosis.seva.record import SevaRecord, SevaStatus
 
 CHANNELS = ("CV", "P1", "P2", "T1", "X", "F")
 
@@ -152,6 +153,21 @@ def test_detection_only_without_fault_runs(recording):
     assert json.loads(s.attrs["undetectable"]) == []
 
 
+def test_a_detector_object_gives_the_stream_of_its_name(recording):
+    """A sequential test passed as an object is calibrated like the built-in one it equals."""
+    from bayes_fdi.diagnosis.detection import CUSUM
+
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    by_name = OnlineDiagnoser(_tiny_models(), detector="cusum", cusum_k=0.7).fit(normal)
+    by_object = OnlineDiagnoser(_tiny_models(), detector=CUSUM(k=0.7, threshold=99.0)).fit(normal)
+    assert by_object.threshold_ == by_name.threshold_
+    a, b = by_name.run(recording), by_object.run(recording)
+    for name in ("DD", "stat_X", "stat_F", "status"):
+        np.testing.assert_array_equal(a[name].values, b[name].values)
+    with pytest.raises(ValueError, match="detector must be 'cusum', 'glr' or a sequential test"):
+        OnlineDiagnoser(_tiny_models(), detector=object()).fit(normal)
+
+
 def test_clone_refits_and_bad_input_is_named(fitted, recording):
     params = fitted.get_params()
     assert params["max_signatures_per_fault"] == 20
@@ -186,7 +202,7 @@ def test_chunked_run_continues_exactly(fitted, recording, cuts):
     assert state.n_runs == recording.sizes["run"]
     np.testing.assert_array_equal(state.seconds, recording.sizes["time"])
     with pytest.raises(ValueError, match="read-only"):
-        state.features[0, 0] = 1.0  # the state is immutable
+        state.signature.sums[0, 0] = 1.0  # the state is immutable
 
 
 def test_update_continues_a_runs_state(fitted, recording):
@@ -202,10 +218,20 @@ def test_update_continues_a_runs_state(fitted, recording):
     assert recs[0].t_start == 130.0  # seconds count on from the state
     after = fitted.stream_state()
     _, want = fitted.run(one, return_state=True)
-    for a, b in zip(after, want, strict=True):
-        np.testing.assert_array_equal(np.asarray(a, dtype=object) if isinstance(a, tuple)
-                                      else a, np.asarray(b, dtype=object) if isinstance(b, tuple)
-                                      else b)  # fmt: skip
+    got, expected = _leaves(after), _leaves(want)
+    assert got.keys() == expected.keys()
+    for name, value in got.items():
+        np.testing.assert_array_equal(value, expected[name], err_msg=name)
+
+
+def _leaves(state, prefix="state"):
+    """Every array of a nested state, by its path."""
+    if isinstance(state, tuple):
+        out = {}
+        for name, value in zip(state._fields, state, strict=True):
+            out.update(_leaves(value, f"{prefix}.{name}"))
+        return out
+    return {prefix: np.asarray(state)}
 
 
 def test_state_of_another_shape_is_refused(fitted, recording):
@@ -214,6 +240,13 @@ def test_state_of_another_shape_is_refused(fitted, recording):
         fitted.run(recording, state=state)
     with pytest.raises(ValueError, match="StreamState"):
         fitted.run(recording, state={"dd": 1})
+    # a state of another diagnoser (another whitening order): the field is named
+    order = fitted.whiteners_["X"].order_
+    whiten = state.whiten._replace(X=state.whiten.X._replace(history=np.zeros((1, order + 1))))
+    with pytest.raises(ValueError, match=r"whitener state.history must be a float64 array"):
+        fitted.reset(state._replace(whiten=whiten))
+    with pytest.raises(ValueError, match=r"state.seconds must be a \(runs,\) array"):
+        fitted.run(recording.isel(run=[0]), state=state._replace(seconds=np.int64(3)))
 
 
 def test_save_load_round_trip_is_exact(fitted, recording, tmp_path):
@@ -248,24 +281,30 @@ def test_normal_runs_as_a_list_of_datasets_of_different_durations(recording):
         OnlineDiagnoser(_tiny_models()).fit([a, "b.csv"])
 
 
-def test_onset_inputs_novel_holds_the_envelope_check_of_the_pre_detection_average():
-    from bayes_fdi.diagnosis.online.state import onset_inputs_novel
-
-    low, high = np.zeros(4), np.full(4, 0.4)
+def test_the_envelope_onset_check_holds_the_check_of_the_pre_detection_average():
+    envelope = InputEnvelope.from_bounds(np.zeros(4), np.full(4, 0.4))
     dd = np.array([0, 0, 0, 1, 1, 1, 0, 0, 1, 1], dtype=bool)
     inside = np.full((10, 4), 0.2)
     inside[3:6, 3] = 0.9  # the fault itself moves T1 far out at the detection: not novel
-    state = np.zeros(7)
-    np.testing.assert_array_equal(onset_inputs_novel(dd, inside, low, high, state), False)
+    np.testing.assert_array_equal(envelope.run(inside, dd)[0], False)
+    np.testing.assert_array_equal(
+        envelope.outside(inside), (np.arange(10) >= 3) & (np.arange(10) < 6)
+    )
     outside = np.full((10, 4), 0.2)
     outside[:, 3] = 0.5  # T1 outside the envelope from the start: every detection is novel
-    got = onset_inputs_novel(dd, outside, low, high, np.zeros(7))
+    got, end = envelope.run(outside, dd)
     np.testing.assert_array_equal(got, dd)
-    # continued in two chunks from the state: the same
-    st = np.zeros(7)
-    halves = np.concatenate([onset_inputs_novel(dd[:4], outside[:4], low, high, st),
-                             onset_inputs_novel(dd[4:], outside[4:], low, high, st)])  # fmt: skip
-    np.testing.assert_array_equal(halves, got)
+    # continued in two chunks, or second by second, from the state: the same
+    first, state = envelope.run(outside[:4], dd[:4])
+    np.testing.assert_array_equal(
+        np.concatenate([first, envelope.run(outside[4:], dd[4:], state)[0]]), got
+    )
+    state, stepwise = envelope.init_state(), []
+    for t in range(10):
+        novel, state = envelope.update(outside[t], dd[t], state)
+        stepwise.append(novel)
+    np.testing.assert_array_equal(stepwise, got)
+    np.testing.assert_array_equal(state.average, end.average)
 
 
 def test_a_detection_outside_the_training_envelope_is_dazzled(fitted, recording):
@@ -281,4 +320,36 @@ def test_a_detection_outside_the_training_envelope_is_dazzled(fitted, recording)
     records = [fitted.update({c: float(shifted[c].values[0, t]) for c in CHANNELS})
                for t in range(shifted.sizes["time"])]  # fmt: skip
     first = int(np.flatnonzero(dd)[0])
-    assert "outside the training envelope" in records[first].reasons[0]
+    assert records[first].reasons[0].startswith("model mismatch: commission this valve")
+    # a mismatch names no fault and indicates no group
+    assert set(s["state"].values[0][dd].astype(str)) == {"mismatch"}
+    assert not s["indicated"].values[0][dd].any()
+    assert np.isnan(s["probability"].values[0][dd]).all()
+
+
+def test_a_detection_from_the_first_second_is_judged_on_its_inputs(fitted, recording):
+    """The default model on a plant it never saw alarms at once: with no second without
+    detection to average, the first second's inputs decide whether the model fits."""
+    from bayes_fdi.diagnosis.online.envelope import InputEnvelope
+
+    envelope = InputEnvelope.from_bounds([0, 0, 0, 0], [1, 0.5, 0.5, 0.5])
+    inputs = np.full((5, 4), 0.2)
+    inputs[:, 3] = 0.7  # T1 above the envelope from the start
+    novel, _ = envelope.run(inputs, np.ones(5, dtype=bool))
+    assert novel.all()
+    inside, _ = envelope.run(np.full((5, 4), 0.2), np.ones(5, dtype=bool))
+    assert not inside.any()
+
+
+def test_evidence_names_the_residual_that_raised_the_detection_and_its_sign(fitted, recording):
+    s = fitted.run(recording)
+    dd = s["DD"].values
+    ev = s["evidence"].values.astype(str)
+    assert (ev[~dd] == "").all() and (ev[dd] != "").all()
+    # f1 (valve clogging) holds the stem below its command: X reads low; f18 (bypass open)
+    # adds flow: F reads high
+    onset = {1: 100, 2: 120}
+    for run, word in ((1, "X low"), (2, "F high")):
+        after = dd[run] & (s["time"].values >= onset[run] + 30)
+        values, counts = np.unique(ev[run][after], return_counts=True)
+        assert word in values[np.argmax(counts)], (run, dict(zip(values, counts, strict=True)))

@@ -22,7 +22,7 @@ from bayes_fdi.diagnosis import (
     svm_classifier,
     svm_fault_diagnoser,
 )
-from bayes_fdi.diagnosis.seva.windows import to_frame
+from bayes_fdi.diagnosis.seva.record import to_frame
 from bayes_fdi.rvm import RBF, RVC, RVR
 
 OFFSETS = {"fn": (0, 0), "f1": (0.04, 0), "f2": (0, -0.04), "f3": (0.03, 0.03)}

@@ -9,16 +9,12 @@ import numpy as np
 import pytest
 from sklearn.metrics import brier_score_loss
 
+from bayes_fdi.campaigns.cache import split_train_test
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.paper.reproduce import (
-    classification_metrics,
-    configure_parser,
-    evaluate_dataset,
-    find_groups,
-    group_metrics,
-    pairwise_separability,
-    split_train_test,
-)
+from bayes_fdi.paper.pipeline import evaluate_dataset
+from bayes_fdi.paper.reproduce import configure_parser
+from bayes_fdi.paper.scores import classification_metrics
+from bayes_fdi.paper.separability import find_groups, group_metrics, pairwise_separability
 
 
 def _synthetic(
@@ -265,7 +261,7 @@ def test_pairwise_separability_matches_sklearn_loo(rng):
 def test_paired_comparison_by_hand():
     from scipy.stats import binom
 
-    from bayes_fdi.paper.reproduce import paired_comparison
+    from bayes_fdi.paper.scores import paired_comparison
 
     y = ["a"] * 10
     a = ["a"] * 7 + ["b"] * 3  # right on runs 0-6

@@ -112,7 +112,7 @@ def test_single_threaded_limits_and_restores():
     import torch
     from threadpoolctl import threadpool_info
 
-    from bayes_fdi.paper.reproduce import single_threaded
+    from bayes_fdi.paper.setup import single_threaded
 
     before = torch.get_num_threads()
     with single_threaded():

@@ -129,7 +129,7 @@ def test_grid_search_uses_the_lagged_inputs():
 
 def test_select_regression_width_is_the_same_search(rng):
     """`select_regression_width` and the default `NormalModels` search agree exactly."""
-    from bayes_fdi.paper.reproduce import select_regression_width
+    from bayes_fdi.paper.setup import select_regression_width
 
     normal = trajectory_runs(4, rng)
     width, evidence = select_regression_width(normal, seed=3, max_samples=150)

@@ -282,10 +282,9 @@ def test_floor_counts_the_fits_products_and_iterations_without_changing_it(monke
     update), the fit itself unchanged, and the solver's functions restored afterwards (counts
     only: no timing asserted)."""
     floor = _load("rvm_floor")
-    import bayes_fdi.rvm.sbl_gaussian as sbl_gaussian
+    import bayes_fdi.rvm.sbl.gaussian as gaussian_module  # the module whose decision is counted
     from bayes_fdi.rvm import RVR
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sbl_tracking import TrackedFactors
+    from bayes_fdi.rvm.sbl import Design, TrackedFactors
 
     additions = [0]
     add = TrackedFactors.add
@@ -295,10 +294,10 @@ def test_floor_counts_the_fits_products_and_iterations_without_changing_it(monke
         return add(self, *args, **kwargs)
 
     monkeypatch.setattr(TrackedFactors, "add", counted_add)
-    rmatmul, decide = Design.rmatmul, sbl_gaussian.lazy_verified_action
+    rmatmul, decide = Design.rmatmul, gaussian_module.lazy_verified_action
     r = floor.measure("smooth", 300)
     n_add = additions[0]  # the measured fit's (the reference fit below adds its own)
-    assert Design.rmatmul is rmatmul and sbl_gaussian.lazy_verified_action is decide
+    assert Design.rmatmul is rmatmul and gaussian_module.lazy_verified_action is decide
     data = bench.make_data(300, problem="smooth")
     ref = RVR(kernel="rbf", width=bench.PROBLEMS["smooth"].sigma, method="fast", bias=True)
     ref.fit(data["X_train"], data["y_train"])

@@ -154,8 +154,7 @@ def test_errors(data, clf):
 def test_float32_screening_bernoulli(data):
     """Screening S, Q in float32 changes nothing that matters for the fitted classifier."""
     from bayes_fdi.rvm import RBF
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_bernoulli
+    from bayes_fdi.rvm.sbl import Design, fast_bernoulli
 
     X, y, _, _ = data
     Xt, t = torch.tensor(X), torch.tensor(y, dtype=torch.float64)

@@ -1,4 +1,4 @@
-"""The fast solvers' decision rules (bayes_fdi.rvm.sbl_decisions) against independent
+"""The fast solvers' decision rules (bayes_fdi.rvm.sbl.decisions) against independent
 references: the textbook factors in 50-digit arithmetic (mpmath), a design with duplicated
 columns in permuted order, a perturbed design, and the closed-form marginal likelihood
 (Gaussian) or an independently computed Laplace approximation (Bernoulli)."""
@@ -12,20 +12,24 @@ import scipy.optimize
 import scipy.special
 import torch
 
-from bayes_fdi.rvm.design import Design
 from bayes_fdi.rvm.kernels import RBF
-from bayes_fdi.rvm.sbl_decisions import (
+from bayes_fdi.rvm.sbl import (
+    Design,
     best_action,
     exact_factors,
+    factor_precision,
+    fast_bernoulli,
+    fast_gaussian,
     gaussian_screened_Q,
     lowest_index_in_band,
     optimistic_ratio,
+    posterior_mode,
+    rounding_gamma,
     screened_factors,
+    thin_matmul,
     verified_argmax,
     weighted_exact_factors,
 )
-from bayes_fdi.rvm.sbl_numerics import _factor
-from bayes_fdi.rvm.sparse_bayes import fast_bernoulli, fast_gaussian, posterior_mode
 from bayes_fdi.rvm.threads import fit_threads
 
 
@@ -80,7 +84,7 @@ def test_exact_factors_match_high_precision_textbook_form():
     Phi = B[:, act]
     alpha = torch.tensor([2e-5, 3e-4, 1e-6, 5e-3], dtype=torch.float64)
     beta = 400.0
-    fac = _factor(alpha, beta * (Phi.T @ Phi))
+    fac = factor_precision(alpha, beta * (Phi.T @ Phi))
     mu = beta * fac.solve(Phi.T @ t)
     resid = t - Phi @ mu
     cand = torch.tensor([5, 50, 90, 3, 77])  # additions and active columns
@@ -106,7 +110,7 @@ def test_screened_factors_bound_the_exact_ones(low):
     beta = 400.0
     M = act.numel()
     G = Phi.T @ Phi
-    fac = _factor(alpha, beta * G)
+    fac = factor_precision(alpha, beta * G)
     mu = beta * fac.solve(Phi.T @ t)
     resid = t - Phi @ mu
     S_ex, Q_ex = exact_factors(fac, Phi, alpha, beta, mu, resid, B, Phi.T @ B)
@@ -236,7 +240,7 @@ def test_weighted_exact_factors_match_high_precision_textbook_form():
     y = torch.sigmoid(Phi @ mu)
     w = y * (1 - y)
     G = (Phi.T * w) @ Phi
-    fac = _factor(alpha, G)
+    fac = factor_precision(alpha, G)
     cand = torch.tensor([5, 50, 60, 3, 57])
     Bc = B[:, cand]
     S, Q = weighted_exact_factors(fac, Phi, alpha, w, mu, t - y, Bc, Phi.T @ (w[:, None] * Bc))
@@ -363,7 +367,6 @@ def test_bernoulli_float32_screening_takes_the_exact_decisions():
 def test_thin_matmul_within_highams_bound(k):
     """``thin_matmul`` (the transposed product for thin right-hand sides) is ``A @ W`` within
     ``gamma_m sum |A| |W|``, on a column view of a wider buffer (as the solver's ``Phi``)."""
-    from bayes_fdi.rvm.sbl_decisions import rounding_gamma, thin_matmul
 
     rng = np.random.default_rng(k)
     buf = torch.tensor(rng.standard_normal((700, 64)))

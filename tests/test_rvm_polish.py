@@ -16,12 +16,15 @@ from blas_paths import EVERYTHING_ELSE, REFERENCE, run_python
 from test_rvm_regression import gaussian_log_evidence
 
 from bayes_fdi.rvm import RVR, load
-from bayes_fdi.rvm.design import Design
 from bayes_fdi.rvm.persistence import save
-from bayes_fdi.rvm.sbl_em import em_gaussian
-from bayes_fdi.rvm.sbl_gaussian import fast_gaussian
-from bayes_fdi.rvm.sbl_polish import polish_gaussian, restart_pool
-from bayes_fdi.rvm.sparse_bayes import SBLResult
+from bayes_fdi.rvm.sbl import (
+    Design,
+    SBLResult,
+    em_gaussian,
+    fast_gaussian,
+    polish_gaussian,
+    restart_pool,
+)
 
 
 def smooth_rbf_design(seed: int, n: int = 200, bias: bool = False) -> tuple[np.ndarray, np.ndarray]:

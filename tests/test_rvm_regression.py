@@ -268,8 +268,7 @@ def test_screening_copy_takes_the_exact_decisions():
     """The screening copy (float32 + bfloat16 entries) only ranks candidates, with a rigorous
     bound of its error (``Design.screening_error``): every action is decided on exact factors,
     so the solver takes the same path as with the float64 matrix and reaches the same optimum."""
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+    from bayes_fdi.rvm.sbl import Design, fast_gaussian
 
     rng = np.random.default_rng(17)
     X = rng.uniform(0, 1, (700, 3))
@@ -311,8 +310,7 @@ def test_screening_copy_takes_the_exact_decisions():
 def test_screening_product_and_monotone_evidence():
     """The one-triangle screening product agrees with float64 K v within its bound, and the
     screened solver (additions re-checked exactly) still never lowers the evidence."""
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+    from bayes_fdi.rvm.sbl import Design, fast_gaussian
 
     rng = np.random.default_rng(23)
     X = rng.uniform(0, 1, (900, 3))
@@ -333,9 +331,8 @@ def test_screening_product_and_monotone_evidence():
 
 def test_buffer_growth_does_not_change_the_fit(monkeypatch):
     """Phi / B^T Phi buffers that must grow (capacity 2) give the same fit as roomy ones."""
-    from bayes_fdi.rvm import sbl_gaussian
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+    import bayes_fdi.rvm.sbl.gaussian as gaussian_module  # the module whose constant is patched
+    from bayes_fdi.rvm.sbl import Design, fast_gaussian
 
     rng = np.random.default_rng(5)
     X = torch.tensor(rng.uniform(-10, 10, (300, 1)))
@@ -343,7 +340,7 @@ def test_buffer_growth_does_not_change_the_fit(monkeypatch):
     for screen in (False, True):
         design = Design(kernel=RBF(1.0), X=X, bias=True, rhs=t, screen=screen)
         roomy = fast_gaussian(design, t)
-        monkeypatch.setattr(sbl_gaussian, "_INITIAL_CAPACITY", 2)
+        monkeypatch.setattr(gaussian_module, "_INITIAL_CAPACITY", 2)
         tight = fast_gaussian(design, t)
         monkeypatch.undo()
         assert roomy.active.numel() > 4  # the tight buffers had to grow
@@ -354,17 +351,17 @@ def test_buffer_growth_does_not_change_the_fit(monkeypatch):
 
 def test_fast_solver_stops_when_only_reestimations_gain_nothing(monkeypatch):
     """The stall rule ends a fit early only at the evidence the full run reaches anyway."""
-    import bayes_fdi.rvm.sbl_gaussian as sb
+    import bayes_fdi.rvm.sbl.gaussian as gaussian_module  # the module whose constants are patched
 
     rng = np.random.default_rng(1)
     X = rng.uniform(0, 1, (800, 3))
     t = np.sin(3 * X[:, 0]) + X[:, 1] ** 2 + 0.01 * rng.standard_normal(800)
     with_rule = RVR(kernel="rbf", width=0.2, max_iter=3000).fit(X, t)
-    monkeypatch.setattr(sb, "_GAUSS_STALL_WINDOW", 10**9)
+    monkeypatch.setattr(gaussian_module, "_GAUSS_STALL_WINDOW", 10**9)
     without = RVR(kernel="rbf", width=0.2, max_iter=3000).fit(X, t)
     assert with_rule.n_iter_ < without.n_iter_
     # the stopped fit is within the rule's tolerance of the longer run's evidence
-    assert abs(with_rule.log_evidence_ - without.log_evidence_) < sb._GAUSS_STALL_GAIN
+    assert abs(with_rule.log_evidence_ - without.log_evidence_) < gaussian_module._GAUSS_STALL_GAIN
     np.testing.assert_allclose(with_rule.predict(X), without.predict(X), atol=1e-3)
     trace = with_rule.evidence_trace_
     assert trace[-1] == pytest.approx(with_rule.log_evidence_)
@@ -373,8 +370,7 @@ def test_fast_solver_stops_when_only_reestimations_gain_nothing(monkeypatch):
 def test_kernel_rows_in_blocks_give_the_same_fit():
     """A kernel matrix too large for the memory budget is computed in row blocks; the
     decisions are taken on exact factors either way, so the fit is the same."""
-    from bayes_fdi.rvm.design import Design
-    from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+    from bayes_fdi.rvm.sbl import Design, fast_gaussian
 
     rng = np.random.default_rng(8)
     X = torch.tensor(rng.uniform(0, 1, (400, 3)))

@@ -12,9 +12,7 @@ import torch
 from blas_paths import EVERYTHING_ELSE, REFERENCE, run_python
 
 from bayes_fdi.rvm import RBF, RVC, RVR, Linear
-from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.screening_copy import ENTRY_BYTES, TriangleCopy, triangle_bytes
-from bayes_fdi.rvm.sparse_bayes import fast_gaussian
+from bayes_fdi.rvm.sbl import ENTRY_BYTES, Design, TriangleCopy, fast_gaussian, triangle_bytes
 
 
 def rbf(X: np.ndarray, width: float) -> np.ndarray:

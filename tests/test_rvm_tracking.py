@@ -1,5 +1,5 @@
-"""The carried screening factors of the fast Gaussian solver (``rvm.sbl_tracking``) and the
-lazy verification of its actions (``rvm.sbl_verification``).
+"""The carried screening factors of the fast Gaussian solver (``rvm.sbl.tracked_factors``) and
+the lazy verification of its actions (``rvm.sbl.verification``).
 
 The bounds are checked against an independent reference: the carried values are computed in
 float32 and their error bounds must contain the float64 values of the same stored problem,
@@ -15,13 +15,16 @@ import numpy as np
 import pytest
 import torch
 
-from bayes_fdi.rvm import RVR, sbl_gaussian
-from bayes_fdi.rvm.sbl_decisions import best_action, rounding_gamma
-from bayes_fdi.rvm.sbl_numerics import _factor
-from bayes_fdi.rvm.sbl_tracking import TrackedFactors, posterior_context
-from bayes_fdi.rvm.sbl_verification import (
+import bayes_fdi.rvm.sbl.gaussian as gaussian_module  # the module whose constant is patched
+from bayes_fdi.rvm import RVR
+from bayes_fdi.rvm.sbl import (
+    TrackedFactors,
+    best_action,
+    factor_precision,
     lazy_verified_action,
+    posterior_context,
     reestimate_gain_bounds,
+    rounding_gamma,
     useful_lower_bound,
 )
 
@@ -82,7 +85,7 @@ def _post(K, Bt_t, act, alpha, beta, eps):
     a = torch.tensor(act)
     G = K[a][:, a]
     al = torch.tensor(alpha, dtype=K.dtype)
-    fac = _factor(al, beta * G)
+    fac = factor_precision(al, beta * G)
     mu = beta * fac.solve(Bt_t[a])
     return posterior_context(fac, al, beta, G, mu, Bt_t[a], eps)
 
@@ -221,7 +224,7 @@ def test_carried_screening_takes_the_refreshed_path(monkeypatch, width, n):
     X = rng.uniform(-6, 6, size=(n, 1))
     y = np.sinc(X[:, 0] / np.pi) + 0.1 * rng.standard_normal(n)
     carried = RVR(width=width).fit(X, y)
-    monkeypatch.setattr(sbl_gaussian, "_REFRESH_EVERY_ITERATION", True)
+    monkeypatch.setattr(gaussian_module, "_REFRESH_EVERY_ITERATION", True)
     fresh = RVR(width=width).fit(X, y)
     np.testing.assert_array_equal(carried.relevance_indices_, fresh.relevance_indices_)
     assert carried.n_iter_ == fresh.n_iter_
@@ -271,7 +274,7 @@ def test_precise_data_screen_from_the_fresh_factor(monkeypatch):
     monkeypatch.setattr(TrackedFactors, "direct", counting)
     carried = RVR(width=1.0).fit(X, y)
     assert calls["direct"] > 0
-    monkeypatch.setattr(sbl_gaussian, "_REFRESH_EVERY_ITERATION", True)
+    monkeypatch.setattr(gaussian_module, "_REFRESH_EVERY_ITERATION", True)
     fresh = RVR(width=1.0).fit(X, y)
     np.testing.assert_array_equal(carried.relevance_indices_, fresh.relevance_indices_)
     assert carried.n_iter_ == fresh.n_iter_

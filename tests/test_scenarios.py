@@ -136,7 +136,7 @@ def test_fault_free_hours_cover_warmup_plus_the_budget():
 def test_the_campaign_file_lists_the_same_scenarios():
     from pathlib import Path
 
-    from bayes_fdi.campaigns.simulation import load_campaign
+    from bayes_fdi.campaigns.parsing import load_campaign
 
     c = load_campaign(Path(__file__).parents[1] / "sim" / "damadics-benchmark.toml")
     faulty = [s for s in c.scenarios if s.state != "fn"]

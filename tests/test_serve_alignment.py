@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 import xarray as xr
+from serve_helpers import fit_tiny_model
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.datasets import CHANNELS
@@ -19,7 +20,6 @@ from bayes_fdi.deployment.serve.durable_log import DurableLog, read_log
 from bayes_fdi.deployment.serve.records import group_labels
 from bayes_fdi.deployment.serve.valve_runner import ValveRunner
 from bayes_fdi.diagnosis import OnlineDiagnoser
-from tests.serve_helpers import fit_tiny_model
 
 T0 = 1_800_000_000  # plant time of second 0
 

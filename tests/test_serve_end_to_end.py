@@ -15,11 +15,7 @@ import time
 import numpy as np
 import pytest
 import xarray as xr
-
-from bayes_fdi.datasets import CHANNELS
-from bayes_fdi.deployment.serve.durable_log import read_log
-from bayes_fdi.diagnosis import OnlineDiagnoser
-from tests.serve_helpers import (
+from serve_helpers import (
     Process,
     fit_tiny_model,
     free_ports,
@@ -27,6 +23,10 @@ from tests.serve_helpers import (
     plant_second,
     write_toml,
 )
+
+from bayes_fdi.datasets import CHANNELS
+from bayes_fdi.deployment.serve.durable_log import read_log
+from bayes_fdi.diagnosis import OnlineDiagnoser
 
 pytestmark = pytest.mark.slow  # minutes: two servers, a browser and 45 s of plant at 4x
 

@@ -12,11 +12,11 @@ import time
 import numpy as np
 import pytest
 import xarray as xr
+from serve_helpers import Process, fit_tiny_model, free_ports, plant_second, write_toml
 
 from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.deployment.serve.durable_log import read_log
 from bayes_fdi.diagnosis import OnlineDiagnoser
-from tests.serve_helpers import Process, fit_tiny_model, free_ports, plant_second, write_toml
 
 SPEED = 2.0
 DURATION = 150

@@ -11,19 +11,17 @@ import pytest
 import xarray as xr
 
 from bayes_fdi.datasets import make_dataset
-from bayes_fdi.diagnosis.seva.windows import (
+from bayes_fdi.diagnosis.seva.novelty import NoveltyReference
+from bayes_fdi.diagnosis.seva.record import (
     ClassDistribution,
-    NoveltyReference,
     SevaRecord,
     SevaStatus,
-    SevaThresholds,
-    records_from_diagnosis,
-    screen_measurements,
-    seva_records,
     to_frame,
     to_json,
     to_xarray,
 )
+from bayes_fdi.diagnosis.seva.rules import SevaThresholds, screen_measurements
+from bayes_fdi.diagnosis.seva.windows import records_from_diagnosis, seva_records
 
 CLASSES = ["fn", "f1", "f2", "f3"]
 T = 200

@@ -9,12 +9,8 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.estimator_checks import estimator_checks_generator
 
 from bayes_fdi.diagnosis import svm_classifier
-from bayes_fdi.diagnosis.isolation.tree import (
-    PAPER_TREE,
-    HierarchicalClassifier,
-    _leaves,
-    design_tree,
-)
+from bayes_fdi.diagnosis.isolation.tree import PAPER_TREE, HierarchicalClassifier, _leaves
+from bayes_fdi.diagnosis.isolation.tree_design import design_tree
 
 
 def blobs(centres: dict, n: int, rng: np.random.Generator, scale: float = 0.1):

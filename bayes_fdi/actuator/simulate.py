@@ -9,6 +9,7 @@ import xarray as xr
 
 from bayes_fdi.actuator import model
 from bayes_fdi.actuator.faults import FAULT_NAMES, Fault
+from bayes_fdi.actuator.parameters import P_RANGE, T_RANGE, ActuatorParameters, parameter_matrix
 from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS, validate_dataset
 from bayes_fdi.memory import check_memory
 
@@ -19,7 +20,7 @@ __all__ = ["NOISE_STD", "inject_faults", "simulate", "simulate_replicas"]
 #: 0.0025 sin(2 pi 50 t), which is exactly 0 at the 1 s sampling instants.
 NOISE_STD = float(np.sqrt(5e-9 / 0.0025))
 
-_SCALE = {"CV": 1.0, "P1": model.P_RANGE, "P2": model.P_RANGE, "T1": model.T_RANGE}
+_SCALE = {"CV": 1.0, "P1": P_RANGE, "P2": P_RANGE, "T1": T_RANGE}
 #: float64 values held per (run, second) at the peak of `simulate` / `inject_faults`: inputs (4),
 #: model outputs (5) and states (4), noise (5), the output dataset (6) and its deep copy (6)
 _VALUES_PER_SAMPLE = 30
@@ -143,8 +144,12 @@ def _run_model(
     who: str,
     steps: int | None = None,
     hold: str = "linear",
+    parameters: np.ndarray | None = None,
 ):
-    """Run the compiled kernel: noise-free measured (run, time, 5) and states (run, time, 4)."""
+    """Run the compiled kernel: noise-free measured (run, time, 5) and states (run, time, 4).
+
+    ``parameters``: the ``(run, VECTOR_SIZE)`` matrix of `parameter_matrix` (None: nominal).
+    """
     if integrator not in _INTEGRATORS:
         raise ValueError(f"{who}: integrator must be 'fast' or 'reference', got {integrator!r}")
     if hold not in _HOLDS:
@@ -153,6 +158,7 @@ def _run_model(
         raise ValueError(f"{who}: warmup must be an integer number of seconds >= 0")
     idx, strength, onset, ramp = _fault_arrays(faults)
     n_runs, n_t = u.shape[:2]
+    par = parameter_matrix(None, n_runs, who) if parameters is None else parameters
     out = np.empty((n_runs, n_t, 5))
     extra = np.empty((n_runs, n_t, 4))
     scheme, default_steps = _INTEGRATORS[integrator]
@@ -160,14 +166,14 @@ def _run_model(
     chunk = n_runs if not progress else max(1, min(n_runs, 64))
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from bayes_fdi.progress import progress_bar
 
-        bar = tqdm(total=n_runs, desc=f"simulating ({integrator})", unit="run")
+        bar = progress_bar(n_runs, f"simulating ({integrator})", unit="run")
     for start in range(0, n_runs, chunk):
         sl = slice(start, min(n_runs, start + chunk))
-        model._simulate_batch(
+        model.simulate_batch(
             u[sl], idx[sl], strength[sl], onset[sl], ramp[sl], scheme, steps, _HOLDS[hold],
-            int(warmup),
+            int(warmup), par[sl],
             out[sl], extra[sl],
         )  # fmt: skip
         if bar is not None:
@@ -221,6 +227,7 @@ def simulate(
     warmup: int = 30,
     progress: bool = False,
     return_states: bool = False,
+    parameters: ActuatorParameters | Sequence[ActuatorParameters] | None = None,
 ):
     """Simulate the DAMADICS actuator driven by the inputs of a dataset.
 
@@ -264,6 +271,12 @@ def simulate(
         Also return an :class:`xarray.Dataset` of internal states at the 1 s instants:
         ``X_true`` (true stem position), ``F_true`` (true flow, t/h), ``Ps`` (chamber gauge
         pressure, Pa), ``CVI`` (positioner controller output).
+    parameters
+        The actuator's parameters: an `ActuatorParameters` for every run, or a sequence of
+        them, one per run (None, the default: the nominal parameters, which reproduce DABLib's
+        model). The recorded P1, P2, T1 are read through the parameters' sensor
+        calibration (true value = (reading - offset) / gain) and the measured channels are
+        returned through it.
 
     Returns
     -------
@@ -284,9 +297,11 @@ def simulate(
     _check_seed(seed, who)
     u = _check_inputs(inputs, who=who)
     resolved = _resolve_faults(inputs, faults, who)
+    par = parameter_matrix(parameters, u.shape[0], who)
     out, extra = _run_model(
-        u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold
-    )
+        u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold,
+        parameters=par,
+    )  # fmt: skip
     ds = _measured(inputs, out, resolved, seed, noise=noise, integrator=integrator, hold=hold)
     if return_states:
         return ds, _states_dataset(ds, extra)
@@ -334,6 +349,7 @@ def simulate_replicas(
     hold: str = "linear",
     warmup: int = 30,
     progress: bool = False,
+    parameters: ActuatorParameters | Sequence[ActuatorParameters] | None = None,
 ) -> list[xr.Dataset]:
     """Simulate once and return one noisy dataset per noise seed.
 
@@ -344,7 +360,7 @@ def simulate_replicas(
 
     Parameters
     ----------
-    inputs, faults, integrator, hold, warmup, progress
+    inputs, faults, integrator, hold, warmup, progress, parameters
         As in :func:`simulate`.
     seeds
         Noise seeds (integers >= 0), as ``seed`` of :func:`simulate`.
@@ -370,9 +386,11 @@ def simulate_replicas(
         _check_seed(seed, who)
     u = _check_inputs(inputs, who=who)
     resolved = _resolve_faults(inputs, faults, who)
+    par = parameter_matrix(parameters, u.shape[0], who)
     clean, _ = _run_model(
-        u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold
-    )
+        u, resolved, integrator=integrator, warmup=warmup, progress=progress, who=who, hold=hold,
+        parameters=par,
+    )  # fmt: skip
     kw = {"noise": True, "integrator": integrator, "hold": hold}
     return [_measured(inputs, clean, resolved, int(s), **kw) for s in seeds]
 
@@ -386,6 +404,7 @@ def inject_faults(
     hold: str = "linear",
     warmup: int = 30,
     progress: bool = False,
+    parameters: ActuatorParameters | Sequence[ActuatorParameters] | None = None,
 ) -> xr.Dataset:
     """Add faults to real records the way the paper did with DABLib.
 
@@ -407,6 +426,9 @@ def inject_faults(
         Stored in the ``seed`` attribute (the method itself is deterministic).
     integrator, hold, warmup, progress
         As in :func:`simulate`.
+    parameters
+        The model the differences are taken with: as in :func:`simulate` (one record, or one
+        per run; e.g. a digital twin's parameters for the valve that made the records).
 
     Returns
     -------
@@ -416,6 +438,7 @@ def inject_faults(
     who = "inject_faults"
     u = _check_inputs(real, who=who, require=CHANNELS)
     resolved = _resolve_faults(real, faults, who)
+    par = parameter_matrix(parameters, u.shape[0], who)
     kw = {
         "integrator": integrator,
         "warmup": warmup,
@@ -427,6 +450,7 @@ def inject_faults(
     ds = real.copy(deep=True)  # the result shares no memory with the caller's dataset
     if faulty_idx:
         sub = u[faulty_idx]
+        kw["parameters"] = par[faulty_idx]
         nominal, _ = _run_model(sub, [None] * len(faulty_idx), **kw)
         faulty, _ = _run_model(sub, [resolved[r] for r in faulty_idx], **kw)
         delta = faulty - nominal

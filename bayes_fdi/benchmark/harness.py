@@ -10,7 +10,7 @@ stream; ``sklearn.base.clone`` + ``fit(normal_runs)`` gives a fresh detector) an
 2. runs the diagnoser on every batch (it sees the six channels only, no labels), derives the
    benchmark's decision signals DD, PID, CID from the stream and the truth
    (`bayes_fdi.scoring.decision_signals`) and computes PICalc's indices
-   (:func:`bayes_fdi.scoring.picalc`);
+   (:func:`bayes_fdi.scoring.picalc`), run by run (`bayes_fdi.benchmark.collection`);
 3. measures what the faults do to the measured signals against the noise
    (`bayes_fdi.benchmark.effects`), the group-level calibration of the per-second isolation
    probabilities, the false alarms of simulated fault-free hours and of the second half of the
@@ -28,11 +28,12 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.benchmark.collection import RunCollector, group_calibration
 from bayes_fdi.benchmark.effects import fault_effects
 from bayes_fdi.benchmark.scenarios import (
     SCENARIOS,
@@ -43,24 +44,14 @@ from bayes_fdi.benchmark.scenarios import (
 )
 from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis.online.timeline import plot_timeline
-from bayes_fdi.scoring.decision_signals import decision_high, decision_signals, rising_edges
-from bayes_fdi.scoring.picalc import picalc
+from bayes_fdi.scoring.decision_signals import decision_high, rising_edges
 
 __all__ = [
-    "CALIBRATION_SECONDS_PER_RUN",
-    "CONFIDENT",
     "configure_parser",
     "run_benchmark",
     "run_from_cli",
 ]
 
-#: Each run contributes at most this many detected faulty seconds (evenly spaced) to the
-#: calibration sample, so the day-long ramps (84 600 faulty s) do not outweigh the abrupt
-#: faults (600 faulty s).
-CALIBRATION_SECONDS_PER_RUN = 600
-#: A group probability above this is "confident" (the isolation target counts confident wrong
-#: groups).
-CONFIDENT = 0.9
 #: Samples per call of ``diagnoser.run`` (runs of equal horizon are batched up to this).
 MAX_BATCH_SAMPLES = 300_000
 _TRUTH_COORDS = ("state", "strength", "onset", "profile", "ramp")
@@ -105,133 +96,6 @@ class _Simulations:
         if self.left[scenario.name] == 0:
             del self.cache[scenario.name]
         return runs
-
-
-class _Collector:
-    """Accumulates per-run indices, calibration samples and counts over the batches."""
-
-    def __init__(self, seed: int) -> None:
-        self.rows: list[dict[str, Any]] = []
-        self.proba: list[np.ndarray] = []
-        self.true: list[np.ndarray] = []
-        self.cluster: list[np.ndarray] = []
-        self.labels: list[str] | None = None
-        self.attrs: dict[str, Any] = {}
-        self.faulty_seconds = 0
-        self.confident_wrong = 0
-        self.model_std: dict[str, list[float]] = {"X": [], "F": []}
-        self.rng = np.random.default_rng(seed)
-
-    def add(self, scenario: BenchmarkScenario, seed: int, one: xr.Dataset) -> dict[str, Any]:
-        t = np.asarray(one["time"].values, dtype=np.float64)
-        sig = decision_signals(one, scenario.fault)
-        indices = picalc(
-            t,
-            sig.dd,
-            sig.pid,
-            sig.cid,
-            t_on=scenario.t_on,
-            t_from=scenario.t_from,
-            t_hor=scenario.t_hor,
-            strength=scenario.strength_at(t),
-            indicated=sig.indicated,
-            group_sizes=sig.group_sizes,
-        )
-        row = {
-            "fault": scenario.fault,
-            "mode": scenario.mode,
-            "size": scenario.size,
-            "seed": int(seed),
-            "indices": indices,
-        }
-        self.rows.append(row)
-        labels = [str(g) for g in one["group"].values]
-        if self.labels is None:
-            self.labels = labels
-            self.attrs = {k: one.attrs.get(k) for k in ("groups", "undetectable")}
-        elif labels != self.labels:
-            raise ValueError("run_benchmark: the stream's groups changed between runs")
-        faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
-        proba = one["group_proba"].transpose("time", "group").values
-        known = np.isfinite(proba).all(axis=1)
-        filled = np.where(known[:, None], proba, 0.0)  # undefined rows are never confident
-        top, pred = filled.max(axis=1), filled.argmax(axis=1)
-        wrong = top > CONFIDENT
-        if sig.true_group is not None:
-            wrong &= pred != sig.true_group
-        self.faulty_seconds += int(faulty.sum())
-        self.confident_wrong += int((wrong & faulty).sum())
-        fault_free = (t >= scenario.t_on) & (t < scenario.t_from)
-        for c in ("X", "F"):
-            std = one[f"{c}_hat_std"].values[fault_free]
-            if np.isfinite(std).any():
-                self.model_std[c].append(float(np.nanmedian(std)))
-        keep = np.flatnonzero(faulty & sig.dd & known)
-        if sig.true_group is not None and keep.size:
-            if keep.size > CALIBRATION_SECONDS_PER_RUN:
-                pos = np.linspace(0, keep.size - 1, CALIBRATION_SECONDS_PER_RUN)
-                keep = keep[np.round(pos).astype(np.int64)]
-            self.proba.append(proba[keep])
-            self.true.append(np.full(keep.size, sig.true_group))
-            self.cluster.append(np.full(keep.size, len(self.rows) - 1))
-        return row
-
-
-def _calibration(col: _Collector, n_bootstrap: int, seed: int, figure: Path | None):
-    """Top-label ECE of the group probabilities with a run-level (cluster) bootstrap interval."""
-    from bayes_fdi.calibration import expected_calibration_error, reliability_diagram
-
-    if not col.proba:
-        return {"n_seconds": 0, "note": "no detected faulty second of an isolable fault"}
-    proba = np.concatenate(col.proba)
-    labels = np.asarray(col.labels)
-    y = labels[np.concatenate(col.true)]
-    cluster = np.concatenate(col.cluster)
-    res = expected_calibration_error(y, proba, classes=labels, n_bins=15)
-    # seconds of one run are strongly correlated: resample whole runs, not seconds
-    runs = np.unique(cluster)
-    members = [np.flatnonzero(cluster == r) for r in runs]
-    rng = np.random.default_rng(seed)
-    boots = np.empty(n_bootstrap)
-    for b in range(n_bootstrap):
-        take = np.concatenate([members[i] for i in rng.integers(0, runs.size, runs.size)])
-        boots[b] = expected_calibration_error(y[take], proba[take], classes=labels, n_bins=15).value
-    lo = hi = float("nan")
-    if n_bootstrap:
-        q_lo, q_hi = np.quantile(boots, [0.025, 0.975])
-        lo, hi = max(0.0, 2 * res.value - q_hi), max(0.0, 2 * res.value - q_lo)  # basic interval
-    res = res._replace(ci_low=float(lo), ci_high=float(hi))
-    if figure is not None:
-        import matplotlib.pyplot as plt
-
-        from bayes_fdi.atomic import save_figure
-
-        fig, ax = plt.subplots(figsize=(5, 5))
-        reliability_diagram(
-            res,
-            ax=ax,
-            title=f"group-level top-label ECE = {res.value:.3f} "
-            f"[{lo:.3f}, {hi:.3f}] (runs resampled)\n{len(y)} s of {runs.size} runs",
-        )
-        save_figure(fig, figure, dpi=110)
-    return {
-        "n_seconds": len(y),
-        "n_runs": int(runs.size),
-        "ece": res.value,
-        "ci_low": res.ci_low,
-        "ci_high": res.ci_high,
-        "noise_floor": res.noise_floor,
-        "mce": res.mce,
-        "accuracy": float(np.mean(labels[np.argmax(proba, axis=1)] == y)),
-        "mean_confidence": float(np.mean(np.max(proba, axis=1))),
-        "bins": {
-            "edges": res.bin_edges,
-            "counts": res.bin_counts,
-            "confidence": res.bin_confidence,
-            "accuracy": res.bin_accuracy,
-        },
-        "n_bootstrap": int(n_bootstrap),
-    }
 
 
 def _fault_free(diagnoser: Any, hours: float) -> dict[str, Any]:
@@ -333,15 +197,84 @@ def run_benchmark(
     seeds = benchmark_seeds(n_seeds)
     out = Path(out)
     (out / "timelines").mkdir(parents=True, exist_ok=True)
-    col = _Collector(seed=0)
+    col = RunCollector(seed=0)
+    runs = _run_scenarios(
+        diagnoser, scenarios, seeds, col, out, figures, max_batch_samples, progress
+    )
+    c0 = time.process_time()
+    results: dict[str, Any] = {
+        "scenarios": col.rows,
+        "real_hour": _real_hour(diagnoser) if real_hour else None,
+        "fault_free": _fault_free(diagnoser, hours),
+    }
+    extra_cpu = time.process_time() - c0
+    results["calibration"] = group_calibration(
+        col, n_bootstrap, seed=0, figure=out / "reliability.png" if figures else None
+    )
+    results["confident_wrong"] = {
+        "seconds": col.confident_wrong,
+        "faulty_seconds": col.faulty_seconds,
+        "share": col.confident_wrong / max(col.faulty_seconds, 1),
+    }
+    results["model_std"] = {c: float(np.median(v)) if v else None for c, v in col.model_std.items()}
+    results["effects"] = fault_effects(scenarios)
+    results["scenario_table"] = [_scenario_row(s) for s in scenarios]
+    results["figures"] = runs.figures
+    results["groups"] = json.loads(col.attrs.get("groups") or "{}")
+    results["undetectable"] = json.loads(col.attrs.get("undetectable") or "[]")
+    results["timing"] = runs.timing(extra_cpu, wall_s=time.perf_counter() - wall0)
+    results["settings"] = {
+        "n_seeds": int(n_seeds),
+        "seeds": list(seeds),
+        "hours": hours,
+        "n_scenarios": len(scenarios),
+        "full_benchmark": _is_full(scenarios),
+        **dict(settings or {}),
+    }
+    write_report(results, out)
+    return results
+
+
+class _ScenarioRuns(NamedTuple):
+    """What running the diagnoser on every scenario and seed produced besides the indices."""
+
+    figures: dict[str, str]  #: scenario name -> its timeline figure (relative to ``out``)
+    simulation_cpu_s: float
+    run_cpu_s: float
+    samples: int  #: samples the diagnoser ran on
+
+    def timing(self, extra_cpu_s: float, wall_s: float) -> dict[str, Any]:
+        """The ``timing`` entry of ``benchmark.json``."""
+        return {
+            "simulation_cpu_s": self.simulation_cpu_s,
+            "run_cpu_s": self.run_cpu_s,
+            "run_samples": self.samples,
+            "run_samples_per_cpu_s": self.samples / self.run_cpu_s if self.run_cpu_s > 0 else None,
+            "fault_free_and_real_hour_cpu_s": extra_cpu_s,
+            "wall_s": wall_s,
+        }
+
+
+def _run_scenarios(
+    diagnoser: Any,
+    scenarios: Sequence[BenchmarkScenario],
+    seeds: Sequence[int],
+    col: RunCollector,
+    out: Path,
+    figures: bool,
+    max_batch_samples: int,
+    progress: bool,
+) -> _ScenarioRuns:
+    """Simulate every scenario with every seed, batch by batch, run the diagnoser on each batch
+    and add every run to ``col``; draw each scenario's first seed's timeline."""
     sim_cpu = run_cpu = 0.0
     samples = 0
     batches = list(_batches(scenarios, seeds, max_batch_samples))
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from bayes_fdi.progress import progress_bar
 
-        bar = tqdm(total=len(scenarios) * len(seeds), desc="benchmark", unit="run")
+        bar = progress_bar(len(scenarios) * len(seeds), "benchmark", unit="run")
     figures_written: dict[str, str] = {}
     simulations = _Simulations(scenarios, seeds)
     try:
@@ -363,15 +296,7 @@ def run_benchmark(
                     one = stream.isel(run=r)
                     col.add(s, seed, one)
                     if figures and seed == seeds[0]:
-                        truth = {
-                            "fault": s.fault,
-                            "onset": s.t_from,
-                            "label": s.name,
-                            "strength": s.strength_at(one["time"].values),
-                        }
-                        path = out / "timelines" / f"{s.slug}.png"
-                        plot_timeline(one, recording.isel(run=r), truth=truth, path=path)
-                        figures_written[s.name] = f"timelines/{s.slug}.png"
+                        figures_written[s.name] = _timeline(s, one, recording.isel(run=r), out)
                     r += 1
                     if bar is not None:
                         bar.update(1)
@@ -379,59 +304,36 @@ def run_benchmark(
     finally:
         if bar is not None:
             bar.close()
-    c0 = time.process_time()
-    results: dict[str, Any] = {
-        "scenarios": col.rows,
-        "real_hour": _real_hour(diagnoser) if real_hour else None,
-        "fault_free": _fault_free(diagnoser, hours),
+    return _ScenarioRuns(figures_written, sim_cpu, run_cpu, samples)
+
+
+def _timeline(scenario: BenchmarkScenario, one: xr.Dataset, run: xr.Dataset, out: Path) -> str:
+    """Draw the decision stream ``one`` of ``run`` with the scenario's truth; its path."""
+    truth = {
+        "fault": scenario.fault,
+        "onset": scenario.t_from,
+        "label": scenario.name,
+        "strength": scenario.strength_at(one["time"].values),
     }
-    extra_cpu = time.process_time() - c0
-    results["calibration"] = _calibration(
-        col, n_bootstrap, seed=0, figure=out / "reliability.png" if figures else None
-    )
-    results["confident_wrong"] = {
-        "seconds": col.confident_wrong,
-        "faulty_seconds": col.faulty_seconds,
-        "share": col.confident_wrong / max(col.faulty_seconds, 1),
+    path = out / "timelines" / f"{scenario.slug}.png"
+    plot_timeline(one, run, truth=truth, path=path)
+    return f"timelines/{scenario.slug}.png"
+
+
+def _scenario_row(s: BenchmarkScenario) -> dict[str, Any]:
+    """A scenario's definition, as ``benchmark.json`` lists it."""
+    return {
+        "name": s.name,
+        "fault": s.fault,
+        "mode": s.mode,
+        "size": s.size,
+        "strength": s.strength,
+        "direction": s.direction,
+        "t_on": s.t_on,
+        "t_from": s.t_from,
+        "t_fd": s.t_fd,
+        "t_hor": s.t_hor,
     }
-    results["model_std"] = {c: float(np.median(v)) if v else None for c, v in col.model_std.items()}
-    results["effects"] = fault_effects(scenarios)
-    results["scenario_table"] = [
-        {
-            "name": s.name,
-            "fault": s.fault,
-            "mode": s.mode,
-            "size": s.size,
-            "strength": s.strength,
-            "direction": s.direction,
-            "t_on": s.t_on,
-            "t_from": s.t_from,
-            "t_fd": s.t_fd,
-            "t_hor": s.t_hor,
-        }
-        for s in scenarios
-    ]
-    results["figures"] = figures_written
-    results["groups"] = json.loads(col.attrs.get("groups") or "{}")
-    results["undetectable"] = json.loads(col.attrs.get("undetectable") or "[]")
-    results["timing"] = {
-        "simulation_cpu_s": sim_cpu,
-        "run_cpu_s": run_cpu,
-        "run_samples": samples,
-        "run_samples_per_cpu_s": samples / run_cpu if run_cpu > 0 else None,
-        "fault_free_and_real_hour_cpu_s": extra_cpu,
-        "wall_s": time.perf_counter() - wall0,
-    }
-    results["settings"] = {
-        "n_seeds": int(n_seeds),
-        "seeds": list(seeds),
-        "hours": hours,
-        "n_scenarios": len(scenarios),
-        "full_benchmark": _is_full(scenarios),
-        **dict(settings or {}),
-    }
-    write_report(results, out)
-    return results
 
 
 def _is_full(scenarios: Sequence[BenchmarkScenario]) -> bool:

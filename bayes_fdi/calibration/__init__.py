@@ -6,8 +6,10 @@ calibrated when its 95 % predictive intervals contain about 95 % of fault-free m
 
 - `bayes_fdi.calibration.metrics`: ECE (top-label, classwise, bootstrap intervals, noise floor),
   log loss, Brier score, reliability diagrams.
-- `bayes_fdi.calibration.recalibration`: temperature, vector and Dirichlet scaling, and the
-  cross-validated log loss that chooses between them.
+- `bayes_fdi.calibration.temperature`: temperature scaling (`TemperatureScaler`).
+- `bayes_fdi.calibration.dirichlet`: Dirichlet calibration and vector scaling (`DirichletScaler`).
+- `bayes_fdi.calibration.recalibration`: the cross-validated log loss that chooses between
+  recalibrators, and what they share.
 - `bayes_fdi.calibration.nodes`: binary calibration of each node of a hierarchical classifier.
 - `bayes_fdi.calibration.intervals`: coverage, PIT and CRPS of Gaussian predictive distributions
   (and `StdScaler`, which recalibrates them).
@@ -16,10 +18,10 @@ calibrated when its 95 % predictive intervals contain about 95 % of fault-free m
   (cross-fitted recalibration and the choice of recalibrator) and `.report_markdown` (its text).
 """
 
+from bayes_fdi.calibration.dirichlet import DEFAULT_REG_GRID, DirichletScaler
 from bayes_fdi.calibration.intervals import (
     DEFAULT_LEVELS,
     CoverageResult,
-    StdScaler,
     crps_gaussian,
     interval_coverage,
     pit_histogram,
@@ -34,12 +36,9 @@ from bayes_fdi.calibration.metrics import (
     reliability_diagram,
 )
 from bayes_fdi.calibration.nodes import NodeCalibration, node_calibration
-from bayes_fdi.calibration.recalibration import (
-    DEFAULT_REG_GRID,
-    DirichletScaler,
-    TemperatureScaler,
-    cross_val_log_loss,
-)
+from bayes_fdi.calibration.recalibration import cross_val_log_loss
+from bayes_fdi.calibration.temperature import TemperatureScaler
+from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
 
 __all__ = [
     "DEFAULT_LEVELS",

@@ -17,12 +17,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy import stats
 
-from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler, check_gaussian
+from bayes_fdi.diagnosis.normal_models.std_scaler import check_gaussian
 
 __all__ = [
     "DEFAULT_LEVELS",
     "CoverageResult",
-    "StdScaler",
     "crps_gaussian",
     "interval_coverage",
     "pit_histogram",

@@ -11,13 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from bayes_fdi.calibration.recalibration import (
-    LOG_LOSS_RTOL,
-    DirichletScaler,
-    TemperatureScaler,
-    cross_val_log_loss,
-    fold_indices,
-)
+from bayes_fdi.calibration.dirichlet import DirichletScaler
+from bayes_fdi.calibration.recalibration import LOG_LOSS_RTOL, cross_val_log_loss, fold_indices
+from bayes_fdi.calibration.temperature import TemperatureScaler
 
 __all__ = [
     "RECALIBRATORS",

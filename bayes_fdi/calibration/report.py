@@ -12,8 +12,8 @@
 - ``calibration.json``: every number of the report.
 
 It only uses the diagnoser's public contract: ``diagnose(runs)`` returning the Dataset of
-``CONTRACTS.md`` (``proba (run, class)``, ``features (run, feature)``, ``X_hat``,
-``X_hat_std``, ``F_hat``, ``F_hat_std``) and, for the per-node table,
+`bayes_fdi.diagnosis.FaultDiagnoser.diagnose` (``proba (run, class)``, ``features (run,
+feature)``, ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``) and, for the per-node table,
 ``diagnoser.classifier_.nodes_`` (nodes with ``.left``, ``.right``, ``.estimator``).
 
 The recalibrators are fitted on held-out data: on ``calibration_runs`` when given,
@@ -138,7 +138,6 @@ def write_report_with_summary(
     import matplotlib
 
     matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
 
     out = Path(out_dir)
     fig_dir = out / "figures"
@@ -164,18 +163,56 @@ def write_report_with_summary(
         "excluded_states": sorted(set(y_samples[~known].tolist())),
     }
     kw = {"n_bins": n_bins, "n_bootstrap": n_bootstrap, "random_state": seed}
+    calibration = _held_out(diagnoser, calibration_runs, classes)
+    p_by, recal = _recalibration(
+        y, p, classes, calibration=calibration, n_folds=n_folds, methods=methods, seed=seed
+    )
+    columns = {"before": p, **{m: p_by[m] for m in methods}, "after": p_by["after"]}
+    summaries = {k: classification_summary(y, v, classes, **kw) for k, v in columns.items()}
+    results["recalibration"] = recal
+    results["whole_tree"] = summaries
+    results["ece_binning"] = _ece_by_binning(y, columns, summaries, classes, kw)
+    _plot_reliability(summaries, methods, recal["selected"], fig_dir)
+    results["nodes"], node_note = _node_rows(
+        diagnoser, None if feats_all is None else feats_all[known], y, n_bins, seed
+    )
+    fn = np.flatnonzero(y_all == "fn")
+    results["normal_models"] = _normal_models(diag, test_runs, fn, fig_dir)
+    results["n_fault_free_runs"] = int(fn.size)
 
-    # ---- recalibration on held-out data
-    if calibration_runs is not None:
-        if "state" not in calibration_runs.coords:
-            raise ValueError("calibration_runs must carry the per-run coordinate 'state'")
-        ycal, pcal, _ = labelled_rows(diagnoser.diagnose(calibration_runs), calibration_runs)
-        kcal = np.isin(ycal, classes)
-        if kcal.sum() < 1:
-            raise ValueError("no calibration run has a state the diagnoser knows")
-        calibration = (pcal[kcal], ycal[kcal])
-    else:
-        calibration = None
+    clean = public_values(results)
+    write_text(out / "calibration.json", json.dumps(clean, indent=2))
+    report = write_text(out / "report.md", render_markdown(clean, node_note))
+    return report, clean
+
+
+def _held_out(
+    diagnoser: Any, calibration_runs: xr.Dataset | None, classes: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The probabilities and labels of the held-out runs of known states (None without)."""
+    if calibration_runs is None:
+        return None
+    if "state" not in calibration_runs.coords:
+        raise ValueError("calibration_runs must carry the per-run coordinate 'state'")
+    ycal, pcal, _ = labelled_rows(diagnoser.diagnose(calibration_runs), calibration_runs)
+    kcal = np.isin(ycal, classes)
+    if kcal.sum() < 1:
+        raise ValueError("no calibration run has a state the diagnoser knows")
+    return pcal[kcal], ycal[kcal]
+
+
+def _recalibration(
+    y: np.ndarray,
+    p: np.ndarray,
+    classes: np.ndarray,
+    *,
+    calibration: tuple[np.ndarray, np.ndarray] | None,
+    n_folds: int,
+    methods: tuple[str, ...],
+    seed: int,
+) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Recalibrated probabilities by method (and ``"after"``), and the report's record of
+    the fits (:func:`recalibrate`)."""
     p_by, info = recalibrate(
         y, p, classes, calibration=calibration, n_folds=n_folds, methods=methods, seed=seed
     )
@@ -192,24 +229,31 @@ def write_report_with_summary(
     }
     if temps:
         recal["temperature"] = temps[0] if calibration is not None else temps
-    columns = {"before": p, **{m: p_by[m] for m in methods}, "after": p_by["after"]}
-    summaries = {k: classification_summary(y, v, classes, **kw) for k, v in columns.items()}
-    results["recalibration"] = recal
-    results["whole_tree"] = summaries
+    return p_by, recal
 
-    # ---- how the ECE depends on the binning (value, debiased, interval, floor)
-    # (the report's own binnings, n_bins equal width and equal mass, are already in summaries)
+
+def _ece_by_binning(
+    y: np.ndarray,
+    columns: dict[str, np.ndarray],
+    summaries: dict[str, dict[str, Any]],
+    classes: np.ndarray,
+    kw: dict[str, Any],
+) -> list[dict[str, Any]]:
+    """How the ECE of every column depends on the binning: value, debiased value, interval and
+    noise floor with equal-width and equal-mass bins (``n_bins``, 10 and 5)."""
+    n_bins = kw["n_bins"]
     binning = []
     for strategy in ("uniform", "quantile"):
         for nb in sorted({int(n_bins), 10, 5}, reverse=True):
             nb_ = min(nb, y.size) if strategy == "quantile" else nb
             row: dict[str, Any] = {"strategy": strategy, "n_bins": nb_}
             for k, v in columns.items():
-                if nb == n_bins:
+                if nb == n_bins:  # the report's own binnings, already in the summaries
                     e = summaries[k]["_results"][0 if strategy == "uniform" else 1]
                 else:
-                    e = expected_calibration_error(y, v, classes=classes, strategy=strategy,
-                                                   **(kw | {"n_bins": nb_}))  # fmt: skip
+                    e = expected_calibration_error(
+                        y, v, classes=classes, strategy=strategy, **(kw | {"n_bins": nb_})
+                    )
                 row[k] = {
                     "value": e.value,
                     "debiased": e.debiased,
@@ -218,68 +262,77 @@ def write_report_with_summary(
                     "noise_floor": e.noise_floor,
                 }
             binning.append(row)
-    results["ece_binning"] = binning
+    return binning
 
-    # ---- reliability diagrams
+
+def _plot_reliability(
+    summaries: dict[str, dict[str, Any]],
+    methods: tuple[str, ...],
+    selected: list[str],
+    fig_dir: Path,
+) -> None:
+    """Whole-tree reliability diagrams before and after each recalibrator."""
+    import matplotlib.pyplot as plt
+
     shown = ["before", *methods]
     fig, axes = plt.subplots(1, len(shown), figsize=(4.5 * len(shown), 4.5), squeeze=False)
-    sel = sorted(set(recal["selected"]))
+    sel = sorted(set(selected))
     for ax, k in zip(axes[0], shown, strict=True):
         mark = " (selected)" if k in sel else ""
         label = "before" if k == "before" else f"{RECALIBRATOR_LABELS[k]}{mark}"
-        reliability_diagram(summaries[k]["_results"][0], ax=ax,
-                            title=f"{label}: ECE {format_ece(summaries[k]['ece'])}")  # fmt: skip
+        reliability_diagram(
+            summaries[k]["_results"][0],
+            ax=ax,
+            title=f"{label}: ECE {format_ece(summaries[k]['ece'])}",
+        )
     fig.suptitle("Whole tree, top-label reliability (equal-width bins)", fontsize=10)
     fig.tight_layout()
     save_figure(fig, fig_dir / "reliability_whole_tree.png", dpi=120)
 
-    # ---- per node
+
+def _node_rows(
+    diagnoser: Any, feats: np.ndarray | None, y: np.ndarray, n_bins: int, seed: int
+) -> tuple[list[dict[str, Any]], str]:
+    """Binary calibration of every tree node on the test rows of known states, or why not."""
     nodes = getattr(getattr(diagnoser, "classifier_", None), "nodes_", None)
-    node_rows = []
-    node_note = ""
     if nodes is None:
-        node_note = "The diagnoser exposes no `classifier_.nodes_`; per-node calibration skipped."
-    elif feats_all is None:
-        node_note = "The diagnosis has no `features`; per-node calibration skipped."
-    else:
-        feats = feats_all[known]
-        scaler = getattr(diagnoser, "scaler_", None)
-        if scaler is not None:  # the tree sees standardised features
-            feats = np.asarray(scaler.transform(feats), dtype=np.float64)
-        for nc in node_calibration(nodes, feats, y, n_bins=min(n_bins, 10), random_state=seed):
-            node_rows.append(
-                {
-                    "index": nc.index,
-                    "left": list(nc.left),
-                    "right": list(nc.right),
-                    "n": nc.n_samples,
-                    "accuracy": nc.accuracy,
-                    "ece": None if nc.ece is None else nc.ece.value,
-                    "mce": None if nc.ece is None else nc.ece.mce,
-                    "log_loss": nc.log_loss,
-                    "brier": nc.brier,
-                }
-            )
-    results["nodes"] = node_rows
+        return [], "The diagnoser exposes no `classifier_.nodes_`; per-node calibration skipped."
+    if feats is None:
+        return [], "The diagnosis has no `features`; per-node calibration skipped."
+    scaler = getattr(diagnoser, "scaler_", None)
+    if scaler is not None:  # the tree sees standardised features
+        feats = np.asarray(scaler.transform(feats), dtype=np.float64)
+    return [
+        {
+            "index": nc.index,
+            "left": list(nc.left),
+            "right": list(nc.right),
+            "n": nc.n_samples,
+            "accuracy": nc.accuracy,
+            "ece": None if nc.ece is None else nc.ece.value,
+            "mce": None if nc.ece is None else nc.ece.mce,
+            "log_loss": nc.log_loss,
+            "brier": nc.brier,
+        }
+        for nc in node_calibration(nodes, feats, y, n_bins=min(n_bins, 10), random_state=seed)
+    ], ""
 
-    # ---- normal models on fault-free runs
-    fn = np.flatnonzero(y_all == "fn")
-    normal: dict[str, Any] = {}
-    if fn.size:
-        normal = normal_model_summary(diag.isel(run=fn), test_runs.isel(run=fn))
-        fig, axes = plt.subplots(1, len(normal), figsize=(4.5 * len(normal), 3.2))
-        for ax, (name, d) in zip(np.atleast_1d(axes), normal.items(), strict=True):
-            plot_pit_histogram(d["_pit"], 10, ax=ax, title=f"PIT of {name} (n = {d['n']})")
-        fig.tight_layout()
-        save_figure(fig, fig_dir / "pit_normal_models.png", dpi=120)
-    results["normal_models"] = normal
-    results["n_fault_free_runs"] = int(fn.size)
 
-    # ---- write
-    clean = public_values(results)
-    write_text(out / "calibration.json", json.dumps(clean, indent=2))
-    report = write_text(out / "report.md", render_markdown(clean, node_note))
-    return report, clean
+def _normal_models(
+    diag: xr.Dataset, test_runs: xr.Dataset, fn: np.ndarray, fig_dir: Path
+) -> dict[str, Any]:
+    """The normal models' intervals on the fault-free test runs ``fn``, and their PIT figure."""
+    if not fn.size:
+        return {}
+    import matplotlib.pyplot as plt
+
+    normal = normal_model_summary(diag.isel(run=fn), test_runs.isel(run=fn))
+    fig, axes = plt.subplots(1, len(normal), figsize=(4.5 * len(normal), 3.2))
+    for ax, (name, d) in zip(np.atleast_1d(axes), normal.items(), strict=True):
+        plot_pit_histogram(d["_pit"], 10, ax=ax, title=f"PIT of {name} (n = {d['n']})")
+    fig.tight_layout()
+    save_figure(fig, fig_dir / "pit_normal_models.png", dpi=120)
+    return normal
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -305,14 +358,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
 
 def _build_diagnoser(method: str, seed: int) -> Any:
     """A fresh diagnoser of the chosen method (RVM defaults or SVM nodes)."""
-    try:
-        from bayes_fdi.diagnosis import FaultDiagnoser
-    except ImportError as err:  # pragma: no cover - until the diagnosis stream is merged
-        raise RuntimeError(f"bayes_fdi.diagnosis is not available: {err}") from None
+    from bayes_fdi.diagnosis import FaultDiagnoser, svm_fault_diagnoser
+
     if method == "rvm":
         return FaultDiagnoser(random_state=seed)
-    from bayes_fdi.diagnosis import svm_fault_diagnoser
-
     return svm_fault_diagnoser(random_state=seed)
 
 

@@ -20,21 +20,12 @@ import xarray as xr
 from bayes_fdi.datasets import load_dataset, save_dataset, validate_dataset
 
 __all__ = [
-    "DATASETS",
-    "N_TRAIN",
     "SMALL_DURATION",
     "SMALL_RUNS_PER_STATE",
     "campaign_file",
     "load_or_simulate",
     "split_train_test",
 ]
-
-
-#: The two campaigns of the paper.
-DATASETS: tuple[str, ...] = ("paper-simulated", "paper-lublin")
-
-#: Training runs per state (the paper: 20 groups train, the rest test).
-N_TRAIN: int = 20
 
 #: ``small=True``: runs per state (20 train + 4 test) ...
 SMALL_RUNS_PER_STATE: int = 24
@@ -83,12 +74,14 @@ def _file_hash(path: Path) -> str:
 def _simulator_hash() -> str:
     """SHA-256 over the simulator's source files (so a changed model never reuses a cache)."""
     from bayes_fdi import actuator
+    from bayes_fdi.campaigns import parsing as campaign_parsing
     from bayes_fdi.campaigns import simulation as campaigns
     from bayes_fdi.campaigns import spec as campaign_spec
 
     files = [
         *sorted(Path(actuator.__file__).parent.glob("*.py")),
         Path(campaign_spec.__file__),
+        Path(campaign_parsing.__file__),
         Path(campaigns.__file__),
     ]
     digest = hashlib.sha256()
@@ -188,7 +181,7 @@ def _small_campaign(spec: Any) -> Any:
 
 
 def split_train_test(
-    ds: xr.Dataset, *, n_train: int = N_TRAIN, states: Sequence[str] | None = None
+    ds: xr.Dataset, *, n_train: int, states: Sequence[str] | None = None
 ) -> tuple[xr.Dataset, xr.Dataset]:
     """Per state, the first ``n_train`` runs (in run order) train and the rest test.
 

@@ -5,9 +5,9 @@ validated campaign and returns a dataset in the project's format (:mod:`bayes_fd
 ``bayes-fdi simulate CAMPAIGN.toml --out FILE.nc`` does both and writes the file atomically (the
 output path is checked before simulating, the memory the campaign needs too).
 
-The schema, its validation (:func:`load_campaign`, :func:`parse_campaign`) and the
-:class:`Campaign` record live in `bayes_fdi.campaigns.spec`; every name of it is
-importable from this module too.
+The schema and its validation (:func:`load_campaign`, :func:`parse_campaign`) live in
+`bayes_fdi.campaigns.parsing`, the :class:`Campaign` record in `bayes_fdi.campaigns.spec`;
+their public names are importable from this module too.
 """
 
 from __future__ import annotations
@@ -19,46 +19,20 @@ from typing import Any
 
 import numpy as np
 
+from bayes_fdi.campaigns.parsing import check_seed, load_campaign, thaw
 from bayes_fdi.campaigns.spec import (
-    FAULT_DIRECTION,
-    FAULTS,
     LUBLIN_HOUR,
-    PROFILES,
-    SIGNED_FAULTS,
-    SOURCES,
-    STATES,
-    WINDOWS,
     Campaign,
     CampaignError,
-    FaultSpec,
     RunSpec,
-    Scenario,
-    check_seed,
-    load_campaign,
-    parse_campaign,
-    thaw,
 )
 from bayes_fdi.cli_arguments import UsageError, input_file, output_file
 from bayes_fdi.datasets.format import NETCDF_SUFFIXES
 from bayes_fdi.memory import check_memory
 
 __all__ = [
-    "FAULTS",
-    "FAULT_DIRECTION",
-    "PROFILES",
-    "SIGNED_FAULTS",
-    "SOURCES",
-    "STATES",
-    "WINDOWS",
-    "Campaign",
-    "CampaignError",
-    "FaultSpec",
-    "RunSpec",
-    "Scenario",
     "check_campaign_memory",
     "configure_parser",
-    "load_campaign",
-    "parse_campaign",
     "run_from_cli",
     "simulate_campaign",
     "window_starts",

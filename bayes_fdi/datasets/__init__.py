@@ -7,18 +7,21 @@
   files and the table of the real fault events.
 - `bayes_fdi.datasets.readers`: recordings from CSV, MATLAB, netCDF and day files, in any declared
   units, on the model's 1-s grid (`read_recording`; `bayes_fdi.datasets.time_grid`: time
-  columns in seconds, resampling onto the grid and the gaps).
+  columns in seconds, resampling onto the grid and the gaps; `bayes_fdi.datasets.csv_columns`:
+  CSV files read in chunks; `bayes_fdi.datasets.units`: units, and values implausible in them).
 - `bayes_fdi.datasets.plotting`: signal plots of chosen runs (the ``bayes-fdi plot`` command).
 """
 
 from bayes_fdi.datasets.format import (
     CHANNELS,
     INPUT_CHANNELS,
+    MEASUREMENT_FAULTS,
     OUTPUT_CHANNELS,
     STATES,
     load_dataset,
     make_dataset,
     save_dataset,
+    state_order,
     validate_dataset,
 )
 from bayes_fdi.datasets.lublin import (
@@ -33,6 +36,7 @@ __all__ = [
     "CHANNELS",
     "INPUT_CHANNELS",
     "LUBLIN_FAULT_EVENTS",
+    "MEASUREMENT_FAULTS",
     "OUTPUT_CHANNELS",
     "STATES",
     "find_gaps",
@@ -42,5 +46,6 @@ __all__ = [
     "make_dataset",
     "read_recording",
     "save_dataset",
+    "state_order",
     "validate_dataset",
 ]

@@ -12,12 +12,15 @@ One dataset type is used throughout the project:
 
 Datasets are saved and loaded as netCDF (``.nc``); saving is atomic (a temporary file in the
 destination's folder renamed over it, see `bayes_fdi.atomic`), so an interrupted or failed save
-never leaves a partial file. `make_dataset` copies the arrays it is given: the dataset never shares
-memory with the caller's arrays.
+never leaves a partial file; a save that fills the disk says so (``OSError`` with
+``errno.ENOSPC``, where netCDF itself only reports "HDF error"). `make_dataset` copies the arrays
+it is given: the dataset never shares memory with the caller's arrays.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
 from collections.abc import Iterable, Sequence
 
@@ -25,15 +28,18 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.atomic import atomic_path, check_output_path
+from bayes_fdi.memory import format_bytes
 
 __all__ = [
     "CHANNELS",
     "INPUT_CHANNELS",
+    "MEASUREMENT_FAULTS",
     "OUTPUT_CHANNELS",
     "STATES",
     "load_dataset",
     "make_dataset",
     "save_dataset",
+    "state_order",
     "validate_dataset",
 ]
 
@@ -41,6 +47,11 @@ INPUT_CHANNELS: tuple[str, ...] = ("CV", "P1", "P2", "T1")
 OUTPUT_CHANNELS: tuple[str, ...] = ("X", "F")
 CHANNELS: tuple[str, ...] = INPUT_CHANNELS + OUTPUT_CHANNELS
 STATES: tuple[str, ...] = ("fn", *(f"f{i}" for i in range(1, 20)))
+#: Faults of one measurement alone, beside the DAMADICS faults: the reading of X, F, P1 or P2
+#: offset by a bias (profile "abrupt") or a drift (profile "incipient"); made by
+#: `bayes_fdi.twin.transplant` (DAMADICS's own sensor faults are f13, in the positioner's loop,
+#: and f19, a gain of the flow reading).
+MEASUREMENT_FAULTS: tuple[str, ...] = ("bias_X", "bias_F", "bias_P1", "bias_P2")
 PROFILES: tuple[str, ...] = ("abrupt", "incipient")
 RUN_COORDS: tuple[str, ...] = ("state", "strength", "onset", "profile", "ramp")
 #: File-name endings :func:`save_dataset` accepts (netCDF).
@@ -240,9 +251,12 @@ def validate_dataset(
             if not np.all(np.isfinite(values)):
                 raise ValueError(f"coordinate {name!r} contains NaN or inf")
     if "state" in ds.coords:
-        bad = sorted(set(map(str, ds["state"].values)) - set(STATES))
+        bad = sorted(set(map(str, ds["state"].values)) - set(STATES) - set(MEASUREMENT_FAULTS))
         if bad:
-            raise ValueError(f"unknown state label(s) {bad}; states are fn, f1..f19")
+            raise ValueError(
+                f"unknown state label(s) {bad}; states are fn, f1..f19, "
+                + ", ".join(MEASUREMENT_FAULTS)
+            )
     if "profile" in ds.coords:
         bad = sorted(set(map(str, ds["profile"].values)) - set(PROFILES))
         if bad:
@@ -262,12 +276,52 @@ def save_dataset(ds: xr.Dataset, path: str | os.PathLike) -> None:
     ValueError
         If ``ds`` is not a valid dataset, or ``path`` does not end in ``.nc`` / ``.nc4``, is a
         folder, or its folder does not exist or is not writable (checked before writing).
+    OSError
+        If the write fails; ``errno.ENOSPC`` ("No space left on device", with the space free)
+        where the disk filled up. Nothing is left at ``path`` nor beside it.
     """
     validate_dataset(ds, require=(), allow_nan=True)
     check_output_path(path, suffixes=NETCDF_SUFFIXES, what="dataset file")
     encoding = {name: {"zlib": True, "complevel": 4} for name in ds.data_vars}
     with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
+        try:
+            ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
+        except (RuntimeError, OSError) as exc:
+            full = _disk_full(exc, ds, tmp, os.fspath(path))
+            # HDF5 keeps a failed file open: emptied, it gives its blocks back at once
+            # (removed by atomic_path, it would hold them until the process ends)
+            with contextlib.suppress(OSError):
+                os.truncate(tmp, 0)
+            if full is not None:
+                raise full from exc
+            raise
+
+
+def _disk_full(exc: BaseException, ds: xr.Dataset, tmp: str, path: str) -> OSError | None:
+    """``OSError(ENOSPC)`` where a failed write left less free space than a variable needs.
+
+    netCDF reports a full disk as "NetCDF: HDF error"; the free space, read while the partial
+    temporary file still holds its blocks, tells.
+    """
+    if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+        return None  # already says so
+    try:
+        stats = os.statvfs(os.path.dirname(os.path.abspath(tmp)))
+    except (OSError, AttributeError):  # no statvfs (Windows)
+        return None
+    root = getattr(os, "geteuid", lambda: -1)() == 0  # root may use the reserved blocks
+    blocks = stats.f_bfree if root else stats.f_bavail
+    free = blocks * stats.f_frsize
+    largest = max((ds[name].nbytes for name in ds.data_vars), default=0)
+    if free >= max(largest, 1 << 20):
+        return None
+    return OSError(
+        errno.ENOSPC,
+        f"No space left on device: {format_bytes(free)} free after writing part of the "
+        f"dataset ({format_bytes(ds.nbytes)} uncompressed; netCDF said: {exc}); nothing "
+        "was written",
+        path,
+    )
 
 
 def load_dataset(path: str | os.PathLike) -> xr.Dataset:
@@ -298,3 +352,15 @@ def load_dataset(path: str | os.PathLike) -> xr.Dataset:
         if name in ds.coords:
             ds = ds.assign_coords({name: ("run", ds[name].values.astype(str))})
     return validate_dataset(ds, require=(), allow_nan=True)
+
+
+def state_order(state: str) -> tuple[int, int, str]:
+    """Sort key of state labels: ``fn``, then ``f1`` .. ``f19`` by number, then the measurement
+    faults in the order of `MEASUREMENT_FAULTS`, then any other label alphabetically."""
+    if state == "fn":
+        return (0, 0, state)
+    if state in STATES:
+        return (1, int(state[1:]), state)
+    if state in MEASUREMENT_FAULTS:
+        return (2, MEASUREMENT_FAULTS.index(state), state)
+    return (3, 0, state)

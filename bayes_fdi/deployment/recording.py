@@ -26,13 +26,14 @@ from __future__ import annotations
 import inspect
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.atomic import atomic_folder
 from bayes_fdi.datasets import CHANNELS, validate_dataset
 from bayes_fdi.deployment.lublin_events import (
     event_summary,
@@ -53,6 +54,7 @@ __all__ = [
     "DEFAULT_CHUNK_SECONDS",
     "RecordingResult",
     "diagnose_recording",
+    "isolation_summary",
     "supports_chunks",
 ]
 
@@ -108,6 +110,7 @@ def diagnose_recording(
     figure: bool = True,
     progress: bool = False,
     model_info: Mapping[str, Any] | None = None,
+    attachments: Mapping[str, Callable[[Path], Any]] | None = None,
 ) -> RecordingResult:
     """Diagnose one recording and write its files in ``out/name`` (see the module docstring).
 
@@ -130,6 +133,9 @@ def diagnose_recording(
         A progress bar over the recording's seconds.
     model_info
         Recorded in ``summary.json`` (e.g. the model file).
+    attachments
+        Other files of the recording's folder: name -> a function writing it to the given
+        path (e.g. the model commissioned on the recording's first seconds).
 
     Returns
     -------
@@ -150,17 +156,76 @@ def diagnose_recording(
             f"{name}: {n_t} s is longer than one chunk ({chunk} s) and {type(diagnoser).__name__}"
             ".run cannot carry its state across chunks; give a larger chunk_seconds"
         )
-    folder = Path(out) / name
-    folder.mkdir(parents=True, exist_ok=True)
-    csv = StreamCSVWriter(folder / "seva.csv", several_runs=n_runs > 1)
+    destination = Path(out) / name
+    with atomic_folder(destination) as folder:
+        for file_name, write in (attachments or {}).items():
+            write(folder / file_name)
+        counts, found, files = _write_outputs(
+            diagnoser,
+            recording,
+            folder,
+            name,
+            attrs,
+            chunk,
+            chunked,
+            collector,
+            figure,
+            progress,
+            model_info,
+            tuple(attachments or {}),
+        )
+    return RecordingResult(
+        name, os.fspath(destination), int(n_t), int(n_runs), len(found), counts, tuple(files)
+    )
+
+
+def isolation_summary(diagnoser: Any) -> dict[str, Any]:
+    """What the model can name: ``detection_only`` (no fault library), its isolability
+    groups and the faults it treats as undetectable."""
+    detection_only = getattr(diagnoser, "isolator_", True) is None
+    groups = [list(g) for g in getattr(diagnoser, "groups_", ())]
+    return {
+        "detection_only": bool(detection_only),
+        "note": (
+            "detection only: this model has no fault library, so every alarm is an unknown "
+            "fault; commission the valve with faults (bayes-fdi commission) to name them"
+            if detection_only
+            else f"faults named up to {len(groups)} isolability groups"
+        ),
+        "groups": groups,
+        "undetectable": list(getattr(diagnoser, "undetectable_", ())),
+    }
+
+
+def _write_outputs(
+    diagnoser: Any,
+    recording: xr.Dataset,
+    folder: Path,
+    name: str,
+    attrs: Mapping[str, Any],
+    chunk: int,
+    chunked: bool,
+    collector: FigureCollector,
+    figure: bool,
+    progress: bool,
+    model_info: Mapping[str, Any] | None,
+    attached: tuple[str, ...],
+) -> tuple[dict[str, int], list, list[str]]:
+    """Diagnose ``recording`` chunk by chunk into the files of ``folder``."""
+    n_runs, n_t = recording.sizes["run"], recording.sizes["time"]
+    isolation = isolation_summary(diagnoser)
+    detection_only = isolation["detection_only"]
+    csv = StreamCSVWriter(
+        folder / "seva.csv", several_runs=n_runs > 1, detection_only=detection_only
+    )
     nc = StreamNetCDFWriter(folder / "seva.nc", attrs={"recording": name})
-    alarms = AlarmCollector()
+    alarms = AlarmCollector(detection_only=detection_only)
     counts: dict[str, int] = {}
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from bayes_fdi.progress import progress_bar
 
-        bar = tqdm(total=n_t, desc=f"diagnosing {name}", unit="s", leave=False)
+        bar = progress_bar(n_t, f"diagnosing {name}", unit="s", leave=False)
     state = None
     try:
         for a in range(0, n_t, chunk):
@@ -209,6 +274,7 @@ def diagnose_recording(
         "alarms": len(found),
         "alarm_seconds": float(sum(al.duration for al in found)),
         "model": dict(model_info or {}),
+        "isolation": isolation,
         "recording_attrs": {k: _json_value(v) for k, v in attrs.items()},
     }
     events = fault_events(attrs)
@@ -217,11 +283,10 @@ def diagnose_recording(
         write_events(scored, folder / "events.csv")
         files.append("events.csv")
         summary["lublin_events"] = event_summary(stream_one, events, scored)
-    files.append("summary.json")
+    files += [*attached, "summary.json"]
     summary["files"] = files
     _write_json(summary, folder / "summary.json")
-    return RecordingResult(name, os.fspath(folder), int(n_t), int(n_runs), len(found), counts,
-                           tuple(files))  # fmt: skip
+    return counts, found, files
 
 
 def _json_value(value: Any) -> Any:

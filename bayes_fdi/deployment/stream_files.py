@@ -50,7 +50,7 @@ __all__ = [
 
 #: Columns of ``seva.csv`` (a leading ``run`` column when the recording holds several runs).
 CSV_COLUMNS: tuple[str, ...] = (
-    "time", "status", "state", "probability", "DD", "FFID",
+    "time", "status", "state", "description", "probability", "evidence", "DD", "FFID",
     "X", "X_hat", "X_hat_std", "r_X", "stat_X", "VMV_X", "VU_X",
     "F", "F_hat", "F_hat_std", "r_F", "stat_F", "VMV_F", "VU_F",
 )  # fmt: skip
@@ -123,12 +123,24 @@ class _PartialFile:
             os.remove(self.partial)
 
 
+def _describe(states: np.ndarray, detection_only: bool) -> np.ndarray:
+    """`describe_state` of every entry of ``states`` (each distinct state described once)."""
+    from bayes_fdi.diagnosis.seva import describe_state
+
+    names, where = np.unique(np.asarray(states).astype(str), return_inverse=True)
+    words = np.array(
+        [describe_state(s, detection_only=detection_only) for s in names], dtype=object
+    )
+    return words[where.reshape(-1)] if names.size else np.array([], dtype=object)
+
+
 class StreamCSVWriter:
     """``seva.csv``: one row per second (and run), columns :data:`CSV_COLUMNS`."""
 
-    def __init__(self, path: Any, *, several_runs: bool) -> None:
+    def __init__(self, path: Any, *, several_runs: bool, detection_only: bool = False) -> None:
         self.path = path
         self.several_runs = several_runs
+        self.detection_only = detection_only
         self._file = _PartialFile(path)
         self._handle = open(self._file.partial, "w", newline="", encoding="utf-8")
         columns = ("run", *CSV_COLUMNS) if several_runs else CSV_COLUMNS
@@ -144,6 +156,12 @@ class StreamCSVWriter:
             data["run"] = np.repeat(stream["run"].values, n_t)
         data["time"] = np.tile(stream["time"].values, n_runs)
         for name in CSV_COLUMNS[1:]:
+            if name == "description":
+                data[name] = _describe(data["state"], self.detection_only)
+                continue
+            if name not in stream and name == "evidence":  # a diagnoser that gives none
+                data[name] = np.full(n_runs * n_t, "")
+                continue
             source = chunk if name in ("X", "F") else stream
             values = np.asarray(source[name].transpose("run", "time").values).reshape(-1)
             if values.dtype == bool:
@@ -293,16 +311,20 @@ class Alarm(NamedTuple):
     end: float  #: last second with DD high
     duration: float  #: seconds with DD high (end - start + 1)
     state: str  #: the state named for the most seconds of the alarm (a fault, group or "unknown")
+    description: str  #: what ``state`` means (`bayes_fdi.diagnosis.seva.describe_state`)
     probability: float  #: mean probability of ``state`` over those seconds (NaN if none given)
+    evidence: str  #: the residuals that raised the alarm and their sign, named most often
     seconds_in_state: int
     first_isolated: float  #: first second naming a fault or group (NaN if never)
     ongoing: bool  #: DD still high at the end of the recording
 
 
 class AlarmCollector:
-    """Collect the alarms of a stream given chunk by chunk (per run), in bounded memory."""
+    """Collect the alarms of a stream given chunk by chunk (per run), in bounded memory
+    (``detection_only``: the model cannot name faults, which the descriptions say)."""
 
-    def __init__(self) -> None:
+    def __init__(self, *, detection_only: bool = False) -> None:
+        self.detection_only = detection_only
         self._open: dict[int, dict[str, Any]] = {}
         self.alarms: list[Alarm] = []
 
@@ -312,6 +334,10 @@ class AlarmCollector:
         dd_all = np.asarray(stream["DD"].transpose("run", "time").values, dtype=bool)
         state_all = np.asarray(stream["state"].transpose("run", "time").values).astype(str)
         proba_all = np.asarray(stream["probability"].transpose("run", "time").values, dtype=float)
+        if "evidence" in stream:
+            evidence_all = np.asarray(stream["evidence"].transpose("run", "time").values)
+        else:
+            evidence_all = np.full(dd_all.shape, "", dtype=object)
         for i, run in enumerate(int(r) for r in stream["run"].values):
             dd = dd_all[i]
             current = self._open.pop(run, None)
@@ -322,7 +348,11 @@ class AlarmCollector:
             starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
             for a, b in zip(starts, stops, strict=True):
                 if current is None:
-                    current = {"start": times[a], "states": {}, "first": math.nan}
+                    current = {"start": times[a], "states": {}, "first": math.nan, "evidence": {}}
+                said, n_said = np.unique(evidence_all[i, a:b].astype(str), return_counts=True)
+                for words, k in zip(said, n_said, strict=True):
+                    if words:
+                        current["evidence"][words] = current["evidence"].get(words, 0) + int(k)
                 names, where = np.unique(state_all[i, a:b], return_inverse=True)
                 probs = proba_all[i, a:b]
                 for k, name in enumerate(names):
@@ -332,7 +362,7 @@ class AlarmCollector:
                     last = max(last, float(times[a + np.flatnonzero(where == k)[-1]]))
                     current["states"][name] = (count + mine.size, n_ok + ok.size,
                                                total + float(ok.sum()), last)  # fmt: skip
-                named = np.flatnonzero(~np.isin(state_all[i, a:b], ("unknown", "fn")))
+                named = np.flatnonzero(~np.isin(state_all[i, a:b], ("unknown", "mismatch", "fn")))
                 if math.isnan(current["first"]) and named.size:
                     current["first"] = times[a + named[0]]
                 current["end"] = times[b - 1]
@@ -347,6 +377,9 @@ class AlarmCollector:
         # the state named for the most seconds; ties go to the one named last
         best = max(states, key=lambda s: (states[s][0], states[s][3]))
         count, n_ok, total, _ = states[best]
+        said = current["evidence"]
+        from bayes_fdi.diagnosis.seva import describe_state
+
         self.alarms.append(
             Alarm(
                 run=run,
@@ -354,7 +387,9 @@ class AlarmCollector:
                 end=float(current["end"]),
                 duration=float(current["end"] - current["start"] + 1.0),
                 state=str(best),
+                description=describe_state(str(best), detection_only=self.detection_only),
                 probability=total / n_ok if n_ok else math.nan,
+                evidence=max(said, key=lambda w: (said[w], w)) if said else "",
                 seconds_in_state=int(count),
                 first_isolated=float(current["first"]),
                 ongoing=ongoing,

@@ -9,6 +9,8 @@
   diagnosis per run or window) and its SVM baseline `svm_fault_diagnoser`.
 - `bayes_fdi.diagnosis.online`: `OnlineDiagnoser`, the 1 Hz diagnoser (detection, isolation
   and SEVA status every second, ``run`` over a recording or ``update`` per sample).
+- `bayes_fdi.diagnosis.component_state`: how the online components' states (named tuples of
+  arrays) are checked, copied and stacked.
 
 Which diagnoser when: `FaultDiagnoser` labels whole runs (or windows) the way the paper does,
 for studies on labelled datasets; `OnlineDiagnoser` is the field device, second by second.

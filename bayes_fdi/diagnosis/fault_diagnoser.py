@@ -35,7 +35,9 @@ from bayes_fdi.diagnosis.isolation.svm import svm_classifier
 from bayes_fdi.diagnosis.isolation.tree import HierarchicalClassifier
 from bayes_fdi.diagnosis.normal_models.kernel_ridge import KernelRidgeRegressor
 from bayes_fdi.diagnosis.normal_models.static import NormalModels
-from bayes_fdi.diagnosis.seva.windows import NoveltyReference, SevaRecord, seva_records
+from bayes_fdi.diagnosis.seva.novelty import NoveltyReference
+from bayes_fdi.diagnosis.seva.record import SevaRecord
+from bayes_fdi.diagnosis.seva.windows import seva_records
 
 __all__ = ["FaultDiagnoser", "ShortRunWarning", "svm_fault_diagnoser"]
 

@@ -16,9 +16,9 @@ from bayes_fdi.model_files.format import (
     MAX_METADATA_BYTES,
     load,
     read_metadata,
-    register_persistable,
     save,
 )
+from bayes_fdi.model_files.registry import register_persistable
 
 __all__ = [
     "DEFAULT_MAX_BYTES",

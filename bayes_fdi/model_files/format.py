@@ -96,7 +96,7 @@ import numpy as np
 
 from bayes_fdi.atomic import atomic_path
 from bayes_fdi.model_files.codec import ModelDecoder, ModelEncoder
-from bayes_fdi.model_files.registry import register_persistable, resolve_class, stable_name
+from bayes_fdi.model_files.registry import resolve_class, stable_name
 
 __all__ = [
     "DEFAULT_MAX_BYTES",
@@ -105,13 +105,13 @@ __all__ = [
     "MAX_METADATA_BYTES",
     "load",
     "read_metadata",
-    "register_persistable",
     "save",
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
-#: 2: classes named by their stable registered names; 1 (bayes_fdi 0.1.0): by ``module:QualName``.
-FORMAT_VERSION = 2
+#: 3: the online diagnoser's components own their states; 2: classes named by their stable
+#: registered names; 1 (bayes_fdi 0.1.0): classes named by ``module:QualName``.
+FORMAT_VERSION = 3
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.

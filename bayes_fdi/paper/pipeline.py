@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.campaigns.cache import N_TRAIN, split_train_test
+from bayes_fdi.campaigns.cache import split_train_test
 from bayes_fdi.diagnosis.isolation.tree import n_vectors
 from bayes_fdi.paper.report_tables import tree_text
 from bayes_fdi.paper.scores import classification_metrics, paired_comparison
@@ -28,6 +28,7 @@ from bayes_fdi.paper.separability import (
 )
 from bayes_fdi.paper.setup import (
     ALL_STATES,
+    N_TRAIN,
     PAPER_STATES,
     fit_tree,
     select_regression_width,
@@ -162,6 +163,168 @@ def evaluate_dataset(
         )
 
 
+class _Split(NamedTuple):
+    """The runs of one dataset, split by :func:`split_train_test`, and their labels."""
+
+    train: xr.Dataset
+    test: xr.Dataset
+    y_train: np.ndarray  #: state of every training run (all states evaluated)
+    y_test: np.ndarray  #: state of every test run
+    in_paper_train: np.ndarray  #: training runs of the paper states
+    in_paper_test: np.ndarray  #: test runs of the paper states
+    normal: xr.Dataset  #: the fault-free training runs (the normal models' data)
+
+
+def _split(ds: xr.Dataset, states: list[str], every: list[str], n_train: int) -> _Split:
+    train, test = split_train_test(ds, n_train=n_train, states=every)
+    y_train = np.asarray(train["state"].values).astype(str)
+    y_test = np.asarray(test["state"].values).astype(str)
+    return _Split(
+        train=train,
+        test=test,
+        y_train=y_train,
+        y_test=y_test,
+        in_paper_train=np.isin(y_train, states),
+        in_paper_test=np.isin(y_test, states),
+        normal=train.isel(run=np.flatnonzero(y_train == "fn")),
+    )
+
+
+def _default_diagnoser(
+    normal: xr.Dataset,
+    *,
+    seed: int,
+    input_lags: Sequence[float],
+    timing: dict[str, float],
+    say: Callable[[str], None],
+) -> tuple[Any, dict[str, Any]]:
+    """The default RVM diagnoser at the width of largest evidence, and that width's record."""
+    from bayes_fdi.diagnosis import FaultDiagnoser
+    from bayes_fdi.rvm import RVR
+
+    say("normal-model kernel width by maximum evidence")
+    t0 = time.perf_counter()
+    width, evidence = select_regression_width(normal, seed=seed, input_lags=input_lags)
+    timing["regression_width"] = time.perf_counter() - t0
+    diagnoser = FaultDiagnoser(
+        regressor=RVR(kernel="rbf", width=width),
+        classifier=tree_classifier("rvm", seed),
+        random_state=seed,
+        input_lags=tuple(input_lags),
+    )
+    return diagnoser, {"width": width, "log_evidence": evidence}
+
+
+def _features(
+    diag: Any, split: _Split, extra_states: bool, timing: dict[str, float]
+) -> tuple[xr.Dataset, np.ndarray, np.ndarray]:
+    """Test residuals, test features and the training features of every state evaluated.
+
+    The paper states' training features are the diagnoser's own; with ``extra_states`` the
+    other states' training runs get theirs from the fitted normal models.
+    """
+    from bayes_fdi.diagnosis.isolation.features import extract_features
+
+    t0 = time.perf_counter()
+    res_test = diag.normal_models_.residuals(split.test)
+    feats_test, _ = extract_features(res_test, diag.feature_names_)
+    timing["test_residuals"] = time.perf_counter() - t0
+    if extra_states:
+        t0 = time.perf_counter()
+        extra = split.train.isel(run=np.flatnonzero(~split.in_paper_train))
+        feats_extra, _ = extract_features(diag.normal_models_.residuals(extra), diag.feature_names_)
+        timing["extra_train_residuals"] = time.perf_counter() - t0
+        feats_train_all = np.empty((split.train.sizes["run"], feats_extra.shape[1]))
+        feats_train_all[split.in_paper_train] = diag.training_features_
+        feats_train_all[~split.in_paper_train] = feats_extra
+    else:
+        feats_train_all = diag.training_features_
+    for name, F in (("training", feats_train_all), ("test", feats_test)):
+        if not np.isfinite(F).all():
+            raise ValueError(f"non-finite residual features in the {name} runs")
+    return res_test, feats_test, feats_train_all
+
+
+def _paper_methods(
+    diag: Any, X_te: np.ndarray, y_te: np.ndarray, seed: int, say: Callable[[str], None]
+) -> dict[str, Any]:
+    """The RVM tree (fitted in ``diag``) and the SVM tree on the paper states' features."""
+    X_tr, y_tr = diag.training_features_, np.asarray(diag.training_labels_).astype(str)
+    say(f"RVM tree on {X_tr.shape[0]} training runs: predicting {X_te.shape[0]} test runs")
+    t0 = time.perf_counter()
+    proba = diag.predict_features(X_te)
+    rvm_predict_s = time.perf_counter() - t0
+    results: dict[str, Any] = {
+        "rvm": _method_result(
+            diag.classifier_, y_te, proba, diag.fit_seconds_["classifier"], rvm_predict_s, "RVM"
+        )
+    }
+    say("SVM tree on the same features")
+    svm, _, proba_svm, fit_s, pred_s = fit_tree(
+        lambda: tree_classifier("svm", seed), X_tr, y_tr, X_te
+    )
+    results["svm"] = _method_result(svm, y_te, proba_svm, fit_s, pred_s, "SVM")
+    results["paired"] = paired_comparison(
+        y_te,
+        np.asarray(diag.classes_).astype(str)[np.argmax(proba, axis=1)],
+        np.asarray(svm.classes_).astype(str)[np.argmax(proba_svm, axis=1)],
+    )
+    return results
+
+
+def _normal_models_record(diag: Any, regression: dict[str, Any]) -> dict[str, Any]:
+    """Width, input lags, relevance vectors and noise level of the fitted normal models."""
+    regressors = diag.normal_models_.regressors_
+    return {
+        **regression,
+        "input_lags": [float(v) for v in diag.normal_models_.input_lags_],
+        "relevance_vectors": {k: n_vectors(r) for k, r in regressors.items()},
+        "noise_std": {
+            k: float(r.beta_**-0.5) for k, r in regressors.items() if getattr(r, "beta_", None)
+        },
+    }
+
+
+def _all_states_block(
+    split: _Split,
+    every: list[str],
+    extra_states: bool,
+    feats_train_all: np.ndarray,
+    feats_test: np.ndarray,
+    seed: int,
+    timing: dict[str, float],
+    say: Callable[[str], None],
+) -> dict[str, Any]:
+    """Beyond the paper: pairwise separability and groups of every state evaluated and, when
+    there are more states than the paper's, both trees on all of them."""
+    say(f"pairwise separability of {len(every)} states on their training features")
+    t0 = time.perf_counter()
+    sep_states, error = pairwise_separability(feats_train_all, split.y_train, states=every)
+    groups = find_groups(sep_states, error)
+    timing["separability"] = time.perf_counter() - t0
+    block: dict[str, Any] = {
+        "states": sep_states,
+        "pairwise_error": error,
+        "threshold": SEPARABILITY_THRESHOLD,
+        "n_neighbors": SEPARABILITY_NEIGHBOURS,
+        "groups": groups,
+        "paper_groups": [list(g) for g in PAPER_GROUPS],
+    }
+    if extra_states:
+        say(f"RVM and SVM trees on all {len(every)} states")
+        for method, prefix in (("rvm", "RVM"), ("svm", "SVM")):
+            clf, _, p, fit_s, pred_s = fit_tree(
+                lambda kind=method: tree_classifier(kind, seed),
+                feats_train_all,
+                split.y_train,
+                feats_test,
+            )
+            m = _method_result(clf, split.y_test, p, fit_s, pred_s, prefix)
+            m.update(group_metrics(split.y_test, p, [str(c) for c in clf.classes_], groups))
+            block[method] = m
+    return block
+
+
 def _evaluate_dataset(
     ds: xr.Dataset,
     *,
@@ -173,143 +336,55 @@ def _evaluate_dataset(
     diagnoser: Any,
     input_lags: Sequence[float],
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    from bayes_fdi.diagnosis import FaultDiagnoser
-    from bayes_fdi.diagnosis.isolation.features import extract_features
-
     say = progress or (lambda _msg: None)
     states = [str(s) for s in states]
     if "fn" not in states:
         raise ValueError("the paper protocol needs the fault-free state 'fn' among the states")
     present = list(dict.fromkeys(np.asarray(ds["state"].values).astype(str)))
     every = [s for s in ALL_STATES if s in present] if all_states else states
-    train, test = split_train_test(ds, n_train=n_train, states=every)
-    y_train_all = np.asarray(train["state"].values).astype(str)
-    y_test_all = np.asarray(test["state"].values).astype(str)
-    in_paper_train = np.isin(y_train_all, states)
-    in_paper_test = np.isin(y_test_all, states)
-    normal = train.isel(run=np.flatnonzero(y_train_all == "fn"))
+    extra_states = all_states and len(every) > len(states)
+    split = _split(ds, states, every, n_train)
     timing: dict[str, float] = {}
     if diagnoser is None:
-        say("normal-model kernel width by maximum evidence")
-        t0 = time.perf_counter()
-        width, evidence = select_regression_width(normal, seed=seed, input_lags=input_lags)
-        timing["regression_width"] = time.perf_counter() - t0
-        from bayes_fdi.rvm import RVR
-
-        diagnoser = FaultDiagnoser(
-            regressor=RVR(kernel="rbf", width=width),
-            classifier=tree_classifier("rvm", seed),
-            random_state=seed,
-            input_lags=tuple(input_lags),
+        diagnoser, regression = _default_diagnoser(
+            split.normal, seed=seed, input_lags=input_lags, timing=timing, say=say
         )
-        regression = {"width": width, "log_evidence": evidence}
     elif len(input_lags):
         raise ValueError("give input_lags to the diagnoser itself when passing a diagnoser")
     else:
         regression = {}
-    say(f"fitting the RVM pipeline (normal models on {normal.sizes['run']} fault-free runs)")
-    diag = diagnoser.fit(normal, train.isel(run=np.flatnonzero(in_paper_train)))
+    say(f"fitting the RVM pipeline (normal models on {split.normal.sizes['run']} fault-free runs)")
+    diag = diagnoser.fit(split.normal, split.train.isel(run=np.flatnonzero(split.in_paper_train)))
     timing.update({f"rvm_fit_{k}": float(v) for k, v in diag.fit_seconds_.items()})
 
-    say(f"residuals and features of {test.sizes['run']} test runs")
-    t0 = time.perf_counter()
-    res_test = diag.normal_models_.residuals(test)
-    feats_test, _ = extract_features(res_test, diag.feature_names_)
-    timing["test_residuals"] = time.perf_counter() - t0
-    if all_states and len(every) > len(states):
-        t0 = time.perf_counter()
-        extra = train.isel(run=np.flatnonzero(~in_paper_train))
-        feats_extra, _ = extract_features(diag.normal_models_.residuals(extra), diag.feature_names_)
-        timing["extra_train_residuals"] = time.perf_counter() - t0
-        feats_train_all = np.empty((train.sizes["run"], feats_extra.shape[1]))
-        feats_train_all[in_paper_train] = diag.training_features_
-        feats_train_all[~in_paper_train] = feats_extra
-    else:
-        feats_train_all = diag.training_features_
-    for name, F in (("training", feats_train_all), ("test", feats_test)):
-        if not np.isfinite(F).all():
-            raise ValueError(f"non-finite residual features in the {name} runs")
-
-    X_tr, y_tr = diag.training_features_, np.asarray(diag.training_labels_).astype(str)
-    X_te, y_te = feats_test[in_paper_test], y_test_all[in_paper_test]
-    say(f"RVM tree on {X_tr.shape[0]} training runs: predicting {X_te.shape[0]} test runs")
-    t0 = time.perf_counter()
-    proba = diag.predict_features(X_te)
-    rvm_predict_s = time.perf_counter() - t0
-    results: dict[str, Any] = {
-        "rvm": _method_result(
-            diag.classifier_, y_te, proba, diag.fit_seconds_["classifier"], rvm_predict_s, "RVM"
-        )
-    }
-
-    say("SVM tree on the same features")
-
-    def make_svm() -> Any:
-        return tree_classifier("svm", seed)
-
-    svm, _, proba_svm, fit_s, pred_s = fit_tree(make_svm, X_tr, y_tr, X_te)
-    results["svm"] = _method_result(svm, y_te, proba_svm, fit_s, pred_s, "SVM")
-    results["paired"] = paired_comparison(
-        y_te,
-        np.asarray(diag.classes_).astype(str)[np.argmax(proba, axis=1)],
-        np.asarray(svm.classes_).astype(str)[np.argmax(proba_svm, axis=1)],
-    )
+    say(f"residuals and features of {split.test.sizes['run']} test runs")
+    res_test, feats_test, feats_train_all = _features(diag, split, extra_states, timing)
+    X_te, y_te = feats_test[split.in_paper_test], split.y_test[split.in_paper_test]
+    y_tr = np.asarray(diag.training_labels_).astype(str)
+    results = _paper_methods(diag, X_te, y_te, seed, say)
     results["split"] = {
         "n_train_per_state": int(n_train),
         "train_runs": {s: int((y_tr == s).sum()) for s in states},
         "test_runs": {s: int((y_te == s).sum()) for s in states},
-        "normal_model_runs": int(normal.sizes["run"]),
+        "normal_model_runs": int(split.normal.sizes["run"]),
         "normal_model_samples": int(diag.normal_models_.n_train_samples_),
     }
-    results["normal_models"] = {
-        **regression,
-        "input_lags": [float(v) for v in diag.normal_models_.input_lags_],
-        "relevance_vectors": {k: n_vectors(r) for k, r in diag.normal_models_.regressors_.items()},
-        "noise_std": {
-            k: float(r.beta_**-0.5)
-            for k, r in diag.normal_models_.regressors_.items()
-            if getattr(r, "beta_", None)
-        },
-    }
+    results["normal_models"] = _normal_models_record(diag, regression)
     results["strength"] = _strength_ranges(ds)
     results["features"] = list(diag.feature_names_)
-
     artifacts: dict[str, Any] = {
         "features": X_te,
         "labels": y_te,
         "rvm_predict": lambda F: diag.classes_[np.argmax(diag.predict_features(F), axis=1)],
-        "residuals": _residual_examples(res_test, y_test_all, ("fn", "f1", "f2", "f15")),
+        "residuals": _residual_examples(res_test, split.y_test, ("fn", "f1", "f2", "f15")),
         "train_features": feats_train_all,
-        "train_labels": y_train_all,
+        "train_labels": split.y_train,
         "diagnoser": diag,
-        "test_runs": test.isel(run=np.flatnonzero(in_paper_test)),
+        "test_runs": split.test.isel(run=np.flatnonzero(split.in_paper_test)),
     }
-
     if all_states:
-        say(f"pairwise separability of {len(every)} states on their training features")
-        t0 = time.perf_counter()
-        sep_states, error = pairwise_separability(feats_train_all, y_train_all, states=every)
-        groups = find_groups(sep_states, error)
-        timing["separability"] = time.perf_counter() - t0
-        block: dict[str, Any] = {
-            "states": sep_states,
-            "pairwise_error": error,
-            "threshold": SEPARABILITY_THRESHOLD,
-            "n_neighbors": SEPARABILITY_NEIGHBOURS,
-            "groups": groups,
-            "paper_groups": [list(g) for g in PAPER_GROUPS],
-        }
-        if len(every) > len(states):
-            say(f"RVM and SVM trees on all {len(every)} states")
-
-            def make_rvm() -> Any:
-                return tree_classifier("rvm", seed)
-
-            for method, make, prefix in (("rvm", make_rvm, "RVM"), ("svm", make_svm, "SVM")):
-                clf, _, p, fit_s, pred_s = fit_tree(make, feats_train_all, y_train_all, feats_test)
-                m = _method_result(clf, y_test_all, p, fit_s, pred_s, prefix)
-                m.update(group_metrics(y_test_all, p, [str(c) for c in clf.classes_], groups))
-                block[method] = m
-        results["all_states"] = block
+        results["all_states"] = _all_states_block(
+            split, every, extra_states, feats_train_all, feats_test, seed, timing, say
+        )
     results["timing"] = timing
     return results, artifacts

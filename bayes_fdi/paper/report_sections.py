@@ -161,7 +161,7 @@ def dynamic_section(results: Mapping[str, Any]) -> list[str]:
     if not datasets:
         return []
     lags = ", ".join(f"{float(v):g}" for v in results.get("dynamic_lags", []))
-    md = [
+    return [
         "## Beyond the paper: dynamic normal models",
         "",
         f"The same pipeline, features (`mean_r1`, `mean_r2`), tree, seeds and runs, but the "
@@ -172,11 +172,21 @@ def dynamic_section(results: Mapping[str, Any]) -> list[str]:
         "only (log evidence and held-out run-mean residual spread; docs/diagnosis.md), never "
         "on test accuracy.",
         "",
+        _static_dynamic_table(datasets, lags),
+        "",
+        "The 20-state columns use each row's own groups (they change with the features): "
+        "accuracy on the states that are separable, and accuracy up to the group.",
+        "",
+        _groups_by_models_table(datasets),
+        *_dynamic_details(datasets),
     ]
+
+
+def _static_dynamic_table(datasets: Mapping[str, Mapping[str, Any]], lags: str) -> str:
+    """One row per dataset and normal models (static, dynamic): sizes, accuracies, ECE."""
     rows = []
     for name, d in datasets.items():
-        dyn = d["dynamic"]
-        for label, r in (("static (paper)", d), (f"dynamic ({lags} s)", dyn)):
+        for label, r in (("static (paper)", d), (f"dynamic ({lags} s)", d["dynamic"])):
             rvm, svm = r["rvm"], r["svm"]
             block = r.get("all_states", {})
             cal = r.get("calibration", {})
@@ -214,21 +224,23 @@ def dynamic_section(results: Mapping[str, Any]) -> list[str]:
         "RVM, 20 states: group level",
         "ECE after recalibration",
     ]
-    md += [markdown_table(header, rows), ""]
-    md += [
-        "The 20-state columns use each row's own groups (they change with the features): "
-        "accuracy on the states that are separable, and accuracy up to the group.",
-        "",
-    ]
-    group_rows = []
+    return markdown_table(header, rows)
+
+
+def _groups_by_models_table(datasets: Mapping[str, Mapping[str, Any]]) -> str:
+    """The groups of confusable states with the static and with the dynamic normal models."""
+    rows = []
     for name, d in datasets.items():
         for label, r in (("static", d), ("dynamic", d["dynamic"])):
             block = r.get("all_states", {})
             groups = [g for g in block.get("groups", []) if len(g) > 1]
-            group_rows.append([name, label, ", ".join("/".join(g) for g in groups) or "none"])
-    md += [
-        markdown_table(["Dataset", "Normal models", "Groups no classifier can split"], group_rows)
-    ]
+            rows.append([name, label, ", ".join("/".join(g) for g in groups) or "none"])
+    return markdown_table(["Dataset", "Normal models", "Groups no classifier can split"], rows)
+
+
+def _dynamic_details(datasets: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """Each dynamic pipeline's confusion on the paper states and its intervals' coverage."""
+    md: list[str] = []
     for name, d in datasets.items():
         m = d["dynamic"]["rvm"]
         cal = d["dynamic"].get("calibration", {})
@@ -255,6 +267,9 @@ def dynamic_section(results: Mapping[str, Any]) -> list[str]:
 
 
 def normal_models_text(nm: Mapping[str, Any]) -> str:
+    """``"; RBF width ...; g for X: n relevance vectors, noise std ..."``: the normal models of
+    a dataset's results (its ``normal_models`` entry) as a clause of a sentence; empty when
+    there are none."""
     if not nm:
         return ""
     out = []

@@ -40,73 +40,20 @@ from typing import Any
 import xarray as xr
 
 from bayes_fdi.atomic import write_text
-from bayes_fdi.campaigns.cache import (
-    DATASETS,
-    N_TRAIN,
-    SMALL_DURATION,
-    SMALL_RUNS_PER_STATE,
-    campaign_file,
-    load_or_simulate,
-    split_train_test,
-)
+from bayes_fdi.campaigns.cache import campaign_file, load_or_simulate
 from bayes_fdi.cli_arguments import UsageError
 from bayes_fdi.datasets import validate_dataset
 from bayes_fdi.paper.calibration_headlines import calibration_headlines
 from bayes_fdi.paper.pipeline import evaluate_dataset
-from bayes_fdi.paper.scores import classification_metrics, paired_comparison
-from bayes_fdi.paper.separability import (
-    PAPER_GROUPS,
-    SEPARABILITY_NEIGHBOURS,
-    SEPARABILITY_THRESHOLD,
-    find_groups,
-    group_metrics,
-    pairwise_separability,
-)
 from bayes_fdi.paper.setup import (
     ALL_STATES,
+    DATASETS,
     DYNAMIC_LAGS,
-    NODE_WIDTH,
+    N_TRAIN,
     PAPER_STATES,
-    REGRESSION_WIDTH_SAMPLES,
-    REGRESSION_WIDTHS,
-    node_classifier,
-    select_regression_width,
-    single_threaded,
-    tree_nodes,
 )
 
-__all__ = [
-    "ALL_STATES",
-    "DATASETS",
-    "DYNAMIC_LAGS",
-    "NODE_WIDTH",
-    "N_TRAIN",
-    "PAPER_GROUPS",
-    "PAPER_STATES",
-    "REGRESSION_WIDTHS",
-    "REGRESSION_WIDTH_SAMPLES",
-    "SEPARABILITY_NEIGHBOURS",
-    "SEPARABILITY_THRESHOLD",
-    "SMALL_DURATION",
-    "SMALL_RUNS_PER_STATE",
-    "calibration_headlines",
-    "campaign_file",
-    "classification_metrics",
-    "configure_parser",
-    "evaluate_dataset",
-    "find_groups",
-    "group_metrics",
-    "load_or_simulate",
-    "node_classifier",
-    "paired_comparison",
-    "pairwise_separability",
-    "reproduce",
-    "run_from_cli",
-    "select_regression_width",
-    "single_threaded",
-    "split_train_test",
-    "tree_nodes",
-]
+__all__ = ["configure_parser", "reproduce", "run_from_cli"]
 
 
 class _Progress:
@@ -167,7 +114,8 @@ def reproduce(
         info) and ``seconds`` (total wall-clock).
     """
     from bayes_fdi import __version__
-    from bayes_fdi.paper import report as rep
+    from bayes_fdi.paper.report import render_report
+    from bayes_fdi.reporting import to_jsonable, write_json
 
     t_start = time.perf_counter()
     say = _Progress(progress)
@@ -185,87 +133,128 @@ def reproduce(
     }
     figures: dict[str, dict[str, str]] = {}
     for i, item in enumerate(datasets):
-        if isinstance(item, xr.Dataset):
-            ds = validate_dataset(item, require=("CV", "P1", "P2", "T1", "X", "F"))
-            name = str(ds.attrs.get("campaign") or f"dataset-{i + 1}")
-            info = {"campaign": name, "campaign_file": None, "cached": False}
-        else:
-            name = os.fspath(item)
-            say(f"{name}: loading or simulating the campaign")
-            ds, info = load_or_simulate(
-                item, seed=seed, cache_dir=cache_dir, small=small, progress=progress
-            )
-        if "simulate_seconds" in info:
-            how = "cached" if info["cached"] else f"simulated in {info['simulate_seconds']:.0f} s"
-        else:
-            how = "given"
-        say(f"{name}: {ds.sizes['run']} runs x {ds.sizes['time']} s ({how})")
-        key = info["campaign"]
-        res, art = evaluate_dataset(
-            ds, states=states, seed=seed, progress=lambda m, k=key: say(f"{k}: {m}")
+        ds, info = _dataset(
+            i, item, seed=seed, cache_dir=cache_dir, small=small, progress=progress, say=say
         )
-        res["campaign"] = info
-        say(f"{key}: calibration report")
-        real = None
-        if str(ds.attrs.get("source", "")) == "lublin-example":
-            from bayes_fdi.datasets import load_lublin_example
-
-            real = load_lublin_example()
-
-        def calibrate(
-            artifacts: dict[str, Any], suffix: str, what: str, k: str = key, real: Any = real
-        ) -> Any:
-            return calibration_headlines(
-                artifacts["diagnoser"],
-                artifacts["test_runs"],
-                out / f"{k}{suffix}-calibration",
-                seed=seed,
-                real_record=real,
-                title=f"{k}: calibration of the {what} on its test runs",
-            )
-
-        res["calibration"] = calibrate(art, "", "RVM pipeline")
-        if len(dynamic_lags):
-            lags = tuple(float(v) for v in dynamic_lags)
-            say(f"{key}: beyond the paper: dynamic normal models with CV lagged {lags} s")
-            dyn, dyn_art = evaluate_dataset(
-                ds,
-                states=states,
-                seed=seed,
-                input_lags=lags,
-                progress=lambda m, k=key: say(f"{k} (dynamic): {m}"),
-            )
-            dyn["calibration"] = calibrate(dyn_art, "-dynamic", "dynamic RVM pipeline")
-            res["dynamic"] = {k: v for k, v in dyn.items() if k != "strength"}
+        key = info["campaign"]
+        res, art = _evaluate(
+            ds, info, out, seed=seed, states=states, dynamic_lags=dynamic_lags, say=say
+        )
         results["datasets"][key] = res
         say(f"{key}: figures")
-        figs = {
-            "residuals": rep.plot_residuals(
-                art["residuals"], out / f"{key}-residuals.png", title=f"{key}: residuals"
-            ).name,
-            "features": rep.plot_features(
-                art["features"],
-                art["labels"],
-                out / f"{key}-features.png",
-                predict=art["rvm_predict"],
-                title=f"{key}: test-run features and the RVM tree's decisions",
-            ).name,
-        }
-        if "all_states" in res:
-            figs["all_features"] = rep.plot_features(
-                art["train_features"],
-                art["train_labels"],
-                out / f"{key}-all-states.png",
-                title=f"{key}: training-run features of every state",
-            ).name
-        figures[key] = figs
+        figures[key] = _figures(key, res, art, out)
     results["seconds"] = time.perf_counter() - t_start
     results["figures"] = figures
-    results = rep.to_jsonable(results)
-    write_text(out / "report.md", rep.render_report(results))
-    rep.write_json(results, out / "results.json")
+    results = to_jsonable(results)
+    write_text(out / "report.md", render_report(results))
+    write_json(results, out / "results.json")
     say(f"done in {results['seconds']:.0f} s: {out / 'report.md'}")
     return results
+
+
+def _dataset(
+    i: int,
+    item: str | os.PathLike | xr.Dataset,
+    *,
+    seed: int,
+    cache_dir: str | os.PathLike | None,
+    small: bool,
+    progress: bool,
+    say: _Progress,
+) -> tuple[xr.Dataset, dict[str, Any]]:
+    """The ``i``-th dataset to evaluate (given, cached or simulated) and where it came from."""
+    if isinstance(item, xr.Dataset):
+        ds = validate_dataset(item, require=("CV", "P1", "P2", "T1", "X", "F"))
+        name = str(ds.attrs.get("campaign") or f"dataset-{i + 1}")
+        info = {"campaign": name, "campaign_file": None, "cached": False}
+    else:
+        name = os.fspath(item)
+        say(f"{name}: loading or simulating the campaign")
+        ds, info = load_or_simulate(
+            item, seed=seed, cache_dir=cache_dir, small=small, progress=progress
+        )
+    if "simulate_seconds" in info:
+        how = "cached" if info["cached"] else f"simulated in {info['simulate_seconds']:.0f} s"
+    else:
+        how = "given"
+    say(f"{name}: {ds.sizes['run']} runs x {ds.sizes['time']} s ({how})")
+    return ds, info
+
+
+def _evaluate(
+    ds: xr.Dataset,
+    info: dict[str, Any],
+    out: Path,
+    *,
+    seed: int,
+    states: Sequence[str],
+    dynamic_lags: Sequence[float],
+    say: _Progress,
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """One dataset's results: the paper's protocol, its calibration report and, with
+    ``dynamic_lags``, the same with dynamic normal models (under ``"dynamic"``)."""
+    key = info["campaign"]
+    res, art = evaluate_dataset(
+        ds, states=states, seed=seed, progress=lambda m, k=key: say(f"{k}: {m}")
+    )
+    res["campaign"] = info
+    say(f"{key}: calibration report")
+    real = None
+    if str(ds.attrs.get("source", "")) == "lublin-example":
+        from bayes_fdi.datasets import load_lublin_example
+
+        real = load_lublin_example()
+
+    def calibrate(artifacts: dict[str, Any], suffix: str, what: str) -> Any:
+        return calibration_headlines(
+            artifacts["diagnoser"],
+            artifacts["test_runs"],
+            out / f"{key}{suffix}-calibration",
+            seed=seed,
+            real_record=real,
+            title=f"{key}: calibration of the {what} on its test runs",
+        )
+
+    res["calibration"] = calibrate(art, "", "RVM pipeline")
+    if len(dynamic_lags):
+        lags = tuple(float(v) for v in dynamic_lags)
+        say(f"{key}: beyond the paper: dynamic normal models with CV lagged {lags} s")
+        dyn, dyn_art = evaluate_dataset(
+            ds,
+            states=states,
+            seed=seed,
+            input_lags=lags,
+            progress=lambda m, k=key: say(f"{k} (dynamic): {m}"),
+        )
+        dyn["calibration"] = calibrate(dyn_art, "-dynamic", "dynamic RVM pipeline")
+        res["dynamic"] = {k: v for k, v in dyn.items() if k != "strength"}
+    return res, art
+
+
+def _figures(key: str, res: dict[str, Any], art: dict[str, Any], out: Path) -> dict[str, str]:
+    """Draw one dataset's figures into ``out``; their file names by role."""
+    from bayes_fdi.paper.report_figures import plot_features, plot_residuals
+
+    figs = {
+        "residuals": plot_residuals(
+            art["residuals"], out / f"{key}-residuals.png", title=f"{key}: residuals"
+        ).name,
+        "features": plot_features(
+            art["features"],
+            art["labels"],
+            out / f"{key}-features.png",
+            predict=art["rvm_predict"],
+            title=f"{key}: test-run features and the RVM tree's decisions",
+        ).name,
+    }
+    if "all_states" in res:
+        figs["all_features"] = plot_features(
+            art["train_features"],
+            art["train_labels"],
+            out / f"{key}-all-states.png",
+            title=f"{key}: training-run features of every state",
+        ).name
+    return figs
 
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
@@ -303,9 +292,12 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "(default: %(default)s; empty string: skip that part)",
     )
     parser.add_argument(
-        "--quiet", "--no-progress", dest="no_progress", action="store_true",
+        "--quiet",
+        "--no-progress",
+        dest="no_progress",
+        action="store_true",
         help="no progress messages",
-    )  # fmt: skip
+    )
 
 
 def run_from_cli(args: argparse.Namespace) -> int:

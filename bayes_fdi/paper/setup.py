@@ -21,8 +21,10 @@ from bayes_fdi.diagnosis.isolation.tree import n_vectors
 
 __all__ = [
     "ALL_STATES",
+    "DATASETS",
     "DYNAMIC_LAGS",
     "NODE_WIDTH",
+    "N_TRAIN",
     "PAPER_STATES",
     "REGRESSION_WIDTHS",
     "REGRESSION_WIDTH_SAMPLES",
@@ -33,6 +35,11 @@ __all__ = [
     "tree_classifier",
     "tree_nodes",
 ]
+
+#: The two campaigns of the paper.
+DATASETS: tuple[str, ...] = ("paper-simulated", "paper-lublin")
+#: Training runs per state (the paper: 20 groups train, the rest test).
+N_TRAIN: int = 20
 
 
 #: The ten states the paper diagnoses (Section 5).

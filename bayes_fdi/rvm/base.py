@@ -13,6 +13,9 @@ two loses nothing, so any finite data from ``1e-300`` to ``1e300`` fit; data wit
 ``[2^-32, 2^32]`` are not rescaled at all (``x_scale = t_scale = 1``). The fitted state is kept
 in the scaled units (``_mu_``, ``_Sigma_``, ``_X_fit_``, ``_kernel_``; the scales in
 ``_x_scale_`` and ``_t_scale_``) and the public attributes are given in the caller's units.
+
+Imports :mod:`~bayes_fdi.rvm.kernels`, :mod:`~bayes_fdi.rvm.persistence` and the solvers' face
+:mod:`bayes_fdi.rvm.sbl`.
 """
 
 from __future__ import annotations
@@ -29,12 +32,11 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils.validation import check_is_fitted, validate_data
 from torch import Tensor
 
-from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES, Design
 from bayes_fdi.rvm.kernels import RBF, Kernel, Linear, Polynomial
 from bayes_fdi.rvm.persistence import save
-from bayes_fdi.rvm.sparse_bayes import SBLResult
+from bayes_fdi.rvm.sbl import DEFAULT_MAX_BYTES, Design, SBLResult
 
-__all__ = ["RVMBase"]
+__all__ = ["RVMBase", "is_torch", "power_of_two_scale"]
 
 _DTYPES = {"float64": torch.float64, "float32": torch.float32}
 _METHODS = ("fast", "em")
@@ -63,7 +65,8 @@ def power_of_two_scale(values: Tensor) -> float:
     return math.ldexp(1.0, exponent)
 
 
-def _is_torch(X: Any) -> bool:
+def is_torch(X: Any) -> bool:
+    """Whether ``X`` is a torch tensor (the estimators then answer in tensors, else in numpy)."""
     return isinstance(X, Tensor)
 
 
@@ -167,7 +170,7 @@ class RVMBase(BaseEstimator):
     def _compute_device(self, X: Any) -> torch.device:
         if self.device is not None:
             return torch.device(self.device)
-        if _is_torch(X):
+        if is_torch(X):
             return X.device
         return torch.device("cpu")
 
@@ -203,13 +206,13 @@ class RVMBase(BaseEstimator):
 
     def _validate_fit(self, X: Any, y: Any, *, classifier: bool) -> tuple[Any, Any]:
         """Validate training data; returns ``(X, y)`` as (numpy or torch) arrays."""
-        if _is_torch(X):
+        if is_torch(X):
             self._validate_torch_X(X, reset=True, min_samples=2)
             if y is None:
                 raise ValueError(
                     f"{type(self).__name__} requires y to be passed, but the target y is None."
                 )
-            y_np = y.detach().cpu().numpy() if _is_torch(y) else np.asarray(y)
+            y_np = y.detach().cpu().numpy() if is_torch(y) else np.asarray(y)
             if y_np.ndim == 2 and y_np.shape[1] == 1:
                 y_np = y_np[:, 0]
             if y_np.ndim != 1:
@@ -237,7 +240,7 @@ class RVMBase(BaseEstimator):
 
     def _validate_predict(self, X: Any) -> Any:
         check_is_fitted(self)
-        if _is_torch(X):
+        if is_torch(X):
             return self._validate_torch_X(X, reset=False, min_samples=1)
         return validate_data(self, X, reset=False, dtype=[np.float64, np.float32])
 
@@ -247,7 +250,7 @@ class RVMBase(BaseEstimator):
             dtype, dev = self._torch_dtype, self._compute_device(X)
         else:
             dtype, dev = self._dtype_, self._device_
-        if _is_torch(X):
+        if is_torch(X):
             # a copy: the model must not share memory with (and change with) the caller's tensor
             return X.detach().to(dtype=dtype, device=dev, copy=True)
         out = torch.tensor(np.asarray(X), dtype=dtype, device=dev)
@@ -285,7 +288,7 @@ class RVMBase(BaseEstimator):
     @staticmethod
     def _output(value: Tensor, like: Any) -> Any:
         """numpy in -> numpy out; torch in -> torch out on the input's device."""
-        if _is_torch(like):
+        if is_torch(like):
             return value.to(like.device)
         return value.detach().cpu().numpy()
 

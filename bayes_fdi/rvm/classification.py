@@ -12,6 +12,9 @@ Probabilities use MacKay's moderated output
 latent mean :math:`\mu_a = \phi^\top\mu` and variance :math:`\sigma_a^2 = \phi^\top\Sigma\phi`
 (``moderated=True``), or the plain :math:`\sigma(\mu_a)` of eq. 30.  More than two classes
 are handled one-vs-rest with normalised probabilities.
+
+Imports :mod:`~bayes_fdi.rvm.base`, :mod:`~bayes_fdi.rvm.kernels`, :mod:`~bayes_fdi.rvm.threads`,
+:mod:`~bayes_fdi.rvm.width` and the solvers' face :mod:`bayes_fdi.rvm.sbl`.
 """
 
 from __future__ import annotations
@@ -26,10 +29,9 @@ from sklearn.metrics import accuracy_score
 from sklearn.utils.multiclass import check_classification_targets
 from torch import Tensor
 
-from bayes_fdi.rvm.base import RVMBase, _is_torch
-from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES
+from bayes_fdi.rvm.base import RVMBase, is_torch
 from bayes_fdi.rvm.kernels import RBF, Kernel
-from bayes_fdi.rvm.sparse_bayes import SBLResult, em_bernoulli, fast_bernoulli
+from bayes_fdi.rvm.sbl import DEFAULT_MAX_BYTES, SBLResult, em_bernoulli, fast_bernoulli
 from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.rvm.width import search_width, width_bounds
 
@@ -320,14 +322,14 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         Xt = self._inputs(X)
         idx = self._proba_tensor(Xt).argmax(1).cpu().numpy()
         labels = self.classes_[idx]
-        if _is_torch(X) and np.issubdtype(labels.dtype, np.number):
+        if is_torch(X) and np.issubdtype(labels.dtype, np.number):
             return torch.as_tensor(labels, device=X.device)
         return labels
 
     def score(self, X: Any, y: Any, sample_weight: Any = None) -> float:
         """Mean accuracy (torch inputs accepted)."""
         pred = self.predict(X)
-        if _is_torch(pred):
+        if is_torch(pred):
             pred = pred.cpu().numpy()
-        y_np = y.detach().cpu().numpy() if _is_torch(y) else y
+        y_np = y.detach().cpu().numpy() if is_torch(y) else y
         return float(accuracy_score(y_np, pred, sample_weight=sample_weight))

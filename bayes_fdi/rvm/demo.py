@@ -4,6 +4,9 @@ Tipping's classic example: ``y = sin(x)/x + noise`` on ``[-10, 10]``.  The comma
 the number of relevance vectors, the RMSE against the noise-free function, the estimated
 noise level, the log evidence, the coverage of the 95 % predictive interval and the
 fit time.
+
+Imports the estimators (:class:`~bayes_fdi.rvm.RVR`) and the command-line helpers of the
+foundation only.
 """
 
 from __future__ import annotations

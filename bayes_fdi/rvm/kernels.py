@@ -6,6 +6,8 @@ A kernel is called as ``kernel(X, Z)`` on two 2-D torch tensors and returns the
 scalar), in the manner of GPyTorch kernels.  Every kernel has a JSON-serialisable
 :meth:`Kernel.to_dict` and :func:`kernel_from_dict` rebuilds it (used by
 :mod:`bayes_fdi.rvm.persistence`).
+
+Imports torch only.
 """
 
 from __future__ import annotations

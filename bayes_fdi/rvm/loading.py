@@ -3,23 +3,26 @@
 The file format is described in `bayes_fdi.rvm.persistence`. Every field is checked before the
 estimator is rebuilt: types, shapes, indices, finiteness of the arrays, positive precisions and
 noise precision. Whatever is wrong with a file, the error is a :class:`ValueError` naming it.
+
+Imports the estimators, :mod:`~bayes_fdi.rvm.persistence` and the solvers' face
+:mod:`bayes_fdi.rvm.sbl`.
 """
 
 from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from numbers import Real
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
 
 from bayes_fdi.rvm.classification import RVC
-from bayes_fdi.rvm.persistence import DEFAULT_MAX_BYTES, _params_from_json, read_model_file
+from bayes_fdi.rvm.persistence import DEFAULT_MAX_BYTES, params_from_json, read_model_file
 from bayes_fdi.rvm.regression import RVR
-from bayes_fdi.rvm.sbl_polish import Polish
-from bayes_fdi.rvm.sparse_bayes import SBLResult
+from bayes_fdi.rvm.sbl import Polish, SBLResult
 
 __all__ = ["load"]
 
@@ -103,12 +106,27 @@ def load(
         raise ValueError(f"{name!r} has malformed content ({type(exc).__name__}: {exc})") from None
 
 
-def _rebuild(meta: dict, arrays: dict, name: str, device: Any) -> Any:
+class _Header(NamedTuple):
+    """A model file's metadata and training inputs, validated (:func:`_header`)."""
+
+    cls: type
+    params: dict[str, Any]
+    models_meta: list[Any]
+    width: float | None
+    n_features: int
+    dtype: torch.dtype
+    X_fit: np.ndarray
+    x_scale: float
+    t_scale: float
+
+
+def _header(meta: dict, arrays: dict, name: str) -> _Header:
+    """The estimator class, parameters, scales and training inputs a file declares."""
     try:
         cls = {"RVR": RVR, "RVC": RVC}[meta["estimator"]]
         if not isinstance(meta["params"], dict):
             raise TypeError("params is not a table")
-        params = _params_from_json(meta["params"])
+        params = params_from_json(meta["params"])
         models_meta = list(meta["models"])
         width = meta["width"]
         n_features = meta["n_features_in"]
@@ -129,91 +147,126 @@ def _rebuild(meta: dict, arrays: dict, name: str, device: Any) -> Any:
             f"{name!r}: training inputs of shape {X_fit_np.shape} do not match metadata"
         )
     _float_array(X_fit_np, "X_fit", name)
+    return _Header(cls, params, models_meta, width, n_features, dtype, X_fit_np, x_scale, t_scale)
+
+
+def _rebuild(meta: dict, arrays: dict, name: str, device: Any) -> Any:
+    head = _header(meta, arrays, name)
+    params, width = head.params, head.width
     try:
-        model = cls(**params)
+        model = head.cls(**params)
         model._check_params()
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name!r} has invalid estimator parameters ({exc})") from None
     dev = (
         torch.device(device) if device is not None else torch.device(params.get("device") or "cpu")
     )
-    X_fit = torch.tensor(X_fit_np, dtype=dtype, device=dev)
-    model.n_features_in_ = n_features
-    width_s = model._scaled_width(width, x_scale) if model._scales_inputs() else width
+    X_fit = torch.tensor(head.X_fit, dtype=head.dtype, device=dev)
+    model.n_features_in_ = head.n_features
+    width_s = model._scaled_width(width, head.x_scale) if model._scales_inputs() else width
     kern = model._resolve_kernel(width_s)
     if model._scales_inputs() and width is None:
         raise ValueError(f"{name!r}: an RBF model needs its width")
-    n_basis = (1 if model.bias else 0) + (X_fit.shape[0] if kern is not None else n_features)
+    n_basis = (1 if model.bias else 0) + (X_fit.shape[0] if kern is not None else head.n_features)
 
     def binary(k: int, target: Any) -> None:
-        try:
-            active = arrays[f"m{k}_active"]
-            mean = arrays[f"m{k}_mean"]
-            cov = arrays[f"m{k}_covariance"]
-            alpha = arrays[f"m{k}_alpha"]
-            trace = arrays[f"m{k}_evidence_trace"]
-            info = models_meta[k]
-        except (KeyError, IndexError) as exc:
-            raise ValueError(f"{name!r} is missing model {k} ({exc!r})") from exc
-        if not isinstance(info, dict):
-            raise ValueError(f"{name!r}: the metadata of model {k} is not a table")
-        m = len(active) if active.ndim == 1 else -1
-        if (
-            active.dtype.kind not in "iu"
-            or active.ndim != 1
-            or mean.shape != (m,)
-            or alpha.shape != (m,)
-            or cov.shape != (m, m)
-            or trace.ndim != 1
-            or (m and (active.min() < 0 or active.max() >= n_basis))
-            or np.unique(active).size != m
-        ):
-            raise ValueError(f"{name!r}: arrays of model {k} have inconsistent shapes or indices")
-        what = f"model {k}"
-        _float_array(mean, f"the weights of {what}", name)
-        _float_array(cov, f"the covariance of {what}", name)
-        _float_array(alpha, f"the precisions of {what}", name)
-        if np.any(alpha <= 0):
-            raise ValueError(f"{name!r}: the precisions (alpha) of {what} must be > 0")
-        if np.any(np.diagonal(cov) < 0):
-            raise ValueError(f"{name!r}: the covariance of {what} has negative variances")
-        if trace.dtype.kind != "f":
-            raise ValueError(f"{name!r}: the evidence trace of {what} must hold floats")
-        beta = info.get("beta")
-        if beta is not None:
-            beta = _positive(beta, f"the noise precision (beta) of {what}", name)
-        log_evidence = info["log_evidence"]
-        if isinstance(log_evidence, bool) or not isinstance(log_evidence, Real):
-            raise ValueError(f"{name!r}: log_evidence of {what} must be a number")
-        n_iter, converged = info["n_iter"], info["converged"]
-        if isinstance(n_iter, bool) or not isinstance(n_iter, int) or n_iter < 0:
-            raise ValueError(f"{name!r}: n_iter of {what} must be an integer >= 0")
-        if not isinstance(converged, bool):
-            raise ValueError(f"{name!r}: converged of {what} must be true or false")
-        if isinstance(target, RVR) and beta is None:
-            raise ValueError(f"{name!r}: an RVR model needs a noise precision 'beta'")
-        result = SBLResult(
-            active=torch.tensor(active, dtype=torch.long, device=dev),
-            mean=torch.tensor(mean, dtype=dtype, device=dev),
-            covariance=torch.tensor(cov, dtype=dtype, device=dev),
-            alpha=torch.tensor(alpha, dtype=dtype, device=dev),
-            beta=float("nan") if beta is None else beta,
-            evidence_trace=torch.tensor(trace, dtype=torch.float64),
-            log_evidence=float(log_evidence),
-            n_iter=n_iter,
-            converged=converged,
-        )
-        scales = {"x_scale": x_scale, "t_scale": t_scale if isinstance(target, RVR) else 1.0}
+        is_rvr = isinstance(target, RVR)
+        result = _binary_result(arrays, head, k, n_basis, dev, name, needs_beta=is_rvr)
+        scales = {"x_scale": head.x_scale, "t_scale": head.t_scale if is_rvr else 1.0}
         target._set_state(result, X_fit, kern, width, warn=False, **scales)
-        if isinstance(target, RVR):
+        if is_rvr:
+            beta = result.beta
             target._beta_scaled_ = beta
             with np.errstate(under="ignore", over="ignore"):
-                target.beta_ = float(np.float64(beta) / np.float64(t_scale) ** 2)
+                target.beta_ = float(np.float64(beta) / np.float64(head.t_scale) ** 2)
 
-    if cls is RVR:
+    if head.cls is RVR:
         binary(0, model)
         model.polish_ = _polish(meta.get("polish"), name)
         return model
+    return _rebuild_classifier(model, arrays, head, X_fit, binary, name)
+
+
+def _binary_result(
+    arrays: dict,
+    head: _Header,
+    k: int,
+    n_basis: int,
+    dev: torch.device,
+    name: str,
+    *,
+    needs_beta: bool,
+) -> SBLResult:
+    """The fitted state of binary model ``k`` of a file (validated)."""
+    try:
+        active = arrays[f"m{k}_active"]
+        mean = arrays[f"m{k}_mean"]
+        cov = arrays[f"m{k}_covariance"]
+        alpha = arrays[f"m{k}_alpha"]
+        trace = arrays[f"m{k}_evidence_trace"]
+        info = head.models_meta[k]
+    except (KeyError, IndexError) as exc:
+        raise ValueError(f"{name!r} is missing model {k} ({exc!r})") from exc
+    if not isinstance(info, dict):
+        raise ValueError(f"{name!r}: the metadata of model {k} is not a table")
+    m = len(active) if active.ndim == 1 else -1
+    if (
+        active.dtype.kind not in "iu"
+        or active.ndim != 1
+        or mean.shape != (m,)
+        or alpha.shape != (m,)
+        or cov.shape != (m, m)
+        or trace.ndim != 1
+        or (m and (active.min() < 0 or active.max() >= n_basis))
+        or np.unique(active).size != m
+    ):
+        raise ValueError(f"{name!r}: arrays of model {k} have inconsistent shapes or indices")
+    what = f"model {k}"
+    _float_array(mean, f"the weights of {what}", name)
+    _float_array(cov, f"the covariance of {what}", name)
+    _float_array(alpha, f"the precisions of {what}", name)
+    if np.any(alpha <= 0):
+        raise ValueError(f"{name!r}: the precisions (alpha) of {what} must be > 0")
+    if np.any(np.diagonal(cov) < 0):
+        raise ValueError(f"{name!r}: the covariance of {what} has negative variances")
+    if trace.dtype.kind != "f":
+        raise ValueError(f"{name!r}: the evidence trace of {what} must hold floats")
+    beta = info.get("beta")
+    if beta is not None:
+        beta = _positive(beta, f"the noise precision (beta) of {what}", name)
+    log_evidence = info["log_evidence"]
+    if isinstance(log_evidence, bool) or not isinstance(log_evidence, Real):
+        raise ValueError(f"{name!r}: log_evidence of {what} must be a number")
+    n_iter, converged = info["n_iter"], info["converged"]
+    if isinstance(n_iter, bool) or not isinstance(n_iter, int) or n_iter < 0:
+        raise ValueError(f"{name!r}: n_iter of {what} must be an integer >= 0")
+    if not isinstance(converged, bool):
+        raise ValueError(f"{name!r}: converged of {what} must be true or false")
+    if needs_beta and beta is None:
+        raise ValueError(f"{name!r}: an RVR model needs a noise precision 'beta'")
+    dtype = head.dtype
+    return SBLResult(
+        active=torch.tensor(active, dtype=torch.long, device=dev),
+        mean=torch.tensor(mean, dtype=dtype, device=dev),
+        covariance=torch.tensor(cov, dtype=dtype, device=dev),
+        alpha=torch.tensor(alpha, dtype=dtype, device=dev),
+        beta=float("nan") if beta is None else beta,
+        evidence_trace=torch.tensor(trace, dtype=torch.float64),
+        log_evidence=float(log_evidence),
+        n_iter=n_iter,
+        converged=converged,
+    )
+
+
+def _rebuild_classifier(
+    model: RVC,
+    arrays: dict,
+    head: _Header,
+    X_fit: torch.Tensor,
+    binary: Callable[[int, Any], None],
+    name: str,
+) -> RVC:
+    """The class labels and binary models of an RVC file (one, or one per class)."""
     if "classes" not in arrays:
         raise ValueError(f"{name!r}: an RVC file must hold the class labels")
     classes = arrays["classes"]
@@ -224,9 +277,10 @@ def _rebuild(meta: dict, arrays: dict, name: str, device: Any) -> Any:
     model.classes_ = classes
     n_classes = len(model.classes_)
     expected = 1 if n_classes == 2 else n_classes
-    if n_classes < 2 or len(models_meta) != expected:
+    n_models = len(head.models_meta)
+    if n_classes < 2 or n_models != expected:
         raise ValueError(
-            f"{name!r}: {n_classes} classes need {expected} binary models, found {len(models_meta)}"
+            f"{name!r}: {n_classes} classes need {expected} binary models, found {n_models}"
         )
     if expected == 1:
         binary(0, model)
@@ -234,11 +288,11 @@ def _rebuild(meta: dict, arrays: dict, name: str, device: Any) -> Any:
         return model
     subs = []
     for k in range(expected):
-        sub = RVC(**params)
+        sub = RVC(**head.params)
         sub.classes_ = np.array([0, 1])
-        sub.n_features_in_ = n_features
+        sub.n_features_in_ = head.n_features
         binary(k, sub)
         sub.estimators_ = None
         subs.append(sub)
-    model._adopt_one_vs_rest(subs, X_fit, width)
+    model._adopt_one_vs_rest(subs, X_fit, head.width)
     return model

@@ -31,6 +31,9 @@ Reading checks the archive before decompressing anything: its members' declared 
 up to at most ``max_bytes`` (default :data:`DEFAULT_MAX_BYTES`) and each member's array header
 must match its size. Unreadable files, missing entries, inconsistent shapes, non-finite weights,
 non-positive precisions and unknown formats or versions raise :class:`ValueError`.
+
+Imports :mod:`bayes_fdi.atomic`, :mod:`~bayes_fdi.rvm.kernels` and the solvers' face
+:mod:`bayes_fdi.rvm.sbl` (for :class:`~bayes_fdi.rvm.sbl.SBLResult`).
 """
 
 from __future__ import annotations
@@ -45,9 +48,16 @@ import numpy as np
 
 from bayes_fdi.atomic import atomic_path, check_output_path
 from bayes_fdi.rvm.kernels import Kernel, kernel_from_dict
-from bayes_fdi.rvm.sparse_bayes import SBLResult
+from bayes_fdi.rvm.sbl import SBLResult
 
-__all__ = ["DEFAULT_MAX_BYTES", "FORMAT_NAME", "FORMAT_VERSION", "read_model_file", "save"]
+__all__ = [
+    "DEFAULT_MAX_BYTES",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "params_from_json",
+    "read_model_file",
+    "save",
+]
 
 FORMAT_NAME = "bayes_fdi.rvm"
 FORMAT_VERSION = 2
@@ -82,7 +92,9 @@ def _params_to_json(params: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _params_from_json(params: dict[str, Any]) -> dict[str, Any]:
+def params_from_json(params: dict[str, Any]) -> dict[str, Any]:
+    """The estimator parameters stored in a model file, with the kernel rebuilt from its dict
+    (the inverse of the parameters' JSON form written by :func:`save`)."""
     out = dict(params)
     if isinstance(out.get("kernel"), dict):
         out["kernel"] = kernel_from_dict(out["kernel"]["kernel"])

@@ -9,6 +9,9 @@ re-estimation (``method="em"``, the paper's eqs. 10-11) -- and most :math:`\alph
 to infinity, leaving a few *relevance vectors*.  Predictions are Gaussian with
 mean :math:`\phi_*^\top\mu` and variance :math:`\beta^{-1} + \phi_*^\top\Sigma\phi_*`
 (eqs. 13-14).
+
+Imports :mod:`~bayes_fdi.rvm.base`, :mod:`~bayes_fdi.rvm.kernels`, :mod:`~bayes_fdi.rvm.threads`,
+:mod:`~bayes_fdi.rvm.width` and the solvers' face :mod:`bayes_fdi.rvm.sbl`.
 """
 
 from __future__ import annotations
@@ -23,11 +26,16 @@ from sklearn.base import RegressorMixin
 from sklearn.metrics import r2_score
 from torch import Tensor
 
-from bayes_fdi.rvm.base import RVMBase, _is_torch, power_of_two_scale
-from bayes_fdi.rvm.design import DEFAULT_MAX_BYTES
+from bayes_fdi.rvm.base import RVMBase, is_torch, power_of_two_scale
 from bayes_fdi.rvm.kernels import RBF, Kernel
-from bayes_fdi.rvm.sbl_polish import Polish, polish_gaussian
-from bayes_fdi.rvm.sparse_bayes import SBLResult, em_gaussian, fast_gaussian
+from bayes_fdi.rvm.sbl import (
+    DEFAULT_MAX_BYTES,
+    Polish,
+    SBLResult,
+    em_gaussian,
+    fast_gaussian,
+    polish_gaussian,
+)
 from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.rvm.width import search_width, width_bounds
 
@@ -67,7 +75,7 @@ class RVR(RegressorMixin, RVMBase):
         Materialise the training kernel matrix only up to this size (2 GB: ``N`` up to about
         15 800 in float64). Larger problems on the CPU keep a screening copy of its upper
         triangle within this size (6 bytes an entry: ``N`` up to about 25 800 at 2 GB;
-        :mod:`bayes_fdi.rvm.screening_copy`); beyond, or on other devices, kernel rows are
+        :mod:`bayes_fdi.rvm.sbl.screening_copy`); beyond, or on other devices, kernel rows are
         computed in blocks for each product (memory ``O(N M)``, slower additions). Either way
         the fit is the same.
     random_state : int or None, default None
@@ -75,7 +83,7 @@ class RVR(RegressorMixin, RVMBase):
     polish : bool, default False
         After the fast fit (at the chosen width for ``width="auto"``), restart Tipping's
         re-estimation from a pool of columns, continue it with the fast solver and keep the
-        fit with the higher evidence (:mod:`bayes_fdi.rvm.sbl_polish`). The evidence of a
+        fit with the higher evidence (:mod:`bayes_fdi.rvm.sbl.polish`). The evidence of a
         kernel basis has many local optima and the greedy fast solver often stops nats below
         the re-estimation's; with a pool covering the basis the polished evidence is at least
         both. Costs about one more fit (see ``docs/rvm.md``). ``method="fast"`` only.
@@ -293,9 +301,9 @@ class RVR(RegressorMixin, RVMBase):
     def score(self, X: Any, y: Any, sample_weight: Any = None) -> float:
         """Coefficient of determination R^2 of the predictive mean (torch inputs accepted)."""
         pred = self.predict(X)
-        if _is_torch(pred):
+        if is_torch(pred):
             pred = pred.detach().cpu().numpy()
-        y_np = y.detach().cpu().numpy() if _is_torch(y) else y
+        y_np = y.detach().cpu().numpy() if is_torch(y) else y
         return float(r2_score(y_np, pred, sample_weight=sample_weight))
 
     @property

@@ -11,6 +11,8 @@ summation in a product, so the same seed gives the same fit however many threads
 process uses.
 
 The limits are set in the thread that fits, and restored there when the fit ends.
+
+Imports torch and threadpoolctl only.
 """
 
 from __future__ import annotations

@@ -19,6 +19,8 @@ therefore bounded by the data (:func:`width_bounds`):
   follow one sample's noise without moving its neighbours;
 * from above by the data diameter (largest distance between training inputs): wider
   kernels are nearly constant over the data and add nothing a bias does not.
+
+Imports numpy, scipy and torch only (the fit is passed in as a function).
 """
 
 from __future__ import annotations

@@ -20,6 +20,7 @@ import xarray as xr
 
 from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis import StreamState
+from bayes_fdi.diagnosis.online.legacy import upgrade_stream_state
 
 __all__ = [
     "FLOAT_COLUMNS",
@@ -150,31 +151,27 @@ def _decode_array(d: Mapping[str, Any]) -> np.ndarray:
 
 
 def encode_state(state: StreamState) -> str:
-    """The stream state as JSON text (exact: the arrays' bytes)."""
-    fields = {}
-    for name in StreamState._fields:
-        value = getattr(state, name)
-        if isinstance(value, tuple):
-            fields[name] = [_encode_array(v) for v in value]
-        else:
-            fields[name] = _encode_array(value)
-    return json.dumps({"format": "bayes_fdi.StreamState", "version": 1, "fields": fields})
+    """The stream state as JSON text (exact: the arrays' bytes, by their paths in the state)."""
+    fields = {path: _encode_array(a) for path, a in state.arrays().items()}
+    return json.dumps({"format": "bayes_fdi.StreamState", "version": 2, "fields": fields})
 
 
 def decode_state(text: str) -> StreamState:
-    """The `StreamState` of `encode_state`'s text; a ``ValueError`` names a foreign text."""
+    """The `StreamState` of `encode_state`'s text (version 1, the flat state of earlier
+    releases, is translated); a ``ValueError`` names a foreign text."""
     try:
         doc = json.loads(text)
-        if doc.get("format") != "bayes_fdi.StreamState" or doc.get("version") != 1:
-            raise ValueError("not a bayes_fdi stream state of version 1")
+        if doc.get("format") != "bayes_fdi.StreamState" or doc.get("version") not in (1, 2):
+            raise ValueError("not a bayes_fdi stream state of version 1 or 2")
         fields = doc["fields"]
+        if doc["version"] == 2:
+            return StreamState.from_arrays({k: _decode_array(v) for k, v in fields.items()})
         values = {}
-        for name in StreamState._fields:
-            value = fields[name]
+        for name, value in fields.items():
             if isinstance(value, list):
                 values[name] = tuple(_decode_array(v) for v in value)
             else:
                 values[name] = _decode_array(value)
+        return StreamState(**upgrade_stream_state(values))
     except (KeyError, TypeError, json.JSONDecodeError) as exc:
         raise ValueError(f"corrupt stream state in the log ({exc})") from None
-    return StreamState(**values)

@@ -2,22 +2,49 @@
 
 - `bayes_fdi.diagnosis.detection.whitening`: `ARWhitener`, an AR prediction-error filter that
   turns standardised residuals into about white innovations.
-- `bayes_fdi.diagnosis.detection.detectors`: the sequential tests `CUSUM` and `GLR` and the
-  detection decision DD with hysteresis.
+- `bayes_fdi.diagnosis.detection.detectors`: the sequential tests `CUSUM` and `GLR`.
+- `bayes_fdi.diagnosis.detection.decision`: `DetectionDecision`, the detection decision DD
+  with hysteresis.
 - `bayes_fdi.diagnosis.detection.thresholds`: thresholds for a false-alarm budget.
 
-May import `bayes_fdi.datasets` and the foundation.
+Each online component here owns its state, a named tuple of arrays (`WhitenState`,
+`CUSUMState`, `GLRState`, `DecisionState`), with ``update`` for one sample and ``run`` over a
+chunk through the same compiled kernel.
+
+May import `bayes_fdi.diagnosis.component_state`, `bayes_fdi.datasets` and the foundation.
 """
 
-from bayes_fdi.diagnosis.detection.detectors import CUSUM, GLR, detection_decision
-from bayes_fdi.diagnosis.detection.thresholds import calibrate_threshold, cusum_threshold
-from bayes_fdi.diagnosis.detection.whitening import ARWhitener
+from bayes_fdi.diagnosis.detection.decision import (
+    DecisionState,
+    DetectionDecision,
+    detection_decision,
+)
+from bayes_fdi.diagnosis.detection.detectors import (
+    CUSUM,
+    GLR,
+    CUSUMState,
+    DetectorOutput,
+    GLRState,
+)
+from bayes_fdi.diagnosis.detection.thresholds import (
+    calibrate_threshold,
+    cusum_threshold,
+    fit_threshold,
+)
+from bayes_fdi.diagnosis.detection.whitening import ARWhitener, WhitenState
 
 __all__ = [
     "CUSUM",
     "GLR",
     "ARWhitener",
+    "CUSUMState",
+    "DecisionState",
+    "DetectionDecision",
+    "DetectorOutput",
+    "GLRState",
+    "WhitenState",
     "calibrate_threshold",
     "cusum_threshold",
     "detection_decision",
+    "fit_threshold",
 ]

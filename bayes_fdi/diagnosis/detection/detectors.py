@@ -2,8 +2,8 @@
 
 The online diagnoser detects a fault from the residuals of the normal models,
 ``z = (y - y_hat) / std``, standardised by their calibrated predictive standard deviation and
-whitened (`bayes_fdi.diagnosis.detection.whitening.ARWhitener`) into about independent unit-variance
-innovations ``e``, which feed a sequential test:
+whitened (`bayes_fdi.diagnosis.detection.whitening.ARWhitener`) into about independent
+unit-variance innovations ``e``, which feed a sequential test:
 
 `CUSUM`
     Page's two-sided cumulative sum ``S+ = max(0, S+ + e - k)``, ``S- = max(0, S- - e - k)``,
@@ -16,15 +16,17 @@ innovations ``e``, which feed a sequential test:
     ``g = max_{1 <= L <= window} (sum of the last L innovations)^2 / (2 L)`` (two-sided by
     construction; the evidence clears ``window`` samples after the change is gone).
 
-Each detector is one small class with ``update(x)`` (one sample, O(1) time and memory, in the
-style of river's drift detectors) and ``run(x)`` (a whole sequence); both call the same
-compiled kernel with the same state, so ``run`` equals ``update`` sample by sample exactly. A
-NaN innovation (a gap) leaves the state unchanged and gives a NaN statistic.
+Each detector is one small class in the style of river's drift detectors and BlackJAX's
+kernels: immutable parameters, a state it creates (``init_state``: `CUSUMState`, `GLRState`),
+checks (``check_state``) and carries, ``update(e, state)`` for one sample (O(1) time and memory)
+and ``run(e, state)`` over a sequence, both through the same compiled kernel, so ``run`` equals
+``update`` sample by sample exactly. Both return the statistics (`DetectorOutput`) and the new
+state; the state passed in is never changed. A NaN innovation (a gap) leaves the state unchanged
+and gives a NaN statistic.
 
-`detection_decision` turns the statistics into the detection decision DD with hysteresis: on
-when a statistic exceeds the threshold, off only when every statistic is back at or below the
-clear level. The thresholds for a false-alarm budget are in
-`bayes_fdi.diagnosis.detection.thresholds`.
+The detection decision DD with hysteresis is `bayes_fdi.diagnosis.detection.decision`; the
+thresholds for a false-alarm budget are `bayes_fdi.diagnosis.detection.thresholds`, and each
+detector knows its threshold on white Gaussian innovations (``gaussian_threshold``).
 
 Written by hand: scipy and scikit-learn have no sequential change detectors, and river's
 (not a dependency) have neither a vectorised path equal to ``update`` nor NaN gaps.
@@ -32,56 +34,96 @@ Written by hand: scipy and scikit-learn have no sequential change detectors, and
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
 
-__all__ = ["CUSUM", "GLR", "detection_decision"]
+from bayes_fdi.diagnosis.component_state import (
+    check_state,
+    one_sequence,
+    working_state,
+)
+from bayes_fdi.diagnosis.detection.thresholds import calibrate_threshold, cusum_threshold
+
+__all__ = [
+    "CUSUM",
+    "GLR",
+    "SEQUENTIAL_TEST_METHODS",
+    "WHITE_SAMPLES",
+    "CUSUMState",
+    "DetectorOutput",
+    "GLRState",
+    "sequential_test",
+]
+
+#: White Gaussian samples per channel behind the GLR's threshold on Gaussian innovations.
+WHITE_SAMPLES = 200_000
 
 
-# ----------------------------------------------------------------------------------------------
-# sequential tests
-# ----------------------------------------------------------------------------------------------
+class DetectorOutput(NamedTuple):
+    """What a detector says of each innovation (arrays from ``run``, floats from ``update``)."""
+
+    statistic: Any  #: the test statistic (NaN for a NaN innovation)
+    since: Any  #: samples since the estimated change (-1 for a NaN innovation)
+
+
+class CUSUMState(NamedTuple):
+    """The state of a `CUSUM`."""
+
+    sums: np.ndarray  #: ``(2,)`` the one-sided sums ``S+`` and ``S-``
+    lengths: np.ndarray  #: ``(2,)`` samples since ``S+`` and ``S-`` last were 0 (float)
+
+
+class GLRState(NamedTuple):
+    """The state of a `GLR`."""
+
+    buffer: np.ndarray  #: ``(window,)`` the last innovations, a ring
+    stored: np.ndarray  #: ``(1,)`` int64: innovations in the ring (at most ``window``)
+    slot: np.ndarray  #: ``(1,)`` int64: where the next innovation goes
+
+
 @njit(cache=True, error_model="numpy")
 def _cusum_kernel(e, k, cap, state, stat, since):  # pragma: no cover - compiled
-    """Two-sided CUSUM. state = [S+, S-, n+, n-] (n: samples since the side last was 0)."""
+    """Two-sided CUSUM (``state`` updated in place)."""
+    sums = state.sums
+    lengths = state.lengths
     for t in range(e.size):
         v = e[t]
         if not np.isfinite(v):
             stat[t] = np.nan
             since[t] = -1
             continue
-        sp = state[0] + v - k
-        sn = state[1] - v - k
+        sp = sums[0] + v - k
+        sn = sums[1] - v - k
         if sp > 0.0:
-            state[2] += 1.0
+            lengths[0] += 1.0
         else:
             sp = 0.0
-            state[2] = 0.0
+            lengths[0] = 0.0
         if sn > 0.0:
-            state[3] += 1.0
+            lengths[1] += 1.0
         else:
             sn = 0.0
-            state[3] = 0.0
+            lengths[1] = 0.0
         if sp > cap:
             sp = cap
         if sn > cap:
             sn = cap
-        state[0] = sp
-        state[1] = sn
+        sums[0] = sp
+        sums[1] = sn
         if sp >= sn:
             stat[t] = sp
-            since[t] = state[2]
+            since[t] = lengths[0]
         else:
             stat[t] = sn
-            since[t] = state[3]
+            since[t] = lengths[1]
 
 
 @njit(cache=True, error_model="numpy")
-def _glr_kernel(e, window, buf, state, stat, since):  # pragma: no cover - compiled
-    """Windowed GLR for a mean change; buf: the last ``window`` innovations (ring), state =
-    [n stored, next slot]."""
+def _glr_kernel(e, state, stat, since):  # pragma: no cover - compiled
+    """Windowed GLR for a mean change (``state`` updated in place)."""
+    buf = state.buffer
     w = buf.size
     for t in range(e.size):
         v = e[t]
@@ -89,12 +131,12 @@ def _glr_kernel(e, window, buf, state, stat, since):  # pragma: no cover - compi
             stat[t] = np.nan
             since[t] = -1
             continue
-        slot = int(state[1])
+        slot = state.slot[0]
         buf[slot] = v
-        state[1] = (slot + 1) % w
-        if state[0] < w:
-            state[0] += 1
-        n = int(state[0])
+        state.slot[0] = (slot + 1) % w
+        if state.stored[0] < w:
+            state.stored[0] += 1
+        n = state.stored[0]
         total = 0.0
         best = 0.0
         best_len = 0
@@ -108,66 +150,65 @@ def _glr_kernel(e, window, buf, state, stat, since):  # pragma: no cover - compi
         since[t] = best_len
 
 
-class _Detector:
-    """Shared machinery: ``update``/``run`` over one compiled kernel and an explicit state."""
+class _SequentialTest:
+    """What `CUSUM` and `GLR` share: ``update``/``run`` over one compiled kernel."""
 
     threshold: float
 
-    def new_state(self) -> tuple[np.ndarray, ...]:  # pragma: no cover - abstract
+    def init_state(self) -> Any:  # pragma: no cover - abstract
         """A fresh state (no evidence)."""
         raise NotImplementedError
 
-    def _kernel(self, e: np.ndarray, state: tuple, stat: np.ndarray, since: np.ndarray) -> None:
+    def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
         raise NotImplementedError  # pragma: no cover - abstract
 
     def _check_params(self) -> None:
         if not (isinstance(self.threshold, int | float) and self.threshold > 0):
             raise ValueError(f"threshold must be a positive number, got {self.threshold!r}")
 
-    def advance(self, e: Any, state: tuple) -> tuple[np.ndarray, np.ndarray]:
-        """Statistics of consecutive innovations from an explicit ``state`` (updated in place),
-        and per sample the samples since the estimated change (-1 for NaN)."""
+    def check_state(self, state: Any) -> None:
+        """Raise a `ValueError` naming the field unless ``state`` is a state of this detector."""
+        check_state(state, self.init_state(), "detector state")
+
+    def run(self, e: Any, state: Any = None) -> tuple[DetectorOutput, Any]:
+        """Statistics of consecutive innovations.
+
+        Parameters
+        ----------
+        e
+            ``(n,)`` innovations of one run (NaN: a gap).
+        state
+            The state after the preceding innovation (default: a fresh one); not changed.
+
+        Returns
+        -------
+        output : DetectorOutput
+            ``(n,)`` statistics and samples since the estimated change.
+        state
+            The state after the last innovation.
+        """
         self._check_params()
-        x = np.ascontiguousarray(np.asarray(e, dtype=np.float64))
-        if x.ndim != 1:
-            raise ValueError(f"expected one sequence (1-D), got shape {x.shape}")
+        x = one_sequence(e)
+        state = working_state(self, state)
         stat = np.empty_like(x)
         since = np.empty(x.size, dtype=np.float64)
         self._kernel(x, state, stat, since)
-        return stat, since
+        return DetectorOutput(stat, since), state
 
-    def reset(self) -> _Detector:
-        """Forget all evidence (a fresh detector with the same parameters)."""
-        self._check_params()
-        self._state = self.new_state()
-        self.statistic = 0.0
-        self.drift_detected = False
-        return self
+    def update(self, e: float, state: Any = None) -> tuple[DetectorOutput, Any]:
+        """The statistic after one more innovation (`run` on one sample): floats, new state."""
+        out, state = self.run(np.array([e], dtype=np.float64), state)
+        return DetectorOutput(float(out.statistic[0]), float(out.since[0])), state
 
-    def run_with_onsets(self, e: Any) -> tuple[np.ndarray, np.ndarray]:
-        """`advance` from the detector's own state (continues it)."""
-        if not hasattr(self, "_state"):
-            self.reset()
-        stat, since = self.advance(e, self._state)
-        last = stat[np.isfinite(stat)]
-        if last.size:
-            self.statistic = float(last[-1])
-            self.drift_detected = self.statistic > self.threshold
-        return stat, since
-
-    def run(self, e: Any) -> np.ndarray:
-        """The statistic after each innovation of a sequence (equals repeated `update`)."""
-        return self.run_with_onsets(e)[0]
-
-    def update(self, e: float) -> float:
-        """Add one innovation; returns the statistic (NaN for a NaN innovation, state kept).
-
-        ``drift_detected`` is then ``statistic > threshold`` (the last finite statistic).
-        """
-        return float(self.run(np.array([e], dtype=np.float64))[0])
+    @classmethod
+    def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
+        """A detector's saved attributes in today's layout: files of bayes_fdi 0.1.0 may hold
+        the state of its own stream (``_state``, ``statistic``, ``drift_detected``), which
+        detectors no longer keep."""
+        return {k: v for k, v in data.items() if k not in ("_state", "statistic", "drift_detected")}
 
 
-class CUSUM(_Detector):
+class CUSUM(_SequentialTest):
     """Page's two-sided CUSUM on unit-variance innovations, capped.
 
     ``S+ = min(cap, max(0, S+ + e - k))``, ``S- = min(cap, max(0, S- - e - k))``; the statistic
@@ -184,13 +225,6 @@ class CUSUM(_Detector):
     cap
         Largest value of ``S+`` and ``S-`` (default ``2 * threshold``): once a fault is gone
         the statistic returns to 0 within about ``cap / k`` samples.
-
-    Attributes
-    ----------
-    statistic : float
-        The last finite statistic.
-    drift_detected : bool
-        ``statistic > threshold``.
     """
 
     def __init__(self, k: float = 0.5, threshold: float = 10.0, cap: float | None = None) -> None:
@@ -210,15 +244,33 @@ class CUSUM(_Detector):
         """The cap in use."""
         return float(2.0 * self.threshold if self.cap is None else self.cap)
 
-    def new_state(self) -> tuple[np.ndarray]:
-        """``([S+, S-, n+, n-],)``: the sums and their samples since they last were 0."""
-        return (np.zeros(4),)
+    def init_state(self) -> CUSUMState:
+        """A fresh state: both sums 0."""
+        return CUSUMState(np.zeros(2), np.zeros(2))
 
-    def _kernel(self, e: np.ndarray, state: tuple, stat: np.ndarray, since: np.ndarray) -> None:
-        _cusum_kernel(e, float(self.k), self.cap_, state[0], stat, since)
+    def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
+        _cusum_kernel(e, float(self.k), self.cap_, state, stat, since)
+
+    def with_threshold(self, threshold: float) -> CUSUM:
+        """The same CUSUM with another threshold (and the default cap follows it)."""
+        return CUSUM(k=self.k, threshold=float(threshold), cap=self.cap)
+
+    def gaussian_threshold(
+        self,
+        target_arl: float,
+        *,
+        n_channels: int = 2,
+        clear: float = 0.0,
+        random_state: int | None = None,
+    ) -> float:
+        """The threshold whose mean run length between false alarms on white N(0, 1)
+        innovations of ``n_channels`` channels is ``target_arl``: Siegmund's approximation, the
+        ``2 n_channels`` one-sided sums sharing the budget (``clear`` and ``random_state`` are
+        not needed)."""
+        return cusum_threshold(target_arl, float(self.k), n_sides=2 * int(n_channels))
 
 
-class GLR(_Detector):
+class GLR(_SequentialTest):
     """Windowed generalised likelihood ratio for a mean change in N(0, 1) innovations.
 
     ``g = max_{1 <= L <= window} S_L^2 / (2 L)`` with ``S_L`` the sum of the last ``L``
@@ -232,11 +284,6 @@ class GLR(_Detector):
         Longest change age considered (samples, default 60).
     threshold
         Alarm level (default 10).
-
-    Attributes
-    ----------
-    statistic : float
-    drift_detected : bool
     """
 
     def __init__(self, window: int = 60, threshold: float = 10.0) -> None:
@@ -248,78 +295,60 @@ class GLR(_Detector):
         if isinstance(self.window, bool) or not isinstance(self.window, int) or self.window < 1:
             raise ValueError(f"window must be an integer >= 1, got {self.window!r}")
 
-    def new_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(ring buffer of the last window innovations, [stored, next slot])``."""
-        return np.zeros(int(self.window)), np.zeros(2)
+    def init_state(self) -> GLRState:
+        """A fresh state: an empty ring of ``window`` innovations."""
+        self._check_params()
+        return GLRState(
+            np.zeros(int(self.window)), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64)
+        )
 
-    def _kernel(self, e: np.ndarray, state: tuple, stat: np.ndarray, since: np.ndarray) -> None:
-        _glr_kernel(e, int(self.window), state[0], state[1], stat, since)
+    def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
+        _glr_kernel(e, state, stat, since)
 
+    def with_threshold(self, threshold: float) -> GLR:
+        """The same GLR with another threshold."""
+        return GLR(window=self.window, threshold=float(threshold))
 
-# ----------------------------------------------------------------------------------------------
-# the detection decision with hysteresis
-# ----------------------------------------------------------------------------------------------
-@njit(cache=True, error_model="numpy")
-def _decision_kernel(stats, threshold, clear, held, state, dd):  # pragma: no cover - compiled
-    """DD with hysteresis over channels; held: last finite statistic per channel (state)."""
-    n, c = stats.shape
-    for t in range(n):
-        for j in range(c):
-            if np.isfinite(stats[t, j]):
-                held[j] = stats[t, j]
-        on = state[0] > 0.5
-        if on:
-            cleared = True
-            for j in range(c):
-                if held[j] > clear:
-                    cleared = False
-            if cleared:
-                on = False
-        else:
-            for j in range(c):
-                if np.isfinite(stats[t, j]) and stats[t, j] > threshold:
-                    on = True
-        state[0] = 1.0 if on else 0.0
-        dd[t] = on
+    def gaussian_threshold(
+        self,
+        target_arl: float,
+        *,
+        n_channels: int = 2,
+        clear: float = 0.0,
+        random_state: int | None = None,
+    ) -> float:
+        """The threshold that meets ``target_arl`` on white N(0, 1) innovations of
+        ``n_channels`` channels, measured (`calibrate_threshold`, hysteresis off at ``clear``)
+        on `WHITE_SAMPLES` simulated seconds drawn with seed ``[random_state, 3]``."""
+        rng = np.random.default_rng(None if random_state is None else [random_state, 3])
+        white = [rng.standard_normal((WHITE_SAMPLES, int(n_channels)))]
+        grid = np.arange(2.0, 40.01, 1.0)
+        return calibrate_threshold(self, white, target_arl, clear=clear, grid=grid)["threshold"]
 
 
-def detection_decision(
-    stats: Any,
-    threshold: float,
-    clear: float,
-    *,
-    state: np.ndarray | None = None,
-    held: np.ndarray | None = None,
-) -> np.ndarray:
-    """The detection decision DD with hysteresis from per-channel statistics.
+#: What a sequential test needs to serve as the online diagnoser's detector.
+SEQUENTIAL_TEST_METHODS = (
+    "init_state",
+    "check_state",
+    "update",
+    "run",
+    "with_threshold",
+    "gaussian_threshold",
+)
 
-    DD turns on at the first sample where a channel's statistic exceeds ``threshold`` and turns
-    off at the first sample where every channel's last finite statistic is at or below
-    ``clear`` ("the evidence has cleared"). A NaN statistic (a gap) brings no new evidence: the
-    channel keeps its last value and cannot switch DD on.
 
-    Parameters
-    ----------
-    stats
-        ``(n, n_channels)`` statistics of one run.
-    threshold, clear
-        Switch-on and switch-off levels (``clear <= threshold``).
-    state, held
-        Optional state to continue from and update in place: ``state`` a ``(1,)`` array
-        (1.0 while DD is on) and ``held`` the ``(n_channels,)`` last finite statistics.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``(n,)`` bool.
-    """
-    s = np.ascontiguousarray(np.asarray(stats, dtype=np.float64))
-    if s.ndim != 2:
-        raise ValueError(f"stats must be (n, n_channels), got shape {s.shape}")
-    if not clear <= threshold:
-        raise ValueError(f"clear ({clear}) must not exceed threshold ({threshold})")
-    state = np.zeros(1) if state is None else state
-    held = np.zeros(s.shape[1]) if held is None else held
-    dd = np.zeros(s.shape[0], dtype=np.bool_)
-    _decision_kernel(s, float(threshold), float(clear), held, state, dd)
-    return dd
+def sequential_test(detector: Any, *, cusum_k: float, glr_window: int) -> Any:
+    """The unfitted test (threshold 1) that ``detector`` names: ``"cusum"`` (`CUSUM` with
+    reference ``cusum_k``), ``"glr"`` (`GLR` over ``glr_window`` s), or an object with the
+    methods of :data:`SEQUENTIAL_TEST_METHODS` (e.g. a new detector class)."""
+    if isinstance(detector, str):
+        if detector == "cusum":
+            return CUSUM(k=float(cusum_k), threshold=1.0)
+        if detector == "glr":
+            return GLR(window=int(glr_window), threshold=1.0)
+    elif all(hasattr(detector, m) for m in SEQUENTIAL_TEST_METHODS):
+        return detector.with_threshold(1.0)
+    raise ValueError(
+        f"detector must be 'cusum', 'glr' or a sequential test with the methods "
+        f"{', '.join(SEQUENTIAL_TEST_METHODS)}; got {detector!r}"
+    )

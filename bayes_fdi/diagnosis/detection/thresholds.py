@@ -3,9 +3,11 @@
 `cusum_arl` is Siegmund's approximation of the in-control average run length (ARL) of a
 one-sided CUSUM on N(0, 1) data and `cusum_threshold` inverts it; `empirical_arl` and
 `calibrate_threshold` measure the run length between false alarms on held-out fault-free
-innovations, with the hysteresis of `~bayes_fdi.diagnosis.detection.detectors.detection_decision`,
+innovations, with the hysteresis of `~bayes_fdi.diagnosis.detection.decision.detection_decision`,
 and extrapolate it (log ARL is linear in the threshold for large thresholds, as Siegmund's formula
-shows), so non-Gaussian real residuals get an honest threshold.
+shows), so non-Gaussian real residuals get an honest threshold. `fit_threshold` is the online
+diagnoser's threshold for a false-alarm budget: the measured one, bounded below by the
+detector's threshold on white Gaussian innovations.
 
 Written by hand: no maintained library in the dependencies computes CUSUM run lengths.
 """
@@ -19,9 +21,15 @@ from typing import Any
 import numpy as np
 from scipy import optimize
 
-from bayes_fdi.diagnosis.detection.detectors import detection_decision
+from bayes_fdi.diagnosis.detection.decision import detection_decision
 
-__all__ = ["calibrate_threshold", "cusum_arl", "cusum_threshold", "empirical_arl"]
+__all__ = [
+    "calibrate_threshold",
+    "cusum_arl",
+    "cusum_threshold",
+    "empirical_arl",
+    "fit_threshold",
+]
 
 
 def cusum_arl(threshold: Any, k: float) -> np.ndarray:
@@ -57,7 +65,7 @@ def empirical_arl(
     """Mean run length between false alarms of a detector on fault-free innovations.
 
     Every run (a sequence of ``(n,)`` or ``(n, n_channels)`` innovations; one fresh detector
-    per channel, a clone of ``detector`` with ``threshold``) is processed as the online
+    per channel, ``detector.with_threshold(threshold)``) is processed as the online
     diagnoser does, with the hysteresis of `detection_decision` (off at ``clear``). An alarm is
     a rising edge of DD.
 
@@ -73,19 +81,12 @@ def empirical_arl(
     for run in innovations:
         e = np.asarray(run, dtype=np.float64)
         e = e[:, None] if e.ndim == 1 else e
-        stats = np.column_stack(
-            [_with_threshold(detector, threshold).run(e[:, j]) for j in range(e.shape[1])]
-        )
+        test = detector.with_threshold(threshold)
+        stats = np.column_stack([test.run(e[:, j])[0].statistic for j in range(e.shape[1])])
         dd = detection_decision(stats, threshold, min(clear, threshold))
         alarms += int(dd[:1].sum() + (dd[1:] & ~dd[:-1]).sum())
         samples += int(np.isfinite(e).all(axis=1).sum())
     return (samples / alarms if alarms else math.inf), alarms, samples
-
-
-def _with_threshold(detector: Any, threshold: float) -> Any:
-    """A fresh copy of ``detector`` with another threshold (same other parameters)."""
-    params = {k: getattr(detector, k) for k in ("k", "cap", "window") if hasattr(detector, k)}
-    return type(detector)(threshold=float(threshold), **params).reset()
 
 
 def calibrate_threshold(
@@ -149,3 +150,48 @@ def calibrate_threshold(
         "samples": int(samples),
         "floor": None if floor is None else float(floor),
     }
+
+
+def fit_threshold(
+    detector: Any,
+    innovations: Sequence[Any],
+    target_arl: float,
+    *,
+    clear: float = 0.0,
+    random_state: int | None = None,
+) -> dict[str, Any]:
+    """The threshold of a false-alarm budget for the online diagnoser's detector.
+
+    The larger of the threshold that meets ``target_arl`` on white Gaussian innovations
+    (``detector.gaussian_threshold``: Siegmund's approximation for the CUSUM, a seeded
+    simulation for the GLR) and the one measured on fault-free innovations
+    (`calibrate_threshold` over thresholds 1, 2, ..., 60, hysteresis off at ``clear``).
+
+    Parameters
+    ----------
+    detector
+        A `~bayes_fdi.diagnosis.detection.detectors.CUSUM` or
+        `~bayes_fdi.diagnosis.detection.detectors.GLR` (its own threshold is not used).
+    innovations
+        Fault-free innovations, one ``(n, n_channels)`` array per run.
+    target_arl
+        The budget: mean samples between false alarms.
+    clear
+        The detection decision's clear level.
+    random_state
+        Seed of the GLR's simulation.
+
+    Returns
+    -------
+    dict
+        `calibrate_threshold`'s report; ``floor`` is the Gaussian threshold.
+    """
+    first = np.asarray(innovations[0], dtype=np.float64)
+    n_channels = 1 if first.ndim == 1 else first.shape[1]
+    floor = detector.gaussian_threshold(
+        target_arl, n_channels=n_channels, clear=clear, random_state=random_state
+    )
+    grid = np.arange(1.0, 60.01, 1.0)
+    return calibrate_threshold(
+        detector, innovations, target_arl, clear=clear, floor=floor, grid=grid
+    )

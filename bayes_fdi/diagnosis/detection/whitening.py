@@ -4,10 +4,12 @@ The standardised residuals ``z = (y - y_hat) / std`` of a fault-free actuator ar
 autocorrelated (the models' errors follow the slow dynamics the static inputs do not capture).
 `ARWhitener` fits an AR prediction-error filter on fault-free residuals (Yule-Walker, pooled
 over runs, order by BIC) and turns ``z`` into about independent unit-variance innovations ``e``,
-which the sequential tests of `bayes_fdi.diagnosis.detection.detectors` then watch. ``update`` (one
-sample) and ``run`` (a sequence) call the same compiled kernel with the same state; a NaN (a
-gap) restarts the filter at order 0, growing back with the lower-order predictors of the same
-fit.
+which the sequential tests of `bayes_fdi.diagnosis.detection.detectors` then watch. Like every
+online component it owns its state (`WhitenState`: the last residuals, created by
+``init_state`` and checked by ``check_state``): ``update(z, state)`` (one sample) and
+``run(z, state)`` (a sequence) call the same compiled kernel and return the innovations with a
+new state. A NaN (a gap) restarts the filter at order 0, growing back with the lower-order
+predictors of the same fit.
 
 Written by hand: the Levinson-Durbin recursion gives every lower-order predictor at once (used
 after gaps), which ``scipy.linalg.solve_toeplitz`` does not, and no maintained library has a
@@ -16,12 +18,25 @@ streaming AR filter whose state survives NaN gaps.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
 
-__all__ = ["ARWhitener", "levinson_durbin"]
+from bayes_fdi.diagnosis.component_state import (
+    check_state,
+    one_sequence,
+    working_state,
+)
+
+__all__ = ["ARWhitener", "WhitenState", "levinson_durbin"]
+
+
+class WhitenState(NamedTuple):
+    """The state of an `ARWhitener`."""
+
+    history: np.ndarray  #: ``(order,)`` the last centred residuals, newest first
+    valid: np.ndarray  #: ``(1,)`` int64: how many of them follow the last gap
 
 
 def levinson_durbin(acov: Any, order: int) -> tuple[np.ndarray, np.ndarray]:
@@ -76,12 +91,14 @@ def _pooled_autocovariance(z: np.ndarray, max_lag: int) -> tuple[np.ndarray, flo
 
 
 @njit(cache=True, error_model="numpy")
-def _whiten_kernel(x, mean, table, std, hist, n_valid, out):  # pragma: no cover - compiled
-    """Innovations of ``x`` with the AR predictors ``table``; ``hist``/``n_valid`` are state.
+def _whiten_kernel(x, mean, table, std, state, out):  # pragma: no cover - compiled
+    """Innovations of ``x`` with the AR predictors ``table`` (``state`` updated in place).
 
     After a NaN (a gap) the predictor restarts at order 0 and grows back to the full order as
     samples arrive, each order with its own innovation std.
     """
+    hist = state.history
+    n_valid = state.valid
     p = hist.size
     for t in range(x.size):
         v = x[t]
@@ -157,40 +174,52 @@ class ARWhitener:
         self.predictors_ = np.ascontiguousarray(table[: order + 1, :order])
         self.innovation_std_ = np.sqrt(var[: order + 1])
         self.coef_ = self.predictors_[order].copy()
-        self.reset()
         return self
 
     def _check(self) -> None:
         if not hasattr(self, "order_"):
             raise ValueError("ARWhitener is not fitted; call fit first")
 
-    def new_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """A fresh filter state: the last ``order_`` centred values and the valid count."""
+    def init_state(self) -> WhitenState:
+        """A fresh filter state (no past residuals: the next sample starts at order 0)."""
         self._check()
-        return np.zeros(self.order_), np.zeros(1, dtype=np.int64)
+        return WhitenState(np.zeros(self.order_), np.zeros(1, dtype=np.int64))
 
-    def advance(self, z: Any, state: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        """Innovations of consecutive residuals from an explicit ``state`` (updated in place)."""
+    def check_state(self, state: Any) -> None:
+        """Raise a `ValueError` naming the field unless ``state`` is a state of this filter."""
+        check_state(state, self.init_state(), "whitener state")
+
+    def run(self, z: Any, state: WhitenState | None = None) -> tuple[np.ndarray, WhitenState]:
+        """Innovations of consecutive standardised residuals of one run.
+
+        Parameters
+        ----------
+        z
+            ``(n,)`` standardised residuals (NaN: a gap).
+        state
+            The state after the preceding residual (default: a fresh one); not changed.
+
+        Returns
+        -------
+        innovations : numpy.ndarray
+            ``(n,)``, NaN for NaN.
+        state : WhitenState
+            The state after the last residual.
+        """
         self._check()
-        x = np.ascontiguousarray(np.asarray(z, dtype=np.float64))
-        if x.ndim != 1:
-            raise ValueError(f"expected one sequence (1-D), got shape {x.shape}")
+        x = one_sequence(z)
+        state = working_state(self, state)
         out = np.empty_like(x)
-        _whiten_kernel(x, self.mean_, self.predictors_, self.innovation_std_, state[0],
-                       state[1], out)  # fmt: skip
-        return out
+        _whiten_kernel(x, self.mean_, self.predictors_, self.innovation_std_, state, out)
+        return out, state
 
-    def reset(self) -> ARWhitener:
-        """Forget the past (the next sample starts at order 0)."""
-        self._state = self.new_state()
-        return self
+    def update(self, z: float, state: WhitenState | None = None) -> tuple[float, WhitenState]:
+        """The innovation of one standardised residual (`run` on one sample; O(order) time)."""
+        out, state = self.run(np.array([z], dtype=np.float64), state)
+        return float(out[0]), state
 
-    def update(self, z: float) -> float:
-        """The innovation of one standardised residual (NaN for NaN; O(order) time)."""
-        self._check()
-        return float(self.advance(np.array([z], dtype=np.float64), self._state)[0])
-
-    def run(self, z: Any) -> np.ndarray:
-        """Innovations of a sequence, continuing from the current state (equals `update`)."""
-        self._check()
-        return self.advance(z, self._state)
+    @classmethod
+    def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
+        """An `ARWhitener`'s saved attributes in today's layout: files of bayes_fdi 0.1.0 hold
+        the state of its own stream (``_state``), which the filter no longer keeps."""
+        return {k: v for k, v in data.items() if k != "_state"}

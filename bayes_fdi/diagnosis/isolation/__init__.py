@@ -4,15 +4,24 @@
   diagnoser (a registry; the paper's mean residuals by default).
 - `bayes_fdi.diagnosis.isolation.tree`: the k-means designed binary tree of probabilistic
   classifiers (RVCs by default), whose leaf probabilities are products along the paths.
+- `bayes_fdi.diagnosis.isolation.tree_design`: the tree's design by recursive 2-means on the
+  class centroids.
 - `bayes_fdi.diagnosis.isolation.svm`: the paper's SVM node classifier (the baseline).
-- `bayes_fdi.diagnosis.isolation.isolator`: the online diagnoser's signatures over the window
-  since a detection, its `FaultIsolator` (isolability groups, calibrated group probabilities,
-  the novelty of a signature).
+- `bayes_fdi.diagnosis.isolation.signatures`: the online diagnoser's signatures over the window
+  since a detection (`SignatureWindow`, an online component with its `SignatureState`).
+- `bayes_fdi.diagnosis.isolation.isolator`: `FaultIsolator` (isolability groups, calibrated
+  group probabilities, per-second isolation of signatures).
+- `bayes_fdi.diagnosis.isolation.class_novelty`: `ClassNovelty`, how unlike every fault's
+  training signatures a signature is.
+- `bayes_fdi.diagnosis.isolation.compiled_tree`: `LeanTree`, the compiled predictor of a tree
+  of RVCs.
 
-May import `bayes_fdi.rvm`, `bayes_fdi.datasets`, `bayes_fdi.diagnosis.normal_models` and the
-foundation.
+May import `bayes_fdi.rvm`, `bayes_fdi.datasets`, `bayes_fdi.diagnosis.normal_models`,
+`bayes_fdi.diagnosis.component_state` and the foundation.
 """
 
+from bayes_fdi.diagnosis.isolation.class_novelty import ClassNovelty
+from bayes_fdi.diagnosis.isolation.compiled_tree import LeanTree
 from bayes_fdi.diagnosis.isolation.features import (
     DEFAULT_FEATURES,
     FEATURES,
@@ -20,22 +29,31 @@ from bayes_fdi.diagnosis.isolation.features import (
     register_feature,
     window_bounds,
 )
-from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
-from bayes_fdi.diagnosis.isolation.svm import SVMClassifier, svm_classifier
-from bayes_fdi.diagnosis.isolation.tree import (
-    PAPER_TREE,
-    HierarchicalClassifier,
-    TreeNode,
-    design_tree,
+from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator, IsolationOutput
+from bayes_fdi.diagnosis.isolation.signatures import (
+    ISOLATION_FEATURES,
+    SignatureInputs,
+    SignatureState,
+    SignatureWindow,
 )
+from bayes_fdi.diagnosis.isolation.svm import SVMClassifier, svm_classifier
+from bayes_fdi.diagnosis.isolation.tree import PAPER_TREE, HierarchicalClassifier, TreeNode
+from bayes_fdi.diagnosis.isolation.tree_design import design_tree
 
 __all__ = [
     "DEFAULT_FEATURES",
     "FEATURES",
+    "ISOLATION_FEATURES",
     "PAPER_TREE",
+    "ClassNovelty",
     "FaultIsolator",
     "HierarchicalClassifier",
+    "IsolationOutput",
+    "LeanTree",
     "SVMClassifier",
+    "SignatureInputs",
+    "SignatureState",
+    "SignatureWindow",
     "TreeNode",
     "design_tree",
     "extract_features",

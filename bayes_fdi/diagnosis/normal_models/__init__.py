@@ -6,14 +6,21 @@
   over a grid; the paper's GA).
 - `bayes_fdi.diagnosis.normal_models.static`: `NormalModels`, the paper's static RVR models of
   the offline diagnoser.
+- `bayes_fdi.diagnosis.normal_models.fit_steps`: the training samples and the kernel width of
+  each output, steps of `NormalModels.fit`.
 - `bayes_fdi.diagnosis.normal_models.dynamic`: `DynamicNormalModels`, the online diagnoser's
-  models (position from the command's dynamics, flow from the predicted position).
+  models (position from the command's dynamics, flow from the predicted position), an online
+  component with ``update``/``run`` and its own state;
+  `bayes_fdi.diagnosis.normal_models.dynamic_kernel` their inputs and compiled per-second
+  predictor.
 - `bayes_fdi.diagnosis.normal_models.interval_calibration` and `.std_scaler`: honest
   predictive standard deviations (cross-fitted factors per command-speed bin).
 - `bayes_fdi.diagnosis.normal_models.kernel_ridge`: the SVM baseline's kernel ridge models.
-- `bayes_fdi.diagnosis.normal_models.compiled`: compiled one-sample predictors of fitted RVRs.
+- `bayes_fdi.diagnosis.normal_models.compiled`: the compiled one-sample predictor of a fitted
+  RVR.
 
-May import `bayes_fdi.rvm`, `bayes_fdi.datasets` and the foundation.
+May import `bayes_fdi.rvm`, `bayes_fdi.datasets`, `bayes_fdi.diagnosis.component_state` and the
+foundation.
 """
 
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels

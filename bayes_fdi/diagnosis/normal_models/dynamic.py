@@ -37,9 +37,12 @@ The out-of-fold standardised residuals are kept (``oof_z_``) for the detector's 
 threshold.
 
 Every prediction (`predict`, and the online diagnoser's per-second path) goes through one
-compiled kernel with an explicit state (the last ``D`` values of CV and ``s``; before a run's
-first sample they are taken as held at its first value), so a recording gives the same numbers
-whole or second by second.
+compiled kernel (`bayes_fdi.diagnosis.normal_models.dynamic_kernel`) with the fitted values as
+one named tuple (``params_``) and an explicit state (the last ``D`` values of CV and ``s``; before
+a run's first sample they are taken as held at its first value). Like every online component
+the models create their state (``init_state``), check it (``check_state``) and carry it:
+``update(sample, state)`` predicts one second and ``run(channels, state)`` a chunk, both
+returning the new state, so a recording gives the same numbers whole or second by second.
 """
 
 from __future__ import annotations
@@ -47,28 +50,29 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import xarray as xr
-from numba import njit
 from sklearn.base import BaseEstimator
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
-from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR, rvr_predict
+from bayes_fdi.diagnosis.component_state import check_state, working_state
+from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR
+from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
+    NormalModelsParams,
+    NormalModelsState,
+    dynamic_inputs,
+    predict_seconds,
+)
 
-__all__ = ["DynamicNormalModels", "dynamic_inputs", "signed_root", "standardised_residuals"]
+__all__ = ["DynamicNormalModels", "standardised_residuals"]
 
 #: Output range of the sensors (DABLib clips every measurement to [0, 1]).
 SENSOR_RANGE = (0.0, 1.0)
 #: A measurement or prediction this close to a rail of `SENSOR_RANGE` is "at the rail".
 RAIL_TOL = 5e-3
-
-
-def signed_root(p1: Any, p2: Any) -> np.ndarray:
-    """``sign(P1 - P2) sqrt(|P1 - P2|)`` (the paper's ``sqrt(P1 - P2)``, kept for P1 < P2)."""
-    d = np.asarray(p1, dtype=np.float64) - np.asarray(p2, dtype=np.float64)
-    return np.sign(d) * np.sqrt(np.abs(d))
 
 
 def standardised_residuals(y: Any, y_hat: Any, std: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -89,102 +93,6 @@ def standardised_residuals(y: Any, y_hat: Any, std: Any) -> tuple[np.ndarray, np
         )
     z = np.where(censored & np.isfinite(z), 0.0, z)
     return r, z
-
-
-def _held_shift(a: np.ndarray, k: int) -> np.ndarray:
-    out = np.empty_like(a)
-    k = min(k, a.shape[1])
-    out[:, :k] = a[:, :1]
-    out[:, k:] = a[:, : a.shape[1] - k]
-    return out
-
-
-def dynamic_inputs(runs: xr.Dataset, n_differences: int) -> np.ndarray:
-    """The unscaled inputs of the position model, ``(n_runs, n_times, 2 + 2 D)``.
-
-    Columns ``CV, s, dCV_0 .. dCV_{D-1}, ds_0 .. ds_{D-1}`` (see the module docstring); before a
-    run's first sample CV and ``s`` are held at their first values (increments 0); a NaN stays
-    NaN in every increment that uses it. A vectorised reference of the compiled kernel's inputs.
-    """
-    cv = np.asarray(runs["CV"].transpose("run", "time").values, dtype=np.float64)
-    s = signed_root(runs["P1"].transpose("run", "time").values,
-                    runs["P2"].transpose("run", "time").values)  # fmt: skip
-    cols = [cv, s]
-    for v in (cv, s):
-        for k in range(n_differences):
-            cols.append(_held_shift(v, k) - _held_shift(v, k + 1))
-    return np.stack(cols, axis=-1)
-
-
-@njit(cache=True, error_model="numpy")
-def _stream_kernel(
-    cv, p1, p2, hist, n_seen, in_mean, in_scale,
-    xc, xw, xcov, xbias, xnoise, xinv,
-    fc, fw, fcov, fbias, fnoise, finv,
-    edges, x_scale, f_scale, x_all, f_all, lo, hi,
-    u, v, phi_x, phi_f, out,
-):  # pragma: no cover - compiled  # fmt: skip
-    """Predictions of one run's samples; ``hist`` (2, D) and ``n_seen`` are the state.
-
-    out[:, 0..4] = X_hat, X_std, F_hat, F_std, |dCV|.
-    """
-    n_d = hist.shape[1]
-    for t in range(cv.size):
-        c = cv[t]
-        dp = p1[t] - p2[t]
-        s = math.sqrt(dp) if dp >= 0.0 else -math.sqrt(-dp)
-        if n_seen[0] == 0:
-            for k in range(n_d):
-                hist[0, k] = c
-                hist[1, k] = s
-            n_seen[0] = 1
-        # raw inputs: levels, then the increments of CV and of s
-        u[0] = c
-        u[1] = s
-        prev_c = c
-        prev_s = s
-        for k in range(n_d):
-            u[2 + k] = prev_c - hist[0, k]
-            u[2 + n_d + k] = prev_s - hist[1, k]
-            prev_c = hist[0, k]
-            prev_s = hist[1, k]
-        speed = abs(u[2]) if n_d > 0 else math.nan
-        for k in range(n_d - 1, 0, -1):
-            hist[0, k] = hist[0, k - 1]
-            hist[1, k] = hist[1, k - 1]
-        if n_d > 0:
-            hist[0, 0] = c
-            hist[1, 0] = s
-        ok = True
-        for j in range(u.size):
-            if not np.isfinite(u[j]):
-                ok = False
-        if not ok:
-            for j in range(5):
-                out[t, j] = np.nan
-            continue
-        for j in range(u.size):
-            u[j] = (u[j] - in_mean[j]) / in_scale[j]
-        xm, xv = rvr_predict(u, xc, xw, xcov, xbias, xnoise, xinv, phi_x)
-        xm = min(max(xm, lo), hi)
-        v[0] = xm
-        v[1] = s
-        fm, fv = rvr_predict(v, fc, fw, fcov, fbias, fnoise, finv, phi_f)
-        fm = min(max(fm, lo), hi)
-        if np.isfinite(speed):
-            b = 0
-            while b < edges.size and speed >= edges[b]:
-                b += 1
-            xs = x_scale[b]
-            fs = f_scale[b]
-        else:
-            xs = x_all
-            fs = f_all
-        out[t, 0] = xm
-        out[t, 1] = math.sqrt(xv) * xs
-        out[t, 2] = fm
-        out[t, 3] = math.sqrt(fv) * fs
-        out[t, 4] = speed
 
 
 class DynamicNormalModels(BaseEstimator):
@@ -228,6 +136,8 @@ class DynamicNormalModels(BaseEstimator):
     oof_z_ : numpy.ndarray
         ``(n_runs, n_times, 2)`` out-of-fold standardised residuals of the training runs
         (NaN where not available), after calibration.
+    params_ : NormalModelsParams
+        The fitted values the compiled per-second predictor takes.
     fit_seconds_ : dict
     """
 
@@ -254,9 +164,14 @@ class DynamicNormalModels(BaseEstimator):
 
     # ---------------------------------------------------------------- fitting
     def _check_params(self) -> None:
-        for name, low in (("n_differences", 0), ("calibration_folds", 2),
-                          ("calibration_bins", 1), ("evidence_max_samples", 10),
-                          ("max_train_samples", 10)):  # fmt: skip
+        lows = {
+            "n_differences": 0,
+            "calibration_folds": 2,
+            "calibration_bins": 1,
+            "evidence_max_samples": 10,
+            "max_train_samples": 10,
+        }
+        for name, low in lows.items():
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < low:
                 raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
@@ -274,8 +189,6 @@ class DynamicNormalModels(BaseEstimator):
             Dataset with ``CV, P1, P2, T1, X, F`` (NaN gaps allowed: those samples are left
             out); with a ``state`` coordinate every run must be ``"fn"``.
         """
-        from bayes_fdi.rvm import RVR
-
         self._check_params()
         validate_dataset(normal_runs, require=INPUT_CHANNELS + OUTPUT_CHANNELS, allow_nan=True)
         if "state" in normal_runs.coords:
@@ -287,8 +200,10 @@ class DynamicNormalModels(BaseEstimator):
         n_runs, n_times = normal_runs.sizes["run"], normal_runs.sizes["time"]
         D = int(self.n_differences)
         U = dynamic_inputs(normal_runs, D).reshape(n_runs * n_times, -1)
-        y = {c: np.asarray(normal_runs[c].transpose("run", "time").values, float).ravel()
-             for c in OUTPUT_CHANNELS}  # fmt: skip
+        y = {
+            c: np.asarray(normal_runs[c].transpose("run", "time").values, float).ravel()
+            for c in OUTPUT_CHANNELS
+        }
         s = U[:, 1]
         finite = np.isfinite(U).all(axis=1) & np.isfinite(y["X"]) & np.isfinite(y["F"])
         if finite.sum() < 4 * int(self.calibration_folds):
@@ -303,24 +218,13 @@ class DynamicNormalModels(BaseEstimator):
         def subset(rows: np.ndarray, size: int) -> np.ndarray:
             return np.sort(rng.choice(rows, size=size, replace=False)) if rows.size > size else rows
 
-        # widths by evidence on one subsample (X first: the flow model's inputs need X_hat)
         t0 = time.perf_counter()
-        ev_rows = subset(idx, int(self.evidence_max_samples))
-        self.log_evidence_ = {"X": {}, "F": {}}
-        for w in self.x_widths:
-            self.log_evidence_["X"][float(w)] = RVR(width=float(w)).fit(
-                Z[ev_rows], y["X"][ev_rows]).log_evidence_  # fmt: skip
-        wx = max(self.log_evidence_["X"], key=self.log_evidence_["X"].get)
-        x_ev = RVR(width=wx).fit(Z[ev_rows], y["X"][ev_rows])
-        V_ev = np.column_stack([np.clip(x_ev.predict(Z[ev_rows]), *SENSOR_RANGE), s[ev_rows]])
-        for w in self.f_widths:
-            self.log_evidence_["F"][float(w)] = RVR(width=float(w)).fit(
-                V_ev, y["F"][ev_rows]).log_evidence_  # fmt: skip
-        wf = max(self.log_evidence_["F"], key=self.log_evidence_["F"].get)
-        self.widths_ = {"X": float(wx), "F": float(wf)}
+        wx, wf = self._search_widths(Z, y, s, subset(idx, int(self.evidence_max_samples)))
         self.fit_seconds_["width_search"] = time.perf_counter() - t0
 
         def fit_pair(rows: np.ndarray) -> tuple[Any, Any]:
+            from bayes_fdi.rvm import RVR
+
             mx = RVR(width=wx).fit(Z[rows], y["X"][rows])
             xh = np.clip(mx.predict(Z[rows]), *SENSOR_RANGE)
             mf = RVR(width=wf).fit(np.column_stack([xh, s[rows]]), y["F"][rows])
@@ -335,16 +239,37 @@ class DynamicNormalModels(BaseEstimator):
         t0 = time.perf_counter()
         speed = np.abs(U[:, 2]) if D > 0 else np.full(U.shape[0], np.nan)
         self._cross_fit(normal_runs, Z, y, finite, speed, fit_pair, rng)
+        self.params_ = self._kernel_params(self.regressors_["X"], self.regressors_["F"])
         self.fit_seconds_["calibration"] = time.perf_counter() - t0
         self.fit_seconds_["total"] = time.perf_counter() - t_start
         return self
+
+    def _search_widths(
+        self, Z: np.ndarray, y: dict[str, np.ndarray], s: np.ndarray, rows: np.ndarray
+    ) -> tuple[float, float]:
+        """The widths of largest evidence on the subsample ``rows`` (X first: the flow model's
+        inputs need X_hat); fills ``log_evidence_`` and ``widths_``."""
+        from bayes_fdi.rvm import RVR
+
+        self.log_evidence_ = {"X": {}, "F": {}}
+        for w in self.x_widths:
+            fitted = RVR(width=float(w)).fit(Z[rows], y["X"][rows])
+            self.log_evidence_["X"][float(w)] = fitted.log_evidence_
+        wx = max(self.log_evidence_["X"], key=self.log_evidence_["X"].get)
+        x_ev = RVR(width=wx).fit(Z[rows], y["X"][rows])
+        V_ev = np.column_stack([np.clip(x_ev.predict(Z[rows]), *SENSOR_RANGE), s[rows]])
+        for w in self.f_widths:
+            fitted = RVR(width=float(w)).fit(V_ev, y["F"][rows])
+            self.log_evidence_["F"][float(w)] = fitted.log_evidence_
+        wf = max(self.log_evidence_["F"], key=self.log_evidence_["F"].get)
+        self.widths_ = {"X": float(wx), "F": float(wf)}
+        return wx, wf
 
     def _set_identity_scales(self, D: int) -> None:
         nb = int(self.calibration_bins)
         self.std_scale_ = {k: np.ones(nb) for k in ("X", "F")}
         self.std_scale_all_ = {"X": 1.0, "F": 1.0}
         self.std_scale_edges_ = np.empty(0)
-        self._compile()
 
     def _folds(self, n_runs: int, n_times: int, rng: np.random.Generator) -> np.ndarray:
         k = int(self.calibration_folds)
@@ -366,11 +291,12 @@ class DynamicNormalModels(BaseEstimator):
             train = np.flatnonzero(finite & ~held)
             if train.size < 10 or not held.any():
                 continue
-            rows = np.sort(rng.choice(train, size=min(train.size, int(self.max_train_samples)),
-                                      replace=False))  # fmt: skip
+            size = min(train.size, int(self.max_train_samples))
+            rows = np.sort(rng.choice(train, size=size, replace=False))
             mx, mf = fit_pair(rows)
             held_runs = np.unique(np.flatnonzero(held) // n_times)
-            part = self._predict_with(runs.isel(run=held_runs), mx, mf)
+            identity = self._kernel_params(mx, mf, calibrated=False)
+            part = self._stream_runs(runs.isel(run=held_runs), identity)
             part = part.reshape(-1, part.shape[-1])
             rows_of = (held_runs[:, None] * n_times + np.arange(n_times)[None, :]).ravel()
             keep = held[rows_of]
@@ -385,86 +311,125 @@ class DynamicNormalModels(BaseEstimator):
         edges = np.quantile(fast, np.arange(1, nb) / nb) if (nb > 1 and fast.size) else []
         self.std_scale_edges_ = np.unique(np.asarray(edges, dtype=np.float64))
         nb = self.std_scale_edges_.size + 1
-        bins = np.where(np.isfinite(speed), np.searchsorted(self.std_scale_edges_, speed, "right"),
-                        -1)  # fmt: skip
+        bins = np.where(
+            np.isfinite(speed), np.searchsorted(self.std_scale_edges_, speed, "right"), -1
+        )
 
         def mle(zz: np.ndarray, fallback: float) -> float:
             return float(np.sqrt(np.mean(zz**2))) if zz.size >= 10 and np.any(zz != 0) else fallback
 
         if used.sum() < 10:
-            warnings.warn("too few out-of-fold residuals: predictive stds not calibrated",
-                          UserWarning, stacklevel=3)  # fmt: skip
+            warnings.warn(
+                "too few out-of-fold residuals: predictive stds not calibrated",
+                UserWarning,
+                stacklevel=3,
+            )
             self.oof_z_ = np.full((n_runs, n_times, 2), np.nan)
             return
         # censored samples (z = 0 by construction) say nothing about the scale
         fit_rows = {c: used & ~censored[c] for c in ("X", "F")}
         self.std_scale_all_ = {c: mle(z[c][fit_rows[c]], 1.0) for c in ("X", "F")}
         self.std_scale_ = {
-            c: np.array([mle(z[c][fit_rows[c] & (bins == b)], self.std_scale_all_[c])
-                         for b in range(nb)])
+            c: np.array(
+                [mle(z[c][fit_rows[c] & (bins == b)], self.std_scale_all_[c]) for b in range(nb)]
+            )
             for c in ("X", "F")
-        }  # fmt: skip
-        self._compile()
+        }
         factor = {
-            c: np.where(bins >= 0, self.std_scale_[c][np.clip(bins, 0, nb - 1)],
-                        self.std_scale_all_[c])
+            c: np.where(
+                bins >= 0, self.std_scale_[c][np.clip(bins, 0, nb - 1)], self.std_scale_all_[c]
+            )
             for c in ("X", "F")
-        }  # fmt: skip
+        }
         oof = np.stack([z["X"] / factor["X"], z["F"] / factor["F"]], axis=-1)
         oof[~used] = np.nan
         self.oof_z_ = oof.reshape(n_runs, n_times, 2)
 
     # ------------------------------------------------------------- prediction
-    def _compile(self) -> None:
-        """The plain-array parameters of the compiled kernel (rebuilt after fitting)."""
-        lx = LeanRVR.from_estimator(self.regressors_["X"])
-        lf = LeanRVR.from_estimator(self.regressors_["F"])
-        self._lean = (lx, lf)
-        self._kernel_args = (
-            np.ascontiguousarray(self.input_mean_), np.ascontiguousarray(self.input_scale_),
-            *lx._args(), *lf._args(),
-            np.ascontiguousarray(self.std_scale_edges_),
-            np.ascontiguousarray(self.std_scale_["X"]), np.ascontiguousarray(self.std_scale_["F"]),
-            float(self.std_scale_all_["X"]), float(self.std_scale_all_["F"]),
-            SENSOR_RANGE[0], SENSOR_RANGE[1],
-        )  # fmt: skip
+    def _kernel_params(self, mx: Any, mf: Any, *, calibrated: bool = True) -> NormalModelsParams:
+        """The compiled predictor's parameters for the regressions ``mx``, ``mf``: with the
+        fitted std factors, or (``calibrated=False``) with factors 1 (the cross-fit's)."""
+        if calibrated:
+            edges = self.std_scale_edges_
+            scale = (self.std_scale_["X"], self.std_scale_["F"])
+            scale_all = (self.std_scale_all_["X"], self.std_scale_all_["F"])
+        else:
+            nb = int(self.calibration_bins)
+            edges, scale, scale_all = np.empty(0), (np.ones(nb), np.ones(nb)), (1.0, 1.0)
+        return NormalModelsParams(
+            input_mean=np.ascontiguousarray(self.input_mean_),
+            input_scale=np.ascontiguousarray(self.input_scale_),
+            x_model=LeanRVR.from_estimator(mx),
+            f_model=LeanRVR.from_estimator(mf),
+            speed_edges=np.ascontiguousarray(edges),
+            x_std_scale=np.ascontiguousarray(scale[0]),
+            f_std_scale=np.ascontiguousarray(scale[1]),
+            x_std_scale_all=float(scale_all[0]),
+            f_std_scale_all=float(scale_all[1]),
+            low=SENSOR_RANGE[0],
+            high=SENSOR_RANGE[1],
+        )
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "regressors_"):
             raise ValueError("DynamicNormalModels is not fitted; call fit(normal_runs) first")
 
-    def new_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """A fresh stream state: the history of CV and ``s`` and the samples-seen flag."""
-        return np.zeros((2, int(self.n_differences))), np.zeros(1, dtype=np.int64)
+    def init_state(self) -> NormalModelsState:
+        """A fresh stream state: no sample seen (the history of CV and ``s`` is undefined)."""
+        if hasattr(self, "params_"):  # the fitted kernel's number of increments
+            n_differences = (self.params_.input_mean.size - 2) // 2
+        else:
+            self._check_params()
+            n_differences = int(self.n_differences)
+        return NormalModelsState(np.zeros((2, n_differences)), np.zeros(1, dtype=np.int64))
 
-    def stream(
-        self, cv: np.ndarray, p1: np.ndarray, p2: np.ndarray, state: tuple, out: np.ndarray
-    ) -> None:
-        """Predict consecutive samples of one run into ``out`` ``(n, 5)``, updating ``state``.
+    def check_state(self, state: Any) -> None:
+        """Raise a `ValueError` naming the field unless ``state`` is a state of these models."""
+        check_state(state, self.init_state(), "normal models state")
 
-        Columns of ``out``: X_hat, X_hat_std, F_hat, F_hat_std, command speed ``|dCV|``.
+    def run(
+        self, channels: Mapping[str, Any], state: NormalModelsState | None = None
+    ) -> tuple[np.ndarray, NormalModelsState]:
+        """Predictions of consecutive seconds of one run.
+
+        Parameters
+        ----------
+        channels
+            ``CV``, ``P1``, ``P2``: ``(n,)`` sequences (normalised; NaN = missing); other keys
+            are ignored.
+        state
+            The state after the preceding second (default: a fresh one); not changed.
+
+        Returns
+        -------
+        predictions : numpy.ndarray
+            ``(n, 5)``: X_hat, X_hat_std, F_hat, F_hat_std (NaN where an input is NaN, and for
+            the increments that use it) and the command speed ``|dCV|``.
+        state : NormalModelsState
+            The state after the last second.
         """
-        if not hasattr(self, "_kernel_args"):
-            self._compile()
-        lx, lf = self._lean
-        n_u = 2 + 2 * int(self.n_differences)
-        _stream_kernel(
-            cv, p1, p2, state[0], state[1], *self._kernel_args,
-            np.empty(n_u), np.empty(2), np.empty(lx.weights.size), np.empty(lf.weights.size), out,
-        )  # fmt: skip
+        self._check_fitted()
+        cv, p1, p2 = (
+            np.ascontiguousarray(np.asarray(channels[c], dtype=np.float64))
+            for c in ("CV", "P1", "P2")
+        )
+        if cv.ndim != 1 or p1.shape != cv.shape or p2.shape != cv.shape:
+            raise ValueError("CV, P1 and P2 must be (n,) sequences of one length")
+        state = working_state(self, state)
+        out = np.empty((cv.size, 5))
+        predict_seconds(cv, p1, p2, self.params_, state, out)
+        return out, state
 
-    def _predict_with(self, runs: xr.Dataset, mx: Any, mf: Any) -> np.ndarray:
-        """``(n_runs, n_times, 5)`` predictions of other fitted models (uncalibrated stds)."""
-        saved = (self.regressors_, self.std_scale_, self.std_scale_all_, self.std_scale_edges_)
-        try:
-            self.regressors_ = {"X": mx, "F": mf}
-            self._set_identity_scales(int(self.n_differences))
-            return self._stream_runs(runs)
-        finally:
-            self.regressors_, self.std_scale_, self.std_scale_all_, self.std_scale_edges_ = saved
-            self._compile()
+    def update(
+        self, sample: Mapping[str, Any], state: NormalModelsState | None = None
+    ) -> tuple[np.ndarray, NormalModelsState]:
+        """Predictions of one second (`run` on one sample): ``(5,)`` and the new state."""
+        one = {c: np.array([float(sample[c])]) for c in ("CV", "P1", "P2")}
+        out, state = self.run(one, state)
+        return out[0], state
 
-    def _stream_runs(self, runs: xr.Dataset) -> np.ndarray:
+    def _stream_runs(self, runs: xr.Dataset, params: NormalModelsParams) -> np.ndarray:
+        """``(n_runs, n_times, 5)`` predictions of every run from a fresh state."""
         arrays = [
             np.ascontiguousarray(runs[c].transpose("run", "time").values, dtype=np.float64)
             for c in ("CV", "P1", "P2")
@@ -472,8 +437,23 @@ class DynamicNormalModels(BaseEstimator):
         n_runs, n_times = arrays[0].shape
         out = np.empty((n_runs, n_times, 5))
         for i in range(n_runs):
-            self.stream(arrays[0][i], arrays[1][i], arrays[2][i], self.new_state(), out[i])
+            predict_seconds(
+                arrays[0][i], arrays[1][i], arrays[2][i], params, self.init_state(), out[i]
+            )
         return out
+
+    @classmethod
+    def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
+        """Saved attributes in today's layout: files of bayes_fdi 0.1.0 hold the compiled
+        kernel's arguments as ``_lean`` and ``_kernel_args``; today they are ``params_``."""
+        data = {k: v for k, v in data.items() if k not in ("_lean", "_kernel_args")}
+        if "regressors_" in data and "params_" not in data:
+            models = cls.__new__(cls)
+            models.__dict__.update(data)
+            data["params_"] = models._kernel_params(
+                data["regressors_"]["X"], data["regressors_"]["F"]
+            )
+        return data
 
     def predict(self, runs: xr.Dataset) -> xr.Dataset:
         """Predicted outputs and calibrated predictive stds (dims ``run``, ``time``).
@@ -483,7 +463,7 @@ class DynamicNormalModels(BaseEstimator):
         """
         self._check_fitted()
         validate_dataset(runs, require=("CV", "P1", "P2"), allow_nan=True)
-        out = self._stream_runs(runs)
+        out = self._stream_runs(runs, self.params_)
         names = ("X_hat", "X_hat_std", "F_hat", "F_hat_std")
         data = {n: (("run", "time"), out[:, :, j]) for j, n in enumerate(names)}
         coords = {k: v for k, v in runs.coords.items() if set(v.dims) <= {"run", "time"}}

@@ -27,7 +27,6 @@ input or output are left out of the training set with a warning giving their num
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from collections.abc import Sequence
@@ -38,6 +37,12 @@ import xarray as xr
 from sklearn.base import BaseEstimator, clone
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
+from bayes_fdi.diagnosis.normal_models.fit_steps import (
+    check_width_grid,
+    choose_widths,
+    training_samples,
+    with_width,
+)
 from bayes_fdi.diagnosis.normal_models.inputs import check_lags, input_names, model_inputs
 from bayes_fdi.diagnosis.normal_models.interval_calibration import (
     command_speed,
@@ -45,12 +50,7 @@ from bayes_fdi.diagnosis.normal_models.interval_calibration import (
     predict_with_std,
     speed_bins,
 )
-from bayes_fdi.diagnosis.normal_models.width_search import (
-    WIDTH_GRID,
-    GAResult,
-    evidence_grid_search,
-    genetic_width_search,
-)
+from bayes_fdi.diagnosis.normal_models.width_search import WIDTH_GRID, GAResult
 from bayes_fdi.rvm.threads import limit_fit_threads
 
 __all__ = ["NormalModels"]
@@ -281,6 +281,62 @@ class NormalModels(BaseEstimator):
         NormalModels
             ``self``.
         """
+        grid, lags = self._check_fit(normal_runs)
+        rng = np.random.default_rng(self.random_state)
+        base = self._base()
+        samples = training_samples(normal_runs, lags)
+        U, targets = samples.U, samples.targets
+        idx = np.flatnonzero(samples.finite)
+        choice = choose_widths(
+            base,
+            U,
+            targets,
+            idx,
+            samples.run_of,
+            rng,
+            method=self.width_search,
+            width_param=self.width_param,
+            grid=grid,
+            evidence_max_samples=int(self.evidence_max_samples),
+            ga_bounds=self.ga_bounds,
+            ga_population=self.ga_population,
+            ga_generations=self.ga_generations,
+            ga_validation_fraction=self.ga_validation_fraction,
+            ga_max_samples=self.ga_max_samples,
+            random_state=self.random_state,
+        )
+        self.ga_results_: dict[str, GAResult] = choice.ga_results
+        self.fit_seconds_: dict[str, float] = dict(choice.seconds)
+        self.width_log_evidence_: dict[float, float] = choice.log_evidence
+        self.width_log_evidence_by_output_: dict[str, dict[float, float]] = (
+            choice.log_evidence_by_output
+        )
+        self.widths_ = dict(choice.widths)
+
+        if self.max_train_samples is not None and idx.size > self.max_train_samples:
+            idx = np.sort(rng.choice(idx, size=int(self.max_train_samples), replace=False))
+        self.regressors_: dict[str, Any] = {}
+        for name, y in targets.items():
+            est = (
+                with_width(base, self.width_param, choice.widths[name])
+                if name in choice.widths
+                else clone(base)
+            )
+            t0 = time.perf_counter()
+            est.fit(U[idx], y[idx])
+            self.fit_seconds_[name] = time.perf_counter() - t0
+            self.regressors_[name] = est
+        self.n_train_samples_ = int(idx.size)
+        self.n_negative_pressure_drop_ = samples.n_negative_pressure_drop
+        self.n_dropped_nan_ = samples.n_dropped
+        self.input_lags_ = lags
+        self.input_names_ = input_names(lags)
+        self.n_features_in_ = len(self.input_names_)
+        self._fit_interval_calibration(normal_runs, U, targets, samples.finite)
+        return self
+
+    def _check_fit(self, normal_runs: xr.Dataset) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """Check the fault-free runs and the parameters; the width grid and the input lags."""
         validate_dataset(normal_runs, require=INPUT_CHANNELS + OUTPUT_CHANNELS, allow_nan=True)
         if "state" in normal_runs.coords:
             states = sorted(set(map(str, normal_runs["state"].values)) - {"fn"})
@@ -293,140 +349,14 @@ class NormalModels(BaseEstimator):
                 "width_search must be None, 'evidence-grid', 'evidence' or 'ga', got "
                 f"{self.width_search!r}"
             )
-        grid = self._check_width_grid()
+        grid = check_width_grid(self.width_grid)
         m = self.evidence_max_samples
         if isinstance(m, bool) or not isinstance(m, int | np.integer) or m < 2:
             raise ValueError(f"evidence_max_samples must be an integer >= 2, got {m!r}")
         if self.max_train_samples is not None and int(self.max_train_samples) < 2:
             raise ValueError("max_train_samples must be at least 2")
         self._check_calibration_params()
-        lags = check_lags(self.input_lags)
-        rng = np.random.default_rng(self.random_state)
-        base = self._base()
-        U, n_neg = model_inputs(normal_runs, input_lags=lags)
-        n_runs, n_times = normal_runs.sizes["run"], normal_runs.sizes["time"]
-        run_of = np.repeat(np.arange(n_runs), n_times)
-        targets = {
-            name: np.asarray(normal_runs[name].transpose("run", "time").values).ravel()
-            for name in OUTPUT_CHANNELS
-        }
-        finite = np.isfinite(U).all(axis=1)
-        for y in targets.values():
-            finite &= np.isfinite(y)
-        n_dropped = int((~finite).sum())
-        if n_dropped:
-            warnings.warn(
-                f"{n_dropped} fault-free sample(s) with NaN inputs/outputs are not used to fit "
-                "the normal models",
-                UserWarning,
-                stacklevel=2,
-            )
-        idx = np.flatnonzero(finite)
-        if idx.size < 2:
-            raise ValueError("fewer than 2 finite fault-free samples to fit the normal models")
-
-        self.ga_results_: dict[str, GAResult] = {}
-        self.fit_seconds_: dict[str, float] = {}
-        self.width_log_evidence_: dict[float, float] = {}
-        self.width_log_evidence_by_output_: dict[str, dict[float, float]] = {}
-        widths: dict[str, float] = {}
-        auto_width = base.get_params().get(self.width_param, None) == "auto"
-
-        def with_width(width: float) -> Any:
-            return clone(base).set_params(**{self.width_param: width})
-
-        if self.width_search == "ga":
-            if self.width_param not in base.get_params():
-                raise ValueError(
-                    f"{type(base).__name__} has no parameter {self.width_param!r} for the GA"
-                )
-            if n_runs < 2:
-                raise ValueError("the genetic width search needs at least 2 fault-free runs")
-            n_val = max(1, round(self.ga_validation_fraction * n_runs))
-            n_val = min(n_val, n_runs - 1)
-            val_runs = rng.choice(n_runs, size=n_val, replace=False)
-            is_val = np.isin(run_of[idx], val_runs)
-            tr, va = idx[~is_val], idx[is_val]
-            if tr.size > self.ga_max_samples:
-                tr = rng.choice(tr, size=int(self.ga_max_samples), replace=False)
-            if va.size > self.ga_max_samples:
-                va = rng.choice(va, size=int(self.ga_max_samples), replace=False)
-            t0 = time.perf_counter()
-            for name, y in targets.items():
-                res = genetic_width_search(
-                    with_width,
-                    U[tr],
-                    y[tr],
-                    U[va],
-                    y[va],
-                    bounds=self.ga_bounds,
-                    population=self.ga_population,
-                    generations=self.ga_generations,
-                    random_state=self.random_state,
-                )
-                self.ga_results_[name] = res
-                widths[name] = res.width
-            self.fit_seconds_["ga"] = time.perf_counter() - t0
-        elif self.width_search == "evidence-grid" and auto_width:
-            t0 = time.perf_counter()
-            res = evidence_grid_search(
-                with_width,
-                U[idx],
-                {name: y[idx] for name, y in targets.items()},
-                grid,
-                max_samples=int(self.evidence_max_samples),
-                rng=rng,
-            )
-            widths = dict.fromkeys(targets, res.width)
-            self.width_log_evidence_ = res.log_evidence
-            self.width_log_evidence_by_output_ = res.log_evidence_by_output
-            self.fit_seconds_["evidence-grid"] = time.perf_counter() - t0
-        elif (
-            self.width_search == "evidence" and auto_width and idx.size > self.evidence_max_samples
-        ):
-            sub = np.sort(rng.choice(idx, size=int(self.evidence_max_samples), replace=False))
-            t0 = time.perf_counter()
-            for name, y in targets.items():
-                searched = clone(base).fit(U[sub], y[sub])
-                widths[name] = float(searched.width_)
-            self.fit_seconds_["evidence"] = time.perf_counter() - t0
-        self.widths_ = dict(widths)
-
-        if self.max_train_samples is not None and idx.size > self.max_train_samples:
-            idx = np.sort(rng.choice(idx, size=int(self.max_train_samples), replace=False))
-        self.regressors_: dict[str, Any] = {}
-        for name, y in targets.items():
-            est = with_width(widths[name]) if name in widths else clone(base)
-            t0 = time.perf_counter()
-            est.fit(U[idx], y[idx])
-            self.fit_seconds_[name] = time.perf_counter() - t0
-            self.regressors_[name] = est
-        self.n_train_samples_ = int(idx.size)
-        self.n_negative_pressure_drop_ = n_neg
-        self.n_dropped_nan_ = n_dropped
-        self.input_lags_ = lags
-        self.input_names_ = input_names(lags)
-        self.n_features_in_ = len(self.input_names_)
-        self._fit_interval_calibration(normal_runs, U, targets, finite)
-        return self
-
-    def _check_width_grid(self) -> tuple[float, ...]:
-        """The validated ``width_grid`` (non-empty, positive finite, distinct)."""
-        msg = "width_grid must be a non-empty sequence of distinct positive finite widths"
-        try:
-            grid = tuple(self.width_grid)
-        except TypeError:
-            raise ValueError(f"{msg}, got {self.width_grid!r}") from None
-        if not grid:
-            raise ValueError(f"{msg}, got an empty grid")
-        for w in grid:
-            if isinstance(w, bool) or not isinstance(w, int | float | np.integer | np.floating):
-                raise ValueError(f"{msg}, got {w!r} in {self.width_grid!r}")
-            if not (math.isfinite(float(w)) and float(w) > 0):
-                raise ValueError(f"{msg}, got {w!r} in {self.width_grid!r}")
-        if len({float(w) for w in grid}) != len(grid):
-            raise ValueError(f"{msg}, got repeated widths in {self.width_grid!r}")
-        return tuple(float(w) for w in grid)
+        return grid, check_lags(self.input_lags)
 
     # ------------------------------------------------------- interval calibration
     def _check_calibration_params(self) -> None:

@@ -3,17 +3,31 @@ trust X and F.
 
 - `bayes_fdi.diagnosis.online.diagnoser`: `OnlineDiagnoser` (``fit``, ``run`` over a recording,
   ``update`` one second at a time; both give the same stream).
-- `bayes_fdi.diagnosis.online.state`: `StreamState`, what one second needs of the seconds
-  before it.
-- `bayes_fdi.diagnosis.online.fitting`: the fit (detection from fault-free runs, isolation from
-  fault runs).
+- `bayes_fdi.diagnosis.online.state`: `StreamState` and `RunState`, what one second needs of
+  the seconds before it (the online components' states, nested).
+- `bayes_fdi.diagnosis.online.envelope`: `InputEnvelope`, the inputs' training range and the
+  check of a detection's onset against it.
+- `bayes_fdi.diagnosis.online.stream`: the per-second decisions and the stream dataset.
+- `bayes_fdi.diagnosis.online.records`: the SEVA record of one second and its reasons.
+- `bayes_fdi.diagnosis.online.training`: the training data of the fit (stacked runs, split
+  fault runs, isolation signatures).
 - `bayes_fdi.diagnosis.online.timeline`: the timeline figure of a recording's stream.
 
 May import the other concepts of `bayes_fdi.diagnosis`, `bayes_fdi.model_files`,
 `bayes_fdi.datasets` and the foundation.
 """
 
-from bayes_fdi.diagnosis.online.diagnoser import FAULTS, OnlineDiagnoser
-from bayes_fdi.diagnosis.online.state import StreamState
+from bayes_fdi.diagnosis.online.diagnoser import OnlineDiagnoser
+from bayes_fdi.diagnosis.online.envelope import EnvelopeState, InputEnvelope
+from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
+from bayes_fdi.diagnosis.online.stream import FAULTS
 
-__all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
+__all__ = [
+    "FAULTS",
+    "EnvelopeState",
+    "InputEnvelope",
+    "OnlineDiagnoser",
+    "PerOutput",
+    "RunState",
+    "StreamState",
+]

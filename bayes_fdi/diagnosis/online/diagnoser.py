@@ -1,80 +1,72 @@
 """The online self-validating diagnoser: every second, detect, isolate and say how far to trust
 X and F.
 
-`OnlineDiagnoser` chains, per second of a recording:
-
-1. the dynamic normal models (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels`):
-   predicted X and F with calibrated predictive standard deviations;
-2. standardised residuals ``z = (y - y_hat) / std``, whitened by an AR filter fitted on
-   fault-free out-of-fold residuals (`~bayes_fdi.diagnosis.detection.whitening.ARWhitener`);
-3. a sequential test per output (`~bayes_fdi.diagnosis.detection.detectors.CUSUM` by default, or
-   `~bayes_fdi.diagnosis.detection.detectors.GLR`) whose threshold meets a false-alarm budget
-   (default: on average at most one alarm per 8 h of fault-free data), and the detection
-   decision DD with hysteresis;
-4. after a detection, the isolation signature over the window since the detection and the
-   fault and group probabilities with novelty (`~bayes_fdi.diagnosis.isolation.isolator`);
-5. the SEVA status: BLIND (a channel missing), CLEAR (no detection, inputs within the
-   training envelope), BLURRED (a detected fault isolated with probability >= ``p_fault``),
-   DAZZLED (otherwise: a detection not yet isolated with confidence, a novel signature, or
-   inputs outside the training envelope).
-
-``run(recording)`` returns the whole 1 Hz decision stream (the contract of
-``ONLINE_CONTRACT.md``); ``update(sample)`` processes one second and returns its
-`~bayes_fdi.diagnosis.seva.windows.SevaRecord` in O(1) time and memory. Both go through the same
-compiled kernels with the same state, so feeding a run second by second gives exactly the
-stream of ``run`` (tested). The fitting lives in `bayes_fdi.diagnosis.online.fitting`.
+`OnlineDiagnoser` fits its online components (normal models, whiteners, detector, detection
+decision, signature window, input envelope, isolator) and runs them second by second
+(`bayes_fdi.diagnosis.online.step`): ``run(recording)`` returns the whole 1 Hz decision stream
+(its variables are listed in `OnlineDiagnoser.run`), ``update(sample)`` processes one second and
+returns its `~bayes_fdi.diagnosis.seva.record.SevaRecord` in O(1) time and memory. Both go
+through the same compiled kernels with the same state (`bayes_fdi.diagnosis.online.state`), so
+feeding a run second by second gives exactly the stream of ``run`` (tested).
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+import time
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import xarray as xr
-from scipy import stats as sps
-from sklearn.base import BaseEstimator
+from sklearn.base import BaseEstimator, clone
 
 from bayes_fdi import model_files
 from bayes_fdi.datasets import CHANNELS, validate_dataset
-from bayes_fdi.diagnosis.detection.detectors import detection_decision
-from bayes_fdi.diagnosis.isolation.isolator import (
-    ISOLATION_FEATURES,
-    isolate_rows,
-    isolation_features,
+from bayes_fdi.diagnosis.detection.detectors import CUSUM, sequential_test
+from bayes_fdi.diagnosis.isolation.signatures import SignatureWindow
+from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
+from bayes_fdi.diagnosis.online.envelope import InputEnvelope
+from bayes_fdi.diagnosis.online.legacy import upgrade_diagnoser
+from bayes_fdi.diagnosis.online.records import last_values, second_record, status_reasons
+from bayes_fdi.diagnosis.online.state import PerOutput, StreamState
+from bayes_fdi.diagnosis.online.step import (
+    Components,
+    check_stream_state,
+    init_run_state,
+    step,
 )
-from bayes_fdi.diagnosis.normal_models.dynamic import signed_root, standardised_residuals
-from bayes_fdi.diagnosis.online.fitting import fit_online
-from bayes_fdi.diagnosis.online.state import (
-    StreamState,
-    check_state,
-    onset_inputs_novel,
-    pack_states,
-    run_state,
-)
-from bayes_fdi.diagnosis.seva.record import ClassDistribution, SevaRecord, SevaStatus
-from bayes_fdi.diagnosis.seva.rules import entropy
+from bayes_fdi.diagnosis.online.stream import assemble_stream, decide, stream_attrs
+from bayes_fdi.diagnosis.online.training import Runs, fit_detection, fit_isolation, stack_runs
+from bayes_fdi.diagnosis.seva.record import SevaRecord
 
-__all__ = ["FAULTS", "OnlineDiagnoser", "StreamState"]
-
-#: The fault names of the stream's ``fault`` coordinate.
-FAULTS: tuple[str, ...] = tuple(f"f{i}" for i in range(1, 20))
-_OUTPUTS = ("X_hat", "X_hat_std", "F_hat", "F_hat_std")
+__all__ = ["OnlineDiagnoser"]
 
 
 class OnlineDiagnoser(BaseEstimator):
     """Online detection, isolation and SEVA validation of an actuator, one second at a time.
 
+    Per second: the dynamic normal models' predictions of X and F with calibrated standard
+    deviations; the standardised residuals, whitened by an AR filter; a sequential test per
+    output (CUSUM or GLR) with a threshold for a false-alarm budget and the detection decision DD
+    with hysteresis; after a detection, the isolation signature since the detection and its
+    fault and group probabilities with novelty; and the SEVA status
+    (`bayes_fdi.diagnosis.online.stream.decide`): BLIND (a channel missing), CLEAR (no
+    detection, inputs within the training envelope), BLURRED (a detected fault isolated with
+    probability >= ``p_fault``), DAZZLED (otherwise: a detection not yet isolated with
+    confidence, a novel signature, or inputs outside the training envelope).
+
     Parameters
     ----------
     normal_models
-        Unfitted normal models with the interface of `DynamicNormalModels` (cloned); None:
-        ``DynamicNormalModels(random_state=random_state)``.
+        Unfitted normal models with the interface of `DynamicNormalModels` (``fit``,
+        ``oof_z_``, and as an online component ``init_state``, ``check_state``, ``run``;
+        cloned); None: ``DynamicNormalModels(random_state=random_state)``.
     detector
-        ``"cusum"`` (default) or ``"glr"``.
+        ``"cusum"`` (default), ``"glr"``, or an unfitted sequential test with the interface of
+        `bayes_fdi.diagnosis.detection.CUSUM` (``init_state``, ``check_state``, ``update``,
+        ``run``, ``with_threshold``, ``gaussian_threshold``): its threshold is calibrated here.
     cusum_k
         CUSUM reference value, in innovation standard deviations (default 0.5).
     glr_window
@@ -84,7 +76,7 @@ class OnlineDiagnoser(BaseEstimator):
         least this many hours (default 8). The threshold is the larger of the one that meets
         it on white Gaussian innovations and the one measured on the fault-free training
         runs' out-of-fold innovations (see
-        `bayes_fdi.diagnosis.detection.thresholds.calibrate_threshold`).
+        `bayes_fdi.diagnosis.detection.thresholds.fit_threshold`).
     clear_level
         DD turns off when every statistic is at or below this (default: 0 for the CUSUM, i.e.
         the evidence is fully gone; 2 for the GLR, about the 95 % point of its in-control
@@ -123,19 +115,25 @@ class OnlineDiagnoser(BaseEstimator):
     whiteners_ : dict
         ``{"X": ARWhitener, "F": ARWhitener}``.
     detector_ : CUSUM or GLR
-        The detector prototype with the calibrated threshold.
+        The detector with the calibrated threshold.
     threshold_ : float
     clear_level_ : float
     threshold_report_ : dict
         The empirical ARL measurements behind the threshold.
-    input_low_, input_high_ : numpy.ndarray
-        The input envelope (CV, P1, P2, T1).
+    decision_ : DetectionDecision
+        DD with the threshold and the clear level.
+    signature_ : SignatureWindow
+        The isolation signatures' window.
+    envelope_ : InputEnvelope
+        The input envelope (``input_low_``, ``input_high_``: its bounds of CV, P1, P2, T1).
     isolator_ : FaultIsolator or None
         None when fitted without fault runs (detection only).
     groups_ : tuple of tuple of str
     undetectable_ : tuple of str
     detection_rates_ : dict
         Fault -> share of its training runs detected after the onset.
+    n_signatures_ : dict
+        Signatures of the isolator's training, validation and calibration sets.
     fit_seconds_ : dict
     """
 
@@ -181,13 +179,18 @@ class OnlineDiagnoser(BaseEstimator):
     # ------------------------------------------------------------------ fitting
     def fit(
         self,
-        normal_runs: xr.Dataset | Sequence[xr.Dataset],
-        fault_runs: xr.Dataset | Sequence[xr.Dataset] | None = None,
+        normal_runs: Runs,
+        fault_runs: Runs | None = None,
         *,
-        validation_runs: xr.Dataset | Sequence[xr.Dataset] | None = None,
-        calibration_runs: xr.Dataset | Sequence[xr.Dataset] | None = None,
+        validation_runs: Runs | None = None,
+        calibration_runs: Runs | None = None,
     ) -> OnlineDiagnoser:
         """Fit detection on fault-free runs and, given fault runs, isolation.
+
+        The normal models, the whitening filters and the detector's threshold
+        (`~bayes_fdi.diagnosis.online.training.fit_detection`) and the input envelope on the
+        fault-free runs; the isolator on the signatures the stream gives on the fault runs
+        (`~bayes_fdi.diagnosis.online.training.fit_isolation`).
 
         Parameters
         ----------
@@ -204,9 +207,82 @@ class OnlineDiagnoser(BaseEstimator):
             None: every fifth run of each fault of ``fault_runs`` (by position) validates and
             the next fifth calibrates; the other three fifths train.
         """
-        fit_online(self, normal_runs, fault_runs, validation_runs, calibration_runs)
+        self._check_params()
+        t_start = time.perf_counter()
+        seconds: dict[str, float] = {}
+        t0 = time.perf_counter()
+        models = self.normal_models
+        models = DynamicNormalModels(random_state=self.random_state) if models is None else models
+        normal_runs = stack_runs(normal_runs)
+        self.normal_models_ = clone(models).fit(normal_runs)
+        seconds["normal_models"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        prototype = self._detector_prototype()
+        clear = self.clear_level
+        if clear is None:
+            clear = 0.0 if isinstance(prototype, CUSUM) else 2.0
+        detection = fit_detection(
+            self.normal_models_.oof_z_,
+            prototype,
+            max_whiten_order=self.max_whiten_order,
+            clear_level=clear,
+            false_alarm_hours=self.false_alarm_hours,
+            random_state=self.random_state,
+        )
+        self.whiteners_, self.detector_ = detection.whiteners, detection.detector
+        self.threshold_, self.clear_level_ = detection.threshold, detection.clear_level
+        self.threshold_report_, self.decision_ = detection.threshold_report, detection.decision
+        if not math.isfinite(self.threshold_):
+            raise ValueError("the detector threshold could not be calibrated (no finite ARL fit)")
+        self.envelope_ = InputEnvelope(margin=self.input_margin).fit(normal_runs)
+        self.signature_ = SignatureWindow()
+        seconds["detection"] = time.perf_counter() - t0
+        self.isolator_ = None
+        self.undetectable_: tuple[str, ...] = ()
+        self.detection_rates_: dict[str, float] = {}
+        if fault_runs is not None:
+            fitted = fit_isolation(
+                self._components(),
+                fault_runs,
+                validation_runs,
+                calibration_runs,
+                classifier=self.isolation_classifier,
+                calibrator=self.calibrator,
+                group_threshold=self.group_threshold,
+                detect_rate=self.detect_rate,
+                max_signatures_per_fault=self.max_signatures_per_fault,
+                random_state=self.random_state,
+                seconds=seconds,
+            )
+            self.isolator_, self.undetectable_ = fitted.isolator, fitted.undetectable
+            self.detection_rates_ = fitted.detection_rates
+            if fitted.n_signatures is not None:
+                self.n_signatures_ = fitted.n_signatures
+        seconds["total"] = time.perf_counter() - t_start
+        self.fit_seconds_ = seconds
         self.reset()
         return self
+
+    def _detector_prototype(self) -> Any:
+        """The unfitted sequential test (threshold 1) whose threshold the fit calibrates."""
+        return sequential_test(self.detector, cusum_k=self.cusum_k, glr_window=self.glr_window)
+
+    def _check_params(self) -> None:
+        self._detector_prototype()
+        checks = {
+            "false_alarm_hours": self.false_alarm_hours > 0,
+            "cusum_k": self.cusum_k >= 0,
+            "glr_window": isinstance(self.glr_window, int) and self.glr_window >= 1,
+            "p_fault": 0 <= self.p_fault <= 1,
+            "novelty_ratio": self.novelty_ratio > 0,
+            "coverage": 0 < self.coverage < 1,
+            "detect_rate": 0 <= self.detect_rate <= 1,
+            "input_margin": self.input_margin >= 0,
+            "max_signatures_per_fault": self.max_signatures_per_fault >= 2,
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise ValueError(f"{name} is out of range: {getattr(self, name)!r}")
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "normal_models_"):
@@ -217,6 +293,16 @@ class OnlineDiagnoser(BaseEstimator):
         """The isolability groups (tuples of fault names) of the ``indicated`` decision."""
         self._check_fitted()
         return self.isolator_.groups_ if self.isolator_ is not None else ()
+
+    @property
+    def input_low_(self) -> np.ndarray:
+        """Lower bounds of the input envelope (CV, P1, P2, T1)."""
+        return self.envelope_.low_
+
+    @property
+    def input_high_(self) -> np.ndarray:
+        """Upper bounds of the input envelope (CV, P1, P2, T1)."""
+        return self.envelope_.high_
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike[str]) -> str:
@@ -237,109 +323,35 @@ class OnlineDiagnoser(BaseEstimator):
         newer file, or one that holds another class."""
         return model_files.load(path, expected=cls, **kwargs)
 
+    @classmethod
+    def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
+        """A saved diagnoser's attributes in today's layout
+        (`bayes_fdi.diagnosis.online.legacy.upgrade_diagnoser`)."""
+        return upgrade_diagnoser(data)
+
     # ------------------------------------------------------------------ the per-second core
-    def _process(self, arrays: Mapping[str, np.ndarray], st: dict[str, Any]) -> dict[str, Any]:
-        """Every per-second quantity of consecutive samples of one run (updates ``st``)."""
-        nm = self.normal_models_
-        n = arrays["CV"].size
-        pred = np.empty((n, 5))
-        nm.stream(arrays["CV"], arrays["P1"], arrays["P2"], st["models"], pred)
-        out: dict[str, Any] = {k: pred[:, j] for j, k in enumerate(_OUTPUTS)}
-        r_x, z_x = standardised_residuals(arrays["X"], pred[:, 0], pred[:, 1])
-        r_f, z_f = standardised_residuals(arrays["F"], pred[:, 2], pred[:, 3])
-        stats = np.empty((n, 2))
-        for j, (c, z) in enumerate((("X", z_x), ("F", z_f))):
-            e = self.whiteners_[c].advance(z, st["whiten"][c])
-            out[f"r_{c}"] = e
-            stats[:, j] = self.detector_.advance(e, st["detect"][c])[0]
-        out["stat_X"], out["stat_F"] = stats[:, 0], stats[:, 1]
-        dd = detection_decision(stats, self.threshold_, self.clear_level_,
-                                state=st["dd"], held=st["held"])  # fmt: skip
-        out["DD"] = dd
-        s = signed_root(arrays["P1"], arrays["P2"])
-        feats = isolation_features(dd, r_x, r_f, pred[:, 0], pred[:, 2], s, arrays["P1"],
-                                   arrays["P2"], arrays["T1"], state=st["features"])  # fmt: skip
-        out["features"] = feats
-        inputs = np.column_stack([arrays[c] for c in ("CV", "P1", "P2", "T1")])
-        out["novel_onset"] = onset_inputs_novel(dd, inputs, self.input_low_, self.input_high_,
-                                                st["reference"])  # fmt: skip
-        out.update(self._isolate(feats))
-        st["seconds"] += n
-        return out
+    def _components(self) -> Components:
+        """The fitted components, in the order a second goes through them."""
+        return Components(
+            normal_models=self.normal_models_,
+            whiteners=PerOutput(self.whiteners_["X"], self.whiteners_["F"]),
+            detector=self.detector_,
+            decision=self.decision_,
+            signature=self.signature_,
+            envelope=self.envelope_,
+            isolator=self.isolator_,
+        )
 
-    def _isolate(self, feats: np.ndarray) -> dict[str, np.ndarray]:
-        """Fault/group probabilities and novelty of feature rows (NaN rows stay NaN)."""
-        iso = self.isolator_
-        n = feats.shape[0]
-        if iso is None:
-            return {"fault_proba": np.full((n, 0), np.nan), "group_proba": np.full((n, 0), np.nan),
-                    "novelty": np.full(n, np.nan)}  # fmt: skip
-        n_f, n_g = iso.faults_.size, len(iso.groups_)
-        fq, gq, nov = np.empty((n, n_f)), np.empty((n, n_g)), np.empty(n)
-        T = iso.temperature()
-        if iso.lean_ is not None and (iso.calibrator_ is None or T is not None):
-            tree = iso.lean_
-            scratch = np.empty(max(1, int(np.diff(tree.woffsets).max(initial=1))))
-            isolate_rows(
-                np.ascontiguousarray(feats), *tree.args(), self._group_of, n_g,
-                0.0 if T is None else T, float(getattr(iso.calibrator_, "floor", 1e-12)),
-                *iso.novelty_.args(), scratch, np.empty(tree.offsets.size - 1),
-                np.empty(feats.shape[1]), np.empty(n_f), np.empty(n_g), fq, gq, nov,
-            )  # fmt: skip
-            return {"fault_proba": fq, "group_proba": gq, "novelty": nov}
-        # a classifier or calibrator without a compiled form: through their own predict
-        fq[:], gq[:], nov[:] = np.nan, np.nan, np.nan
-        ok = np.all(np.isfinite(feats), axis=1)
-        if ok.any():
-            p = iso.fault_proba(feats[ok])
-            gp = p @ iso.membership_
-            g = iso.calibrator_.transform(gp) if iso.calibrator_ is not None else gp
-            with np.errstate(invalid="ignore", divide="ignore"):
-                share = np.where(gp[:, self._group_of] > 0, p / gp[:, self._group_of], 1.0)
-            gq[ok] = g
-            fq[ok] = g[:, self._group_of] * share
-            nov[ok] = iso.novelty_.score(feats[ok])
-        return {"fault_proba": fq, "group_proba": gq, "novelty": nov}
-
-    def _decide(self, arrays: Mapping[str, np.ndarray], out: dict[str, Any]) -> dict[str, Any]:
-        """States, probabilities, statuses and the indicated groups (no arithmetic)."""
-        n = arrays["CV"].size
-        blind = np.zeros(n, dtype=bool)
-        for c in CHANNELS:
-            blind |= ~np.isfinite(arrays[c])
-        novel_in = np.zeros(n, dtype=bool)
-        for j, c in enumerate(("CV", "P1", "P2", "T1")):
-            with np.errstate(invalid="ignore"):
-                novel_in |= (arrays[c] < self.input_low_[j]) | (arrays[c] > self.input_high_[j])
-        dd = out["DD"]
-        labels = np.asarray((*self._group_labels, "unknown", "fn"), dtype=object)
-        gq = out["group_proba"]
-        isolated = np.isfinite(gq).all(axis=1) & (gq.shape[1] > 0) & dd
-        top = np.argmax(np.where(isolated[:, None], gq, -1.0), axis=1) if gq.shape[1] else \
-            np.zeros(n, dtype=np.int64)  # fmt: skip
-        prob = np.where(isolated, gq[np.arange(n), top] if gq.shape[1] else np.nan, np.nan)
-        novel_sig = isolated & (out["novelty"] > self.novelty_ratio)
-        known = isolated & ~novel_sig
-        novel_onset = out["novel_onset"]
-        code = np.where(~dd, len(labels) - 1, np.where(known, top, len(labels) - 2))
-        state = labels[code].astype(str)
-        prob = np.where(known, prob, np.nan)
-        status = np.where(
-            blind, SevaStatus.BLIND.value,
-            np.where(dd, np.where(known & (prob >= self.p_fault) & ~novel_onset,
-                                  SevaStatus.BLURRED.value, SevaStatus.DAZZLED.value),
-                     np.where(novel_in, SevaStatus.DAZZLED.value, SevaStatus.CLEAR.value)),
-        )  # fmt: skip
-        indicated = np.zeros((n, len(self._group_labels)), dtype=bool)
-        if indicated.shape[1]:
-            indicated[np.flatnonzero(known), top[known]] = True
-        z = float(sps.norm.ppf(0.5 + self.coverage / 2.0))
-        return {
-            "state": state, "probability": prob, "status": status.astype(str),
-            "indicated": indicated, "FFID": ~dd & ~blind, "blind": blind,
-            "novel_inputs": novel_in, "novel_signature": novel_sig, "novel_onset": novel_onset,
-            "z": z,
-        }  # fmt: skip
+    def _decide(self, arrays: Mapping[str, np.ndarray], out: Mapping[str, Any]) -> dict[str, Any]:
+        return decide(
+            arrays,
+            out,
+            threshold=self.threshold_,
+            group_labels=self._group_labels,
+            novelty_ratio=self.novelty_ratio,
+            p_fault=self.p_fault,
+            coverage=self.coverage,
+        )
 
     # ------------------------------------------------------------------ streaming
     def reset(self, state: StreamState | None = None) -> OnlineDiagnoser:
@@ -352,17 +364,19 @@ class OnlineDiagnoser(BaseEstimator):
             `update` continues that stream exactly. None: a fresh stream.
         """
         self._check_fitted()
-        if state is not None:
-            check_state(self, state, 1)
-        self._stream = run_state(self, state, 0)
+        if state is None:
+            self._stream = init_run_state(self._components())
+        else:
+            check_stream_state(self._components(), state, 1)
+            self._stream = state.run(0)
         return self
 
     def stream_state(self) -> StreamState:
-        """The state of the `update` stream after its last second (a read-only copy)."""
+        """The state of the `update` stream after its last second (read-only)."""
         self._check_fitted()
         if not hasattr(self, "_stream"):
             self.reset()
-        return pack_states([self._stream])
+        return StreamState.of_runs([self._stream])
 
     def update(self, sample: Mapping[str, Any]) -> SevaRecord:
         """Process one second of one actuator; returns its SEVA record (O(1) time, memory).
@@ -387,63 +401,14 @@ class OnlineDiagnoser(BaseEstimator):
         if missing:
             raise ValueError(f"sample lacks channel(s) {missing}")
         arrays = {c: np.array([float(sample[c])], dtype=np.float64) for c in CHANNELS}
-        t = float(sample.get("time", self._stream["seconds"]))
-        out = self._process(arrays, self._stream)
+        t = float(sample.get("time", self._stream.seconds))
+        out, self._stream = step(self._components(), arrays, self._stream)
         dec = self._decide(arrays, out)
-        self.last_ = {
-            "time": t, "DD": bool(out["DD"][0]), "FFID": bool(dec["FFID"][0]),
-            "indicated": dec["indicated"][0].copy(), "stat_X": float(out["stat_X"][0]),
-            "stat_F": float(out["stat_F"][0]), "r_X": float(out["r_X"][0]),
-            "r_F": float(out["r_F"][0]), "fault_proba": out["fault_proba"][0].copy(),
-            "group_proba": out["group_proba"][0].copy(),
-        }  # fmt: skip
-        return self._record(arrays, out, dec, t)
-
-    def _record(self, arrays, out, dec, t: float) -> SevaRecord:
-        z = dec["z"]
-        gq = out["group_proba"][0]
-        detected = bool(out["DD"][0]) and np.isfinite(gq).all() and gq.size > 0
-        dist = ClassDistribution(list(zip(self._group_labels, gq.tolist(), strict=True))
-                                 if detected else [])  # fmt: skip
-        status = SevaStatus(str(dec["status"][0]))
-        reasons = self._reasons(out, dec)
-        rails = sum(1 for c in CHANNELS if arrays[c][0] <= 0.0 or arrays[c][0] >= 1.0)
-        return SevaRecord(
-            run=0, t_start=t, t_end=t,
-            x_measured=float(arrays["X"][0]), f_measured=float(arrays["F"][0]),
-            x_vmv=float(out["X_hat"][0]), x_vu=z * float(out["X_hat_std"][0]),
-            f_vmv=float(out["F_hat"][0]), f_vu=z * float(out["F_hat_std"][0]),
-            coverage=float(self.coverage), state=str(dec["state"][0]),
-            probability=float(dec["probability"][0]), distribution=dist,
-            entropy=entropy(gq) if detected else math.nan, status=status,
-            reasons=reasons, missing_fraction=float(dec["blind"][0]) and
-            sum(1 for c in CHANNELS if not np.isfinite(arrays[c][0])) / len(CHANNELS),
-            saturated_fraction=rails / len(CHANNELS),
-            novel_fraction=float(dec["novel_inputs"][0]),
-            feature_novelty=float(out["novelty"][0]),
-        )  # fmt: skip
-
-    def _reasons(self, out, dec) -> tuple[str, ...]:
-        if dec["blind"][0]:
-            return ("a measurement is missing this second",)
-        if not out["DD"][0]:
-            if dec["novel_inputs"][0]:
-                return ("inputs outside the training envelope: the normal models extrapolate",)
-            return (f"no detection (statistics X {out['stat_X'][0]:.3g}, F "
-                    f"{out['stat_F'][0]:.3g} <= threshold {self.threshold_:.3g})",)  # fmt: skip
-        if self.isolator_ is None:
-            return ("fault detected; no isolation fitted",)
-        if dec["novel_signature"][0]:
-            return (f"fault detected; signature unlike every known fault (novelty "
-                    f"{out['novelty'][0]:.3g} > {self.novelty_ratio})",)  # fmt: skip
-        p = dec["probability"][0]
-        if dec["novel_onset"][0]:
-            return (f"fault detected while the inputs were outside the training envelope: the "
-                    f"normal models extrapolate, P({dec['state'][0]}) = {p:.3f} is not "
-                    f"trusted",)  # fmt: skip
-        need = ">=" if p >= self.p_fault else "<"
-        return (f"fault detected; P({dec['state'][0]}) = {p:.3f} {need} p_fault = "
-                f"{self.p_fault}",)  # fmt: skip
+        self.last_ = last_values(out, dec, t)
+        reasons = status_reasons(
+            out, dec, self.threshold_, self.isolator_ is not None, self.novelty_ratio, self.p_fault
+        )
+        return second_record(arrays, out, dec, t, self._group_labels, self.coverage, reasons)
 
     # ------------------------------------------------------------------ batch
     def run(
@@ -456,8 +421,7 @@ class OnlineDiagnoser(BaseEstimator):
         """The 1 Hz decision stream of a recording (dims ``run``, ``time`` or just ``time``).
 
         Each run starts from a fresh stream state (as after `reset`) unless ``state`` is given;
-        the result equals feeding each run through `update` second by second. See
-        ``ONLINE_CONTRACT.md`` for the variables.
+        the result equals feeding each run through `update` second by second.
 
         Parameters
         ----------
@@ -473,6 +437,39 @@ class OnlineDiagnoser(BaseEstimator):
         Returns
         -------
         xarray.Dataset, or (xarray.Dataset, StreamState) with ``return_state``
+            The decision stream, with the recording's ``run`` and ``time`` coordinates (and
+            its other coordinates over them; one named like a variable, such as the truth
+            label ``state``, is renamed ``true_<name>``), ``group`` (the isolability groups'
+            labels, members joined by ``|``) and ``fault`` (f1 .. f19, then the faults of one
+            reading the model knows, such as ``bias_X``). Per run and second:
+
+            - ``DD`` (bool): the detection decision; ``FFID`` (bool): fault-free indication,
+              not DD and no channel missing;
+            - ``state`` (str): the diagnosed group's label, ``"unknown"`` (detected, but no
+              fault library or a signature unlike every known fault), ``"mismatch"`` (a
+              detection that began while the inputs lay outside the normal models' envelope:
+              the model does not fit this valve, commission it) or ``"fn"`` (no detection);
+              ``probability``: that group's calibrated probability (NaN unless isolated);
+              ``evidence`` (str): while DD is on, which residual raised it and its sign
+              (``"X high"``, ``"F low"``, ``"X low, F high"``), else ``""``;
+            - ``status`` (str): the SEVA status ``CLEAR``, ``BLURRED``, ``DAZZLED`` or
+              ``BLIND``;
+            - ``indicated`` (bool, per group): the diagnosed group; ``group_proba`` (per
+              group) and ``fault_proba`` (per fault: the group's probability shared in
+              proportion to the classifier's, 0 for a fault it does not know): calibrated
+              probabilities, NaN while there is no signature; ``novelty``: the signature's
+              class-novelty score;
+            - ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``: the normal models'
+              predictions and predictive standard deviations; ``VMV_X``, ``VMV_F`` (the
+              same predictions, the validated measurement values) and ``VU_X``, ``VU_F``
+              (validated uncertainties, ``z`` standard deviations for the ``coverage``);
+            - ``r_X``, ``r_F``: the whitened innovations; ``stat_X``, ``stat_F``: the
+              sequential test statistics (NaN in a gap).
+
+            Attributes: ``groups`` (JSON: label -> members), ``undetectable`` (JSON list, DGN0),
+            ``detector``, ``threshold``, ``clear_level``, ``coverage`` and ``features`` (the
+            signature's features). Without a ``run`` dimension in ``recording`` the stream
+            has none either.
         """
         self._check_fitted()
         single = "run" not in recording.dims
@@ -482,67 +479,35 @@ class OnlineDiagnoser(BaseEstimator):
         channels = ds[[c for c in CHANNELS if c in ds.data_vars]].reset_coords(drop=True)
         validate_dataset(channels, require=CHANNELS, allow_nan=True)
         n_runs, n_t = ds.sizes["run"], ds.sizes["time"]
+        components = self._components()
         if state is not None:
-            check_state(self, state, n_runs)
-        data = {c: np.asarray(ds[c].transpose("run", "time").values, dtype=np.float64)
-                for c in CHANNELS}  # fmt: skip
+            check_stream_state(components, state, n_runs)
+        data = {
+            c: np.asarray(ds[c].transpose("run", "time").values, dtype=np.float64) for c in CHANNELS
+        }
         per_run, states = [], []
         for i in range(n_runs):
             arrays = {c: np.ascontiguousarray(v[i]) for c, v in data.items()}
-            st = run_state(self, state, i)
-            out = self._process(arrays, st)
+            start = init_run_state(components) if state is None else state.run(i)
+            out, end = step(components, arrays, start)
             per_run.append((out, self._decide(arrays, out)))
-            states.append(st)
-        stream = self._assemble(ds, per_run, n_t, single)
+            states.append(end)
+        attrs = stream_attrs(
+            self.groups_,
+            self.undetectable_,
+            detector=self.detector if isinstance(self.detector, str) else repr(self.detector),
+            threshold=self.threshold_,
+            clear_level=self.clear_level_,
+            coverage=self.coverage,
+        )
+        stream = assemble_stream(
+            ds, per_run, n_t, faults=self._faults, group_labels=self._group_labels, attrs=attrs
+        )
+        if single:
+            stream = stream.isel(run=0, drop=True)
         if return_state:
-            return stream, pack_states(states) if states else state
+            return stream, StreamState.of_runs(states) if states else state
         return stream
-
-    def _assemble(self, ds, per_run, n_t: int, single: bool) -> xr.Dataset:
-        def stack(key: str, src: int) -> np.ndarray:
-            return np.stack([pr[src][key] for pr in per_run])
-
-        z = per_run[0][1]["z"] if per_run else 1.96
-        dims = ("run", "time")
-        fault_cols = {f: j for j, f in enumerate(self._faults)}
-        fault = np.full((len(per_run), n_t, len(FAULTS)), np.nan)
-        if per_run and self._faults:
-            fq = stack("fault_proba", 0)
-            for k, f in enumerate(FAULTS):
-                if f in fault_cols:
-                    fault[:, :, k] = fq[:, :, fault_cols[f]]
-                else:  # undetectable or untrained faults: probability 0 once detected
-                    fault[:, :, k] = np.where(np.isfinite(fq[:, :, 0]), 0.0, np.nan)
-        data = {
-            "DD": (dims, stack("DD", 0)),
-            "FFID": (dims, stack("FFID", 1)),
-            "indicated": ((*dims, "group"), stack("indicated", 1)),
-            "group_proba": ((*dims, "group"), stack("group_proba", 0)),
-            "fault_proba": ((*dims, "fault"), fault),
-            "state": (dims, stack("state", 1)),
-            "probability": (dims, stack("probability", 1)),
-            "status": (dims, stack("status", 1)),
-            "novelty": (dims, stack("novelty", 0)),
-            **{k: (dims, stack(k, 0)) for k in (*_OUTPUTS, "r_X", "r_F", "stat_X", "stat_F")},
-            "VMV_X": (dims, stack("X_hat", 0)),
-            "VU_X": (dims, z * stack("X_hat_std", 0)),
-            "VMV_F": (dims, stack("F_hat", 0)),
-            "VU_F": (dims, z * stack("F_hat_std", 0)),
-        }
-        coords = {k: v.variable for k, v in ds.coords.items() if set(v.dims) <= {"run", "time"}}
-        for k in [k for k in coords if k in data]:  # a truth label such as `state` is kept
-            coords[f"true_{k}"] = coords.pop(k)
-        coords["group"] = np.asarray(self._group_labels, dtype=str)
-        coords["fault"] = np.asarray(FAULTS, dtype=str)
-        out = xr.Dataset(data, coords=coords)
-        out.attrs.update(
-            groups=json.dumps({"|".join(g): list(g) for g in self.groups_}),
-            undetectable=json.dumps(list(self.undetectable_)),
-            detector=str(self.detector), threshold=float(self.threshold_),
-            clear_level=float(self.clear_level_), coverage=float(self.coverage),
-            features=",".join(ISOLATION_FEATURES),
-        )  # fmt: skip
-        return out.isel(run=0, drop=True) if single else out
 
     @property
     def _faults(self) -> tuple[str, ...]:
@@ -551,8 +516,3 @@ class OnlineDiagnoser(BaseEstimator):
     @property
     def _group_labels(self) -> tuple[str, ...]:
         return tuple(self.isolator_.group_labels_) if self.isolator_ is not None else ()
-
-    @property
-    def _group_of(self) -> np.ndarray:
-        iso = self.isolator_
-        return np.ascontiguousarray(np.argmax(iso.membership_, axis=1).astype(np.int64))

@@ -152,25 +152,45 @@ def plot_timeline(
     tt = t / scale
 
     fig, axes = plt.subplots(
-        7, 1, figsize=(11, 15), sharex=True, layout="constrained",
+        7,
+        1,
+        figsize=(11, 15),
+        sharex=True,
+        layout="constrained",
         gridspec_kw={"height_ratios": [2, 2, 1.5, 1.5, 1, 1.6, 1.6]},
-    )  # fmt: skip
+    )
     w = _bin_width(t.size)
     tw = _reduce(tt, w)[0]
     for ax, channel in zip(axes[:2], ("X", "F"), strict=True):
         _band(ax, tw, w, stream, channel, recording)
     if w > 1:
         axes[0].set_title(f"signals: mean per {w} s, min-max shaded", fontsize=8, loc="left")
-    ax = axes[2]
+    _inputs_panel(axes[2], tw, w, recording)
+    _residuals_panel(axes[3], tw, w, stream)
+    _status_panel(axes[4], tt, stream, strength)
+    _groups_panels(axes[5], axes[6], tt, stream, fault)
+    for ax in axes:
+        if onset is not None:
+            ax.axvline(float(onset) / scale, color="k", ls="--", lw=0.8)
+    axes[-1].set_xlabel(f"time [{unit}]")
+    label = (truth or {}).get("label") or fault
+    fig.suptitle(title or (f"{label}" if label else "online diagnosis"), fontsize=11)
+    if path is not None:
+        return atomic.save_figure(fig, path, dpi=100)
+    return fig
+
+
+def _inputs_panel(ax: Any, tw: np.ndarray, w: int, recording: xr.Dataset) -> None:
+    """CV on ``ax``, P1 and P2 on a twin axis, the range of T1 in the title."""
     cv_factor, cv_unit = physical_range(recording, "CV")
-    _line(ax, tw, recording["CV"].values * cv_factor, w, lw=0.6, color="C2",
-          label=f"CV [{cv_unit}]")  # fmt: skip
+    cv_label = f"CV [{cv_unit}]"
+    _line(ax, tw, recording["CV"].values * cv_factor, w, lw=0.6, color="C2", label=cv_label)
     ax.set_ylabel(f"CV [{cv_unit}]")
     twin = ax.twinx()
     for name, colour in (("P1", "C4"), ("P2", "C5")):
         factor, p_unit = physical_range(recording, name)
-        _line(twin, tw, recording[name].values * factor, w, lw=0.5, color=colour,
-              label=f"{name} [{p_unit}]")  # fmt: skip
+        values = recording[name].values * factor
+        _line(twin, tw, values, w, lw=0.5, color=colour, label=f"{name} [{p_unit}]")
     twin.set_ylabel(f"P [{p_unit}]")
     t1_factor, t1_unit = physical_range(recording, "T1")
     t1 = recording["T1"].values * t1_factor
@@ -179,7 +199,9 @@ def plot_timeline(
     lines = ax.get_lines() + twin.get_lines()
     ax.legend(lines, [ln.get_label() for ln in lines], loc="upper left", fontsize=7, ncol=3)
 
-    ax = axes[3]
+
+def _residuals_panel(ax: Any, tw: np.ndarray, w: int, stream: xr.Dataset) -> None:
+    """The innovations with their 95 % band."""
     for name, colour in (("r_X", "C0"), ("r_F", "C1")):
         if name in stream:
             _line(ax, tw, stream[name].values, w, lw=0.5, color=colour, label=name)
@@ -187,7 +209,9 @@ def plot_timeline(
     ax.set_ylabel("residual [σ]")
     ax.legend(loc="upper right", fontsize=7, ncol=3)
 
-    ax = axes[4]
+
+def _status_panel(ax: Any, tt: np.ndarray, stream: xr.Dataset, strength: Any) -> None:
+    """DD, the SEVA status strip and, given the truth, the fault strength."""
     if "DD" in stream:
         ax.fill_between(
             tt,
@@ -211,17 +235,6 @@ def plot_timeline(
     ax.set_yticks([0, 1])
     ax.set_ylabel("DD / status")
     ax.legend(loc="upper left", fontsize=7, ncol=6)
-
-    _groups_panels(axes[5], axes[6], tt, stream, fault)
-    for ax in axes:
-        if onset is not None:
-            ax.axvline(float(onset) / scale, color="k", ls="--", lw=0.8)
-    axes[-1].set_xlabel(f"time [{unit}]")
-    label = (truth or {}).get("label") or fault
-    fig.suptitle(title or (f"{label}" if label else "online diagnosis"), fontsize=11)
-    if path is not None:
-        return atomic.save_figure(fig, path, dpi=100)
-    return fig
 
 
 def _groups_panels(ax_ind: Any, ax_p: Any, tt: np.ndarray, stream: xr.Dataset, fault):

@@ -36,29 +36,31 @@ variance shrinks back to the noise level far from the data, so it does not flag 
 
 The record and its conversions live in `bayes_fdi.diagnosis.seva.record`, the thresholds and
 status rules in `bayes_fdi.diagnosis.seva.rules`, the novelty reference in
-`bayes_fdi.diagnosis.seva.novelty`; every name stays importable from here.
+`bayes_fdi.diagnosis.seva.novelty`; every name stays importable from here. Runs with a window
+without a single complete sample are diagnosed by
+`bayes_fdi.diagnosis.seva.empty_windows`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
 from scipy import stats
 
 from bayes_fdi.datasets import CHANNELS, INPUT_CHANNELS
-from bayes_fdi.diagnosis.isolation.features import extract_features, window_bounds
+from bayes_fdi.diagnosis.seva.empty_windows import (
+    DIAGNOSIS_VARIABLES,
+    diagnose_allowing_empty_windows,
+)
 from bayes_fdi.diagnosis.seva.novelty import NoveltyReference
 from bayes_fdi.diagnosis.seva.record import (
     ClassDistribution,
     SevaRecord,
     SevaStatus,
-    to_frame,
-    to_json,
-    to_xarray,
 )
 from bayes_fdi.diagnosis.seva.rules import (
     DEFAULT_SATURATION_LIMITS,
@@ -69,20 +71,7 @@ from bayes_fdi.diagnosis.seva.rules import (
     screen_window,
 )
 
-__all__ = [
-    "DEFAULT_SATURATION_LIMITS",
-    "ClassDistribution",
-    "NoveltyReference",
-    "SevaRecord",
-    "SevaStatus",
-    "SevaThresholds",
-    "records_from_diagnosis",
-    "screen_measurements",
-    "seva_records",
-    "to_frame",
-    "to_json",
-    "to_xarray",
-]
+__all__ = ["records_from_diagnosis", "seva_records"]
 
 
 def _nanmean(a: np.ndarray) -> float:
@@ -167,196 +156,232 @@ def records_from_diagnosis(
         t_diag = np.asarray(diagnosis["time"].values, dtype=np.float64)
         if np.all(np.isin(t_diag, runs["time"].values)):
             runs = runs.sel(time=t_diag)
+    data = _record_data(
+        diagnosis,
+        runs,
+        th,
+        limits,
+        coverage=coverage,
+        calibrator=calibrator,
+        input_reference=input_reference,
+        input_channels=input_channels,
+        feature_reference=feature_reference,
+    )
+    return [
+        _window_record(
+            data,
+            i,
+            w,
+            th,
+            limits,
+            not_diagnosed=not_diagnosed,
+            input_reference=input_reference,
+            feature_reference=feature_reference,
+        )
+        for i in range(n_runs)
+        for w in range(data.proba.shape[1])
+    ]
+
+
+class _RecordData(NamedTuple):
+    """What the records of a diagnosis are built from, per run (and window) and sample."""
+
+    measured: dict[str, np.ndarray]  #: measured channels, (run, time)
+    times: np.ndarray
+    run_ids: np.ndarray
+    z: float  #: VU = z * std
+    coverage: float
+    windowed: bool
+    classes: list[str]
+    proba: np.ndarray  #: (run, window, class); NaN rows: not diagnosed
+    w_start: np.ndarray  #: window starts (s)
+    w_end: np.ndarray  #: window ends (s, exclusive)
+    predicted: dict[str, np.ndarray]  #: X_hat, X_hat_std, F_hat, F_hat_std, (run, time)
+    features: np.ndarray | None  #: (run, window, feature), for the feature novelty
+    novel: np.ndarray | None  #: (run, time): input sample novel (1), not (0), unknown (NaN)
+
+
+def _record_data(
+    diagnosis: xr.Dataset | None,
+    runs: xr.Dataset,
+    th: SevaThresholds,
+    limits: dict[str, tuple[float, float]],
+    *,
+    coverage: float,
+    calibrator: Any,
+    input_reference: NoveltyReference | None,
+    input_channels: Sequence[str],
+    feature_reference: NoveltyReference | None,
+) -> _RecordData:
+    """Read the measurements, the class distributions, the windows, the predictions, the
+    features and the input novelty of ``runs`` (aligned with ``diagnosis``)."""
+    n_runs = runs.sizes["run"]
     channels = [c for c in CHANNELS if c in runs]
-    arrays = {c: np.asarray(runs[c].transpose("run", "time").values) for c in channels}
+    measured = {c: np.asarray(runs[c].transpose("run", "time").values) for c in channels}
     times = np.asarray(runs["time"].values, dtype=np.float64)
     run_ids = np.asarray(runs["run"].values) if "run" in runs.coords else np.arange(n_runs)
     z = float(stats.norm.ppf(0.5 + coverage / 2.0))
-
     windowed = diagnosis is not None and "window" in diagnosis["proba"].dims
     if diagnosis is not None:
-        if "proba" not in diagnosis:
-            raise ValueError("diagnosis lacks 'proba'")
-        classes = [str(c) for c in diagnosis["class"].values]
-        lead = ("run", "window") if windowed else ("run",)
-        proba = np.asarray(diagnosis["proba"].transpose(*lead, "class").values, dtype=np.float64)
-        proba = proba.reshape(n_runs, -1, len(classes))
-        if calibrator is not None:
-            flat = proba.reshape(-1, len(classes))
-            ok = np.all(np.isfinite(flat), axis=1)
-            cal = np.full_like(flat, np.nan)
-            if ok.any():
-                cal[ok] = np.asarray(calibrator.transform(flat[ok]), dtype=np.float64)
-            proba = cal.reshape(proba.shape)
+        classes, proba = _class_distributions(diagnosis, n_runs, windowed, calibrator)
     else:
-        blind = screen_measurements(runs, channels=channels, thresholds=th,
-                                    saturation_limits=limits)["blind"]  # fmt: skip
+        blind = screen_measurements(
+            runs, channels=channels, thresholds=th, saturation_limits=limits
+        )["blind"]
         if not blind.all():
             raise ValueError("diagnosis is None but some runs are not BLIND")
         classes, proba = [], np.full((n_runs, 1, 0), np.nan)
-    n_win = proba.shape[1]
     if windowed:
         w_start = np.asarray(diagnosis["window_start"].values, dtype=np.float64)
         w_end = np.asarray(diagnosis["window_end"].values, dtype=np.float64)
     else:
         w_start, w_end = np.array([times[0]]), np.array([np.inf])
-
-    def per_time(name: str) -> np.ndarray:
-        if diagnosis is None or name not in diagnosis:
-            return np.full((n_runs, times.size), np.nan)
-        v = diagnosis[name].transpose("run", ...)
-        return np.asarray(v.values, dtype=np.float64).reshape(n_runs, -1)
-
-    x_hat, x_std, f_hat, f_std = (per_time(k) for k in ("X_hat", "X_hat_std", "F_hat", "F_hat_std"))
-    feats = None
+    predicted = _predictions(diagnosis, n_runs, times.size)
+    features = None
     if feature_reference is not None and diagnosis is not None and "features" in diagnosis:
         fv = diagnosis["features"].transpose(*(("run", "window") if windowed else ("run",)), ...)
-        feats = np.asarray(fv.values, dtype=np.float64).reshape(n_runs, n_win, -1)
-    novel_all = None
-    if input_reference is not None:
-        U = np.stack([np.asarray(runs[c].transpose("run", "time").values, dtype=np.float64)
-                      for c in input_channels], axis=-1)  # fmt: skip
-        ok = np.all(np.isfinite(U), axis=-1)
-        novel_all = np.full(ok.shape, np.nan)
-        novel_all[ok] = input_reference.score(U[ok]) > th.novelty_ratio
-
-    records = []
-    for i in range(n_runs):
-        for w in range(n_win):
-            tm = (times >= w_start[w]) & (times < w_end[w])
-            if not tm.any():
-                raise ValueError(f"window {w} holds no samples of run {i}")
-            missing, saturated, blind_why, notes = screen_window(
-                {c: a[i, tm] for c, a in arrays.items()}, th, limits
-            )
-            if not_diagnosed and i in not_diagnosed and not blind_why:
-                blind_why = tuple(f"run not diagnosed: {r}" for r in not_diagnosed[i])
-            p = proba[i, w]
-            diagnosed = p.size > 0 and bool(np.all(np.isfinite(p)))
-            if diagnosed:
-                k = int(np.argmax(p))
-                state, prob, ent = classes[k], float(p[k]), entropy(p)
-            else:
-                state, prob, ent = "", math.nan, math.nan
-            novel_frac = math.nan
-            if novel_all is not None:
-                nv = novel_all[i, tm]
-                nv = nv[np.isfinite(nv)]
-                novel_frac = float(nv.mean()) if nv.size else math.nan
-            feat_nov = math.nan
-            if feats is not None and not np.isnan(feats[i, w]).any():
-                feat_nov = float(feature_reference.score(feats[i, w][None, :])[0])
-            status, reasons = decide_status(th, blind_why, state, prob, ent, diagnosed, novel_frac,
-                                      feat_nov)  # fmt: skip
-            if input_reference is None and status is not SevaStatus.BLIND:
-                reasons.append("input novelty not checked (no input reference)")
-            reasons.extend(notes)
-            t_sel = times[tm]
-            records.append(
-                SevaRecord(
-                    run=int(run_ids[i]),
-                    t_start=float(t_sel[0]),
-                    t_end=float(t_sel[-1]),
-                    x_measured=_nanmean(arrays["X"][i, tm]) if "X" in arrays else math.nan,
-                    f_measured=_nanmean(arrays["F"][i, tm]) if "F" in arrays else math.nan,
-                    x_vmv=_nanmean(x_hat[i, tm]),
-                    x_vu=z * _rms(x_std[i, tm]),
-                    f_vmv=_nanmean(f_hat[i, tm]),
-                    f_vu=z * _rms(f_std[i, tm]),
-                    coverage=float(coverage),
-                    state=state,
-                    probability=prob,
-                    distribution=ClassDistribution(
-                        list(zip(classes, p.tolist(), strict=True)) if diagnosed else []
-                    ),
-                    entropy=ent,
-                    status=status,
-                    reasons=tuple(reasons),
-                    missing_fraction=float(missing.max(initial=0.0)),
-                    saturated_fraction=float(saturated.max(initial=0.0)),
-                    novel_fraction=novel_frac,
-                    feature_novelty=feat_nov,
-                    window=w if windowed else None,
-                )
-            )
-    return records
-
-
-_DIAGNOSIS_VARS = ("proba", "X_hat", "X_hat_std", "F_hat", "F_hat_std", "features")
-
-
-def _empty_windows(diagnoser: Any, runs: xr.Dataset) -> np.ndarray | None:
-    """``(n_runs, n_windows)``: True where a window holds no sample with every channel finite.
-
-    None when ``diagnoser`` is not windowed (no ``window`` attribute, or ``window=None``).
-    """
-    window = getattr(diagnoser, "window", None)
-    if window is None:
-        return None
-    bounds = window_bounds(runs.sizes["time"], window, getattr(diagnoser, "step", None))
-    finite = np.ones((runs.sizes["run"], runs.sizes["time"]), dtype=bool)
-    for c in CHANNELS:
-        if c in runs:
-            finite &= np.isfinite(np.asarray(runs[c].transpose("run", "time").values, dtype=float))
-    cum = np.concatenate([np.zeros((finite.shape[0], 1)), np.cumsum(finite, axis=1)], axis=1)
-    return (cum[:, bounds[:, 1]] - cum[:, bounds[:, 0]]) == 0
-
-
-def _diagnose_with_empty_windows(diagnoser: Any, runs: xr.Dataset) -> xr.Dataset:
-    """The windowed diagnosis of a `FaultDiagnoser`, NaN for windows without features.
-
-    ``FaultDiagnoser.diagnose`` refuses a run with a window whose features cannot be computed
-    (no finite residual); here such windows get a NaN distribution (their records are BLIND
-    by the screening) and the other windows of the run are diagnosed as ``diagnose`` would,
-    through the diagnoser's public parts (``normal_models_``, ``feature_names_``,
-    ``predict_features``, ``classes_``).
-    """
-    res = diagnoser.normal_models_.residuals(runs)
-    names = tuple(diagnoser.feature_names_)
-    step = getattr(diagnoser, "step", None)
-    feats, _ = extract_features(res, names, diagnoser.window, step)
-    n_runs, n_win, n_feat = feats.shape
-    flat = feats.reshape(-1, n_feat)
-    ok = np.all(np.isfinite(flat), axis=1)
-    classes = np.asarray(diagnoser.classes_).astype(str)
-    proba = np.full((flat.shape[0], classes.size), np.nan)
-    if ok.any():
-        proba[ok] = diagnoser.predict_features(flat[ok])
-    bounds = window_bounds(runs.sizes["time"], diagnoser.window, step)
-    times = np.asarray(runs["time"].values, dtype=np.float64)
-    out = res[["X_hat", "X_hat_std", "F_hat", "F_hat_std"]].assign_coords(
-        {
-            "class": classes,
-            "feature": list(names),
-            "window_start": ("window", times[bounds[:, 0]]),
-            "window_end": ("window", times[bounds[:, 1] - 1] + 1.0),
-        }
+        features = np.asarray(fv.values, dtype=np.float64).reshape(n_runs, proba.shape[1], -1)
+    return _RecordData(
+        measured=measured,
+        times=times,
+        run_ids=run_ids,
+        z=z,
+        coverage=float(coverage),
+        windowed=windowed,
+        classes=classes,
+        proba=proba,
+        w_start=w_start,
+        w_end=w_end,
+        predicted=predicted,
+        features=features,
+        novel=_input_novelty(runs, input_reference, input_channels, th),
     )
-    out["proba"] = (("run", "window", "class"), proba.reshape(n_runs, n_win, classes.size))
-    out["features"] = (("run", "window", "feature"), feats)
+
+
+def _class_distributions(
+    diagnosis: xr.Dataset, n_runs: int, windowed: bool, calibrator: Any
+) -> tuple[list[str], np.ndarray]:
+    """The classes and the ``(run, window, class)`` distributions, recalibrated when asked."""
+    if "proba" not in diagnosis:
+        raise ValueError("diagnosis lacks 'proba'")
+    classes = [str(c) for c in diagnosis["class"].values]
+    lead = ("run", "window") if windowed else ("run",)
+    proba = np.asarray(diagnosis["proba"].transpose(*lead, "class").values, dtype=np.float64)
+    proba = proba.reshape(n_runs, -1, len(classes))
+    if calibrator is not None:
+        flat = proba.reshape(-1, len(classes))
+        ok = np.all(np.isfinite(flat), axis=1)
+        cal = np.full_like(flat, np.nan)
+        if ok.any():
+            cal[ok] = np.asarray(calibrator.transform(flat[ok]), dtype=np.float64)
+        proba = cal.reshape(proba.shape)
+    return classes, proba
+
+
+def _predictions(diagnosis: xr.Dataset | None, n_runs: int, n_times: int) -> dict[str, np.ndarray]:
+    """The normal models' predictions and stds, ``(run, time)``; NaN where there are none."""
+    out = {}
+    for name in ("X_hat", "X_hat_std", "F_hat", "F_hat_std"):
+        if diagnosis is None or name not in diagnosis:
+            out[name] = np.full((n_runs, n_times), np.nan)
+        else:
+            v = diagnosis[name].transpose("run", ...)
+            out[name] = np.asarray(v.values, dtype=np.float64).reshape(n_runs, -1)
     return out
 
 
-def _diagnose(diagnoser: Any, runs: xr.Dataset) -> xr.Dataset:
-    """``diagnoser.diagnose(runs)``; runs with an all-missing window diagnosed window by window.
+def _input_novelty(
+    runs: xr.Dataset,
+    input_reference: NoveltyReference | None,
+    input_channels: Sequence[str],
+    th: SevaThresholds,
+) -> np.ndarray | None:
+    """``(run, time)``: 1 where the input sample is novel, 0 where not, NaN where an input is
+    missing; None without a reference."""
+    if input_reference is None:
+        return None
+    U = np.stack(
+        [
+            np.asarray(runs[c].transpose("run", "time").values, dtype=np.float64)
+            for c in input_channels
+        ],
+        axis=-1,
+    )
+    ok = np.all(np.isfinite(U), axis=-1)
+    novel = np.full(ok.shape, np.nan)
+    novel[ok] = input_reference.score(U[ok]) > th.novelty_ratio
+    return novel
 
-    One window without a single complete sample must not take the whole batch down: the runs
-    holding such a window go through `_diagnose_with_empty_windows` when the diagnoser is a
-    windowed `FaultDiagnoser` (or exposes the same public parts); other diagnosers get
-    ``diagnose`` and its error.
-    """
-    empty = _empty_windows(diagnoser, runs)
-    parts = ("normal_models_", "feature_names_", "predict_features", "classes_")
-    if empty is None or not empty.any() or not all(hasattr(diagnoser, a) for a in parts):
-        return diagnoser.diagnose(runs)
-    gappy = empty.any(axis=1)
-    pieces = [_diagnose_with_empty_windows(diagnoser, runs.isel(run=np.flatnonzero(gappy)))]
-    if not gappy.all():
-        pieces.append(diagnoser.diagnose(runs.isel(run=np.flatnonzero(~gappy))))
-    pieces = [p[[v for v in _DIAGNOSIS_VARS if v in p.data_vars]] for p in pieces]
-    order = np.concatenate([np.flatnonzero(gappy), np.flatnonzero(~gappy)])
-    joined = xr.concat(pieces, dim="run", coords="minimal", compat="override", join="override")
-    return joined.isel(run=np.argsort(order, kind="stable"))
+
+def _window_record(
+    data: _RecordData,
+    i: int,
+    w: int,
+    th: SevaThresholds,
+    limits: dict[str, tuple[float, float]],
+    *,
+    not_diagnosed: Mapping[int, tuple[str, ...]] | None,
+    input_reference: NoveltyReference | None,
+    feature_reference: NoveltyReference | None,
+) -> SevaRecord:
+    """The record of window ``w`` of run ``i``: screening, diagnosis, novelty, status."""
+    tm = (data.times >= data.w_start[w]) & (data.times < data.w_end[w])
+    if not tm.any():
+        raise ValueError(f"window {w} holds no samples of run {i}")
+    measured = data.measured
+    missing, saturated, blind_why, notes = screen_window(
+        {c: a[i, tm] for c, a in measured.items()}, th, limits
+    )
+    if not_diagnosed and i in not_diagnosed and not blind_why:
+        blind_why = tuple(f"run not diagnosed: {r}" for r in not_diagnosed[i])
+    p = data.proba[i, w]
+    diagnosed = p.size > 0 and bool(np.all(np.isfinite(p)))
+    if diagnosed:
+        k = int(np.argmax(p))
+        state, prob, ent = data.classes[k], float(p[k]), entropy(p)
+    else:
+        state, prob, ent = "", math.nan, math.nan
+    novel_frac = math.nan
+    if data.novel is not None:
+        nv = data.novel[i, tm]
+        nv = nv[np.isfinite(nv)]
+        novel_frac = float(nv.mean()) if nv.size else math.nan
+    feat_nov = math.nan
+    if data.features is not None and not np.isnan(data.features[i, w]).any():
+        feat_nov = float(feature_reference.score(data.features[i, w][None, :])[0])
+    status, reasons = decide_status(
+        th, blind_why, state, prob, ent, diagnosed, novel_frac, feat_nov
+    )
+    if input_reference is None and status is not SevaStatus.BLIND:
+        reasons.append("input novelty not checked (no input reference)")
+    reasons.extend(notes)
+    t_sel = data.times[tm]
+    pred = data.predicted
+    return SevaRecord(
+        run=int(data.run_ids[i]),
+        t_start=float(t_sel[0]),
+        t_end=float(t_sel[-1]),
+        x_measured=_nanmean(measured["X"][i, tm]) if "X" in measured else math.nan,
+        f_measured=_nanmean(measured["F"][i, tm]) if "F" in measured else math.nan,
+        x_vmv=_nanmean(pred["X_hat"][i, tm]),
+        x_vu=data.z * _rms(pred["X_hat_std"][i, tm]),
+        f_vmv=_nanmean(pred["F_hat"][i, tm]),
+        f_vu=data.z * _rms(pred["F_hat_std"][i, tm]),
+        coverage=data.coverage,
+        state=state,
+        probability=prob,
+        distribution=ClassDistribution(
+            list(zip(data.classes, p.tolist(), strict=True)) if diagnosed else []
+        ),
+        entropy=ent,
+        status=status,
+        reasons=tuple(reasons),
+        missing_fraction=float(missing.max(initial=0.0)),
+        saturated_fraction=float(saturated.max(initial=0.0)),
+        novel_fraction=novel_frac,
+        feature_novelty=feat_nov,
+        window=w if data.windowed else None,
+    )
 
 
 def seva_records(
@@ -401,12 +426,12 @@ def seva_records(
     usable = np.flatnonzero(~screen["blind"])
     diag = None
     if usable.size:
-        part = _diagnose(diagnoser, runs.isel(run=usable))
+        part = diagnose_allowing_empty_windows(diagnoser, runs.isel(run=usable))
         if usable.size == runs.sizes["run"]:
             diag = part
         else:
             # NaN rows for BLIND runs: never diagnosed, never shown as a diagnosis
-            part = part[[v for v in _DIAGNOSIS_VARS if v in part.data_vars]]
+            part = part[[v for v in DIAGNOSIS_VARIABLES if v in part.data_vars]]
             part = part.assign_coords(run=runs["run"].values[usable])
             diag = part.reindex(run=runs["run"].values)
     skipped = {int(i): tuple(screen["reasons"][i]) for i in np.flatnonzero(screen["blind"])}

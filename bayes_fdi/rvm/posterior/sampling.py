@@ -104,9 +104,10 @@ def sample_posterior(
 
     t0 = time.perf_counter()
     if inference == "nuts":
-        raw, st = run_nuts(
+        log_alpha, log_beta, weights, diagnostics = _nuts_draws(
             model,
             start,
+            t0,
             num_samples=num_samples,
             warmup_steps=warmup_steps,
             num_chains=num_chains,
@@ -117,39 +118,11 @@ def sample_posterior(
             init_jitter=float(init_jitter),
             progress=progress,
         )
-        log_alpha = raw["log_alpha"]
-        if model.kind == "regression":
-            log_beta = raw["log_beta"]
-            gen = torch.Generator().manual_seed(chain_seeds(seed, num_chains + 1)[-1])
-            w = model.sample_weights(
-                torch.as_tensor(log_alpha.reshape(-1, m)),
-                torch.as_tensor(log_beta.reshape(-1)),
-                generator=gen,
-            )
-            weights = w.numpy().reshape(log_alpha.shape)
-        else:
-            log_beta = None
-            weights = model.weights_from_latent(log_alpha, raw["v"])
-        elapsed = time.perf_counter() - t0
-        variables = {"log_alpha": log_alpha, "weights": weights}
-        if log_beta is not None:
-            variables["log_beta"] = log_beta
-        diagnostics = PosteriorDiagnostics.from_nuts(variables, st, elapsed)
-        bad_r_hat = num_chains > 1 and diagnostics.max_r_hat > 1.01
-        if bad_r_hat or diagnostics.n_divergences:
-            warnings.warn(
-                f"NUTS chains may not have converged ({diagnostics}); check "
-                "posterior.diagnostics, run longer or with more chains (R-hat < 1.01 needs a bulk "
-                "ESS of several hundred per chain; 4 chains are recommended). Large R-hat with "
-                "many overlapping basis functions usually means a multimodal posterior (chains "
-                "switch on different subsets of similar basis functions).",
-                ConvergenceWarning,
-                stacklevel=2,
-            )
     else:
-        raw, elbo = run_svi(
+        log_alpha, log_beta, weights, diagnostics = _svi_draws(
             model,
             start,
+            t0,
             steps=check_int("svi_steps", svi_steps, 1),
             lr=float(svi_lr),
             particles=check_int("svi_particles", svi_particles, 1),
@@ -157,10 +130,6 @@ def sample_posterior(
             seed=seed,
             jit=bool(svi_jit),
             progress=progress,
-        )
-        log_alpha, weights, log_beta = raw["log_alpha"], raw["weights"], raw.get("log_beta")
-        diagnostics = PosteriorDiagnostics(
-            inference="svi", elbo=elbo, wall_time_s=time.perf_counter() - t0
         )
     return RVMPosterior(
         kind=model.kind,
@@ -177,6 +146,67 @@ def sample_posterior(
         train_design=model.Phi.numpy(),
         observed=model.t.numpy(),
     )
+
+
+def _nuts_draws(
+    model: Model, start: dict[str, torch.Tensor], t0: float, **settings: Any
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, PosteriorDiagnostics]:
+    """NUTS chains (``settings`` as :func:`~bayes_fdi.rvm.posterior.samplers.run_nuts` takes
+    them), the weights of each draw (drawn exactly given it for regression, mapped from the
+    latent for classification) and the diagnostics (wall time since ``t0``); warns when the
+    chains may not have converged.
+
+    Returns
+    -------
+    log_alpha, log_beta, weights : numpy.ndarray
+        ``log_beta`` is None for classification.
+    diagnostics : PosteriorDiagnostics
+    """
+    raw, st = run_nuts(model, start, **settings)
+    seed, num_chains, m = settings["seed"], settings["num_chains"], model.n_basis
+    log_alpha = raw["log_alpha"]
+    if model.kind == "regression":
+        log_beta = raw["log_beta"]
+        gen = torch.Generator().manual_seed(chain_seeds(seed, num_chains + 1)[-1])
+        w = model.sample_weights(
+            torch.as_tensor(log_alpha.reshape(-1, m)),
+            torch.as_tensor(log_beta.reshape(-1)),
+            generator=gen,
+        )
+        weights = w.numpy().reshape(log_alpha.shape)
+    else:
+        log_beta = None
+        weights = model.weights_from_latent(log_alpha, raw["v"])
+    elapsed = time.perf_counter() - t0
+    variables = {"log_alpha": log_alpha, "weights": weights}
+    if log_beta is not None:
+        variables["log_beta"] = log_beta
+    diagnostics = PosteriorDiagnostics.from_nuts(variables, st, elapsed)
+    bad_r_hat = num_chains > 1 and diagnostics.max_r_hat > 1.01
+    if bad_r_hat or diagnostics.n_divergences:
+        warnings.warn(
+            f"NUTS chains may not have converged ({diagnostics}); check "
+            "posterior.diagnostics, run longer or with more chains (R-hat < 1.01 needs a bulk "
+            "ESS of several hundred per chain; 4 chains are recommended). Large R-hat with "
+            "many overlapping basis functions usually means a multimodal posterior (chains "
+            "switch on different subsets of similar basis functions).",
+            ConvergenceWarning,
+            stacklevel=3,
+        )
+    return log_alpha, log_beta, weights, diagnostics
+
+
+def _svi_draws(
+    model: Model, start: dict[str, torch.Tensor], t0: float, **settings: Any
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, PosteriorDiagnostics]:
+    """Draws from the SVI guide (``settings`` as
+    :func:`~bayes_fdi.rvm.posterior.samplers.run_svi` takes them) and the diagnostics (wall
+    time since ``t0``), in the order of :func:`_nuts_draws`."""
+    raw, elbo = run_svi(model, start, **settings)
+    diagnostics = PosteriorDiagnostics(
+        inference="svi", elbo=elbo, wall_time_s=time.perf_counter() - t0
+    )
+    return raw["log_alpha"], raw.get("log_beta"), raw["weights"], diagnostics
 
 
 def _estimator_init(
@@ -286,49 +316,24 @@ def fit_posterior(
         ``predict(X, return_std=True)`` (regression), ``predict_proba(X)`` (classification),
         ``diagnostics``, ``to_arviz()``.
     """
-    if basis not in ("active", "all"):
-        raise ValueError(f"basis must be 'active' or 'all', got {basis!r}")
-    for attr in ("alpha_", "design_matrix"):
-        if not hasattr(estimator, attr):
-            raise ValueError(f"estimator has no {attr!r}: fit it (RVR/RVC) before fit_posterior")
-    for forbidden in ("basis", "basis_names", "design", "classes", "init"):
-        if forbidden in kwargs:
-            raise ValueError(f"{forbidden!r} is set by fit_posterior")
-    n = int(X.shape[0]) if hasattr(X, "shape") else len(X)
-    y_arr = y.detach().cpu().numpy() if isinstance(y, torch.Tensor) else np.asarray(y)
-    if y_arr.ndim != 1 or y_arr.shape[0] != n:
-        raise ValueError(f"y must be 1-D with {n} entries (one per row of X), got {y_arr.shape}")
+    y_arr = _checked_targets(estimator, X, y, basis, kwargs)
     classes = getattr(estimator, "classes_", None)
     if classes is not None:
         classes = np.asarray(classes)
         unknown = ~np.isin(y_arr, classes)
         if unknown.any():
             raise ValueError(f"y has labels not in estimator.classes_: {np.unique(y_arr[unknown])}")
-        subs = getattr(estimator, "estimators_", None)
         if classes.size > 2:
-            if subs is None or len(subs) != classes.size:
-                raise ValueError(
-                    f"{classes.size} classes but estimator.estimators_ does not hold one binary "
-                    "one-vs-rest classifier per class"
-                )
-            parts = []
-            for k, (label, sub) in enumerate(zip(classes, subs, strict=True)):
-                part = fit_posterior(
-                    sub,
-                    X,
-                    (y_arr == label).astype(int),
-                    inference=inference,
-                    num_samples=num_samples,
-                    warmup_steps=warmup_steps,
-                    num_chains=num_chains,
-                    seed=int(np.random.SeedSequence([seed, k]).generate_state(1)[0] >> 1),
-                    basis=basis,
-                    hyperpriors=hyperpriors,
-                    svi_steps=svi_steps,
-                    **kwargs,
-                )
-                parts.append(part)
-            return OneVsRestPosterior(classes=classes, posteriors=tuple(parts))
+            settings = {
+                "inference": inference,
+                "num_samples": num_samples,
+                "warmup_steps": warmup_steps,
+                "num_chains": num_chains,
+                "basis": basis,
+                "hyperpriors": hyperpriors,
+                "svi_steps": svi_steps,
+            }
+            return _one_vs_rest_posterior(estimator, X, y_arr, classes, seed, settings, kwargs)
         Phi = estimator.design_matrix(X, basis=basis)
         param = kwargs.pop("parametrisation", None)
         if param is None:
@@ -356,3 +361,53 @@ def fit_posterior(
         classes=classes,
         **kwargs,
     )
+
+
+def _one_vs_rest_posterior(
+    estimator: Any,
+    X: Any,
+    y: np.ndarray,
+    classes: np.ndarray,
+    seed: int,
+    settings: dict[str, Any],
+    kwargs: dict[str, Any],
+) -> OneVsRestPosterior:
+    """:func:`fit_posterior` of each binary one-vs-rest classifier of a multi-class RVC (class
+    ``k`` seeded from ``(seed, k)``)."""
+    subs = getattr(estimator, "estimators_", None)
+    if subs is None or len(subs) != classes.size:
+        raise ValueError(
+            f"{classes.size} classes but estimator.estimators_ does not hold one binary "
+            "one-vs-rest classifier per class"
+        )
+    parts = []
+    for k, (label, sub) in enumerate(zip(classes, subs, strict=True)):
+        part = fit_posterior(
+            sub,
+            X,
+            (y == label).astype(int),
+            seed=int(np.random.SeedSequence([seed, k]).generate_state(1)[0] >> 1),
+            **settings,
+            **kwargs,
+        )
+        parts.append(part)
+    return OneVsRestPosterior(classes=classes, posteriors=tuple(parts))
+
+
+def _checked_targets(
+    estimator: Any, X: Any, y: Any, basis: str, kwargs: Mapping[str, Any]
+) -> np.ndarray:
+    """``y`` as a 1-D numpy array, once :func:`fit_posterior`'s arguments are checked."""
+    if basis not in ("active", "all"):
+        raise ValueError(f"basis must be 'active' or 'all', got {basis!r}")
+    for attr in ("alpha_", "design_matrix"):
+        if not hasattr(estimator, attr):
+            raise ValueError(f"estimator has no {attr!r}: fit it (RVR/RVC) before fit_posterior")
+    for forbidden in ("basis", "basis_names", "design", "classes", "init"):
+        if forbidden in kwargs:
+            raise ValueError(f"{forbidden!r} is set by fit_posterior")
+    n = int(X.shape[0]) if hasattr(X, "shape") else len(X)
+    y_arr = y.detach().cpu().numpy() if isinstance(y, torch.Tensor) else np.asarray(y)
+    if y_arr.ndim != 1 or y_arr.shape[0] != n:
+        raise ValueError(f"y must be 1-D with {n} entries (one per row of X), got {y_arr.shape}")
+    return y_arr

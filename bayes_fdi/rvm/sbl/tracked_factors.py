@@ -1,12 +1,11 @@
 r"""Screening factors of every candidate carried from iteration to iteration, with rigorous
 error bounds (:class:`TrackedFactors`), for the fast Gaussian solver.
 
-Written by hand: no maintained library implements Tipping & Faul's solver, nor error bounds for
-its updates. :func:`bayes_fdi.rvm.sbl_decisions.screened_factors` recomputes the screening
-factors of all ``P`` candidates from a fresh factor at ``O(P M^2)`` per iteration. Here they are
-*carried*: each add / re-estimate / delete changes the posterior precision by a rank-one or
-bordering step, and the candidates' solve coefficients ``c_m`` follow by one rank-one update of
-the ``P x M`` matrix ``C`` (``O(P M)``), as in SparseBayes. Unlike SparseBayes, every carried
+:func:`bayes_fdi.rvm.sbl.screening.screened_factors` recomputes the screening factors of all
+``P`` candidates from a fresh factor at ``O(P M^2)`` per iteration. Here they are *carried*:
+each add / re-estimate / delete changes the posterior precision by a rank-one or bordering step,
+and the candidates' solve coefficients ``c_m`` follow by one rank-one update of the ``P x M``
+matrix ``C`` (``O(P M)``), as in SparseBayes. Unlike SparseBayes, every carried
 value comes with a bound of its error that grows with each update:
 
 * ``rho_m >= ||A^-1/2 (H c_m - z_m)||``: the residual of the carried coefficients against the
@@ -22,98 +21,37 @@ value comes with a bound of its error that grows with each update:
   (``c^T Delta c``, ``c^T Delta mu``) and the second-order rest goes into the bounds and into
   ``rho``.
 
-The decisions are still taken on exact factors (:mod:`bayes_fdi.rvm.sbl_verification`): the
+The decisions are still taken on exact factors (:mod:`bayes_fdi.rvm.sbl.verification`): the
 carried factors and bounds only decide which candidates need an exact look, so they change the
 cost, never the path of actions. Rows that could win are first screened afresh from the fresh
 factor (:meth:`TrackedFactors.tighten`, ``O(M^2)`` each); when the bounds have grown so loose
 that many rows need it, the solver asks for a full refresh (:meth:`TrackedFactors.refresh`, the
 ``O(P M^2)`` screening). Everything is kept in ``beta``-free units:
-``H_ = diag(alpha / beta) + Phi^T Phi``, ``z_m = Phi^T b_m``; ``S = beta S_``, ``Q = beta Q_``.
+``H_ = diag(alpha / beta) + Phi^T Phi``, ``z_m = Phi^T b_m``; ``S = beta S_``, ``Q = beta Q_``
+(the posterior and its bounds: :mod:`bayes_fdi.rvm.sbl.posterior_bounds`).
+
+Imports :mod:`~bayes_fdi.rvm.sbl.posterior_bounds`, :mod:`~bayes_fdi.rvm.sbl.rounding` and
+:mod:`~bayes_fdi.rvm.sbl.screening`. Written by hand: no maintained library implements Tipping &
+Faul's solver, nor error bounds for its updates.
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl_decisions import (
-    gaussian_screened_Q,
-    rounding_gamma,
-    screened_factors,
-    thin_matmul,
-)
-from bayes_fdi.rvm.sbl_numerics import _Factor
+from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
+from bayes_fdi.rvm.sbl.rounding import rounding_gamma, thin_matmul
+from bayes_fdi.rvm.sbl.screening import gaussian_screened_Q, screened_factors
 
-__all__ = ["Posterior", "TrackedFactors", "posterior_context"]
+__all__ = ["TrackedFactors"]
 
 #: the carried bounds are used while the stored Gram matrix's error inflates them by at most
-#: this factor (``psd``, :func:`posterior_context`); beyond it the solver screens directly
+#: this factor (``psd``, see :mod:`bayes_fdi.rvm.sbl.posterior_bounds`); beyond it the solver
+#: screens directly
 _MAX_PSD = 2.0
-
-
-class Posterior(NamedTuple):
-    """The current posterior in ``beta``-free units, with the bounds the updates need
-    (:func:`posterior_context`)."""
-
-    fac: _Factor  # Cholesky factor of H = beta * Hb
-    beta: float
-    abar: Tensor  # (M,) alpha / beta
-    root: Tensor  # (M,) abar^1/2
-    Hb: Tensor  # (M, M) stored precision diag(abar) + G
-    Hb_F: float  # upper bound of ||Hb||_F
-    lam: float  # upper bound of lambda_max(Hb^-1)
-    psd: float  # Hb >= A / psd (1 for an exactly PSD Gram matrix; slightly above 1 here)
-    mu: Tensor  # (M,) posterior mean Hb^-1 Phi^T t
-    mu_error_w: float  # bound of ||A^1/2 (mu - exact mu)||
-    gradient: Tensor  # (M,) Hb mu - Phi^T t (computed)
-    gradient_error: Tensor  # (M,) bound of its rounding
-
-    def solve(self, v: Tensor) -> Tensor:
-        """``Hb^-1 v``."""
-        return self.beta * self.fac.solve(v)
-
-    def weighted(self, v: Tensor) -> float:
-        """``||A^-1/2 v||`` (upper bound, rounding included)."""
-        n = float(torch.linalg.vector_norm(v / self.root))
-        return n * (1.0 + rounding_gamma(v.numel() + 2, v.dtype))
-
-
-def posterior_context(
-    fac: _Factor, alpha: Tensor, beta: float, G: Tensor, mu: Tensor, Phi_t: Tensor, eps: float
-) -> Posterior:
-    """Bounds of the current posterior from its fresh factor, ``O(M^2)``.
-
-    The exact Gram matrix is positive semi-definite and the stored one is within ``eps`` per
-    entry (``Design.screening_error``), so ``Hb >= A - M eps >= A (1 - M eps / min abar)``:
-    ``lambda_max(Hb^-1) <= 1 / (min abar - M eps)``. Where that is not positive, every bound
-    is infinite and the carried factors are refreshed each iteration.
-    """
-    M = alpha.numel()
-    dt = alpha.dtype
-    abar = alpha / beta
-    Hb = 0.5 * (G + G.T)
-    Hb.diagonal().add_(abar)
-    Hb_F = float(torch.linalg.matrix_norm(Hb)) * (1.0 + rounding_gamma(M * M + 1, dt))
-    a_min = float(abar.min())
-    low = a_min - M * eps
-    gamma2 = rounding_gamma(2, dt)
-    if low > 0:
-        lam, psd = (1.0 / low) * (1.0 + gamma2), (a_min / low) * (1.0 + gamma2)
-    else:
-        lam = psd = math.inf
-    root = abar.sqrt()
-    gradient = Hb @ mu - Phi_t
-    gradient_error = rounding_gamma(M + 3, dt) * (Hb.abs() @ mu.abs() + Phi_t.abs())
-    g_w = float(torch.linalg.vector_norm(gradient / root)) + float(
-        torch.linalg.vector_norm(gradient_error / root)
-    )
-    mu_error_w = math.sqrt(psd) * g_w * (1.0 + rounding_gamma(M + 2, dt))
-    return Posterior(
-        fac, beta, abar, root, Hb, Hb_F, lam, psd, mu, mu_error_w, gradient, gradient_error
-    )
 
 
 class TrackedFactors:
@@ -146,8 +84,8 @@ class TrackedFactors:
     # ----------------------------------------------------------------------- fresh values
     def refresh(self, post: Posterior, Z: Tensor, rows: Tensor | None = None) -> None:
         """Recompute the factors of ``rows`` (all when None) from the fresh factor, with the
-        stationary forms of ``sbl_decisions`` (``O(K M^2)`` for ``K`` rows). ``Z`` is the stored
-        ``P x M`` matrix of products ``B^T Phi``."""
+        stationary forms of :mod:`~bayes_fdi.rvm.sbl.screening` (``O(K M^2)`` for ``K`` rows).
+        ``Z`` is the stored ``P x M`` matrix of products ``B^T Phi``."""
         M = Z.shape[1]
         beta = post.beta
         Zr = Z if rows is None else Z[rows]
@@ -195,9 +133,9 @@ class TrackedFactors:
 
     def direct(self, post: Posterior, Z: Tensor, eps: float, bt_error: float) -> tuple[Tensor, ...]:
         """``S, Q`` (``beta`` units) of all rows screened from the fresh factor with the
-        complete bounds of ``sbl_decisions`` (input errors through ``tr(H^-1)``), for a
-        posterior the carried bounds cannot serve (:meth:`usable`); the carried values are
-        refreshed at the next usable posterior."""
+        complete bounds of :mod:`~bayes_fdi.rvm.sbl.screening` (input errors through
+        ``tr(H^-1)``), for a posterior the carried bounds cannot serve (:meth:`usable`); the
+        carried values are refreshed at the next usable posterior."""
         M = Z.shape[1]
         beta = post.beta
         z_err = Z.new_full((M,), beta * eps)

@@ -14,7 +14,7 @@ budget ``max_bytes``; otherwise it is recomputed in row blocks, so memory grows 
 
 Screening copy.  A float64 kernel design may keep, instead of the matrix, only its upper
 triangle in 6 bytes an entry (a float32 value and a bfloat16 remainder:
-:class:`~bayes_fdi.rvm.screening_copy.TriangleCopy`, 37.5 % of the float64 matrix's memory),
+:class:`~bayes_fdi.rvm.sbl.screening_copy.TriangleCopy`, 37.5 % of the float64 matrix's memory),
 used by ``rmatmul(V, exact=False)``: the ``B^T b_i`` products that screen candidate columns in
 the fast solvers.  The products are accumulated in float64 from cache-sized blocks converted
 on the fly, so their error is the stored entries' (relative ``2^-33``) plus float64
@@ -28,6 +28,10 @@ matrix exceeds ``max_bytes`` and the copy fits it (``N`` from about 15 800 to 25
 default 2 GB); recomputing the kernel rows for every product instead made the smooth benchmark
 fit at ``N = 20000`` ten times slower (``docs/rvm-benchmark.md``).  On other devices the rows
 are recomputed there, which is cheap.
+
+Imports :mod:`bayes_fdi.rvm.kernels` and :mod:`~bayes_fdi.rvm.sbl.screening_copy` only. Written
+by hand: no maintained library serves a kernel design in blocks or from a reduced-precision copy
+with a bound of the products' error.
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from scipy.linalg.blas import dsymv
 from torch import Tensor
 
 from bayes_fdi.rvm.kernels import Kernel
-from bayes_fdi.rvm.screening_copy import TriangleCopy, triangle_bytes
+from bayes_fdi.rvm.sbl.screening_copy import TriangleCopy, triangle_bytes
 
 __all__ = ["DEFAULT_MAX_BYTES", "Design"]
 
@@ -241,7 +245,7 @@ class Design:
         """Bound on the error of ``rmatmul(v, exact=False)[i] / ||b_i||`` for a unit vector ``v``
         (and of ``sq_rmatmul(w, exact=False)[i]`` relative to ``sum_j b_ij^2 |w_j|``): that of
         :meth:`product_error`, plus with the screening copy the rounding of its stored entries
-        (:meth:`TriangleCopy.error <bayes_fdi.rvm.screening_copy.TriangleCopy.error>`).
+        (:meth:`TriangleCopy.error <bayes_fdi.rvm.sbl.screening_copy.TriangleCopy.error>`).
         """
         if self.screen_copy is None:
             return self.product_error()

@@ -1,19 +1,20 @@
 """Polishing a fast Gaussian fit by a re-estimation restart (:func:`polish_gaussian`).
 
 The evidence of an RBF design has many local optima: Tipping & Faul's sequential solver
-(:func:`~bayes_fdi.rvm.sbl_gaussian.fast_gaussian`) builds its basis greedily from one column
+(:func:`~bayes_fdi.rvm.sbl.gaussian.fast_gaussian`) builds its basis greedily from one column
 and stops at an optimum where no single addition, deletion or re-estimation helps, while
-Tipping's re-estimation from the whole basis (:func:`~bayes_fdi.rvm.sbl_em.em_gaussian`,
+Tipping's re-estimation from the whole basis (:func:`~bayes_fdi.rvm.sbl.reestimation.em_gaussian`,
 scikit-learn's ``ARDRegression``) often reaches a different one, nats higher (on 200 to 400
 noisy samples of a smooth function with an RBF basis of width 0.5, 0.1 to 6 nats; the two
 active sets share half their columns). Moves of one or two columns from the fast optimum
-(swaps, tried on the branch ``rvr-engine``) did not get there. The polish therefore restarts
+(swaps) did not get there. The polish therefore restarts
 the re-estimation from a pool of columns -- the whole basis when it is small, else the fast
 fit's basis and the candidates most correlated with its residual -- continues it with the
 fast solver (whose decisions are taken on exact factors, and whose every action raises the
 evidence), and keeps whichever of the two fits has the higher evidence.
 
-Written by hand on top of the two solvers; no maintained library combines them.
+Imports the two Gaussian solvers and the result type. Written by hand on top of the two solvers;
+no maintained library combines them.
 """
 
 from __future__ import annotations
@@ -23,10 +24,10 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_em import em_gaussian
-from bayes_fdi.rvm.sbl_gaussian import fast_gaussian
-from bayes_fdi.rvm.sbl_numerics import SBLResult, _unit_columns
+from bayes_fdi.rvm.sbl.design import Design
+from bayes_fdi.rvm.sbl.gaussian import fast_gaussian
+from bayes_fdi.rvm.sbl.reestimation import em_gaussian
+from bayes_fdi.rvm.sbl.result import SBLResult, unit_columns
 
 __all__ = ["Polish", "polish_gaussian", "restart_pool"]
 
@@ -72,7 +73,7 @@ def restart_pool(design: Design, t: Tensor, fitted: SBLResult, size: int) -> Ten
     """
     if size < 1:
         raise ValueError(f"the pool size must be >= 1, got {size}")
-    norms, valid = _unit_columns(design)
+    norms, valid = unit_columns(design)
     if int(valid.sum()) <= size:
         return valid.nonzero().squeeze(1)
     active = fitted.active.to(norms.device)

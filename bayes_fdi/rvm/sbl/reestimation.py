@@ -1,11 +1,12 @@
-"""Tipping's (2001) re-estimation ("EM") solvers, the paper's eqs. (10)-(11) and (26)-(29):
-``alpha_i = gamma_i / mu_i^2``, ``sigma^2 = ||t - Phi mu||^2 / (N - sum gamma)``, pruning large
-``alpha`` (Gaussian: :func:`em_gaussian`; Bernoulli with the Laplace approximation:
-:func:`em_bernoulli`).
+"""Tipping's (2001) re-estimation ("EM") solvers: ``alpha_i = gamma_i / mu_i^2``,
+``sigma^2 = ||t - Phi mu||^2 / (N - sum gamma)``, pruning large ``alpha`` (Gaussian:
+:func:`em_gaussian`; Bernoulli with the Laplace approximation: :func:`em_bernoulli`).
 
-Written by hand: a few lines on top of the shared numerics; scikit-learn's ``ARDRegression``
-implements the Gaussian case on a fixed design but not on a kernel design held in blocks, nor
-the Bernoulli case.
+Tipping 2001, "Sparse Bayesian learning and the relevance vector machine" (JMLR), eqs. (10)-(11)
+and (26)-(29). Imports the solver family's numerics, :mod:`~bayes_fdi.rvm.sbl.noise` and
+:mod:`~bayes_fdi.rvm.sbl.laplace` (not the fast solvers). Written by hand: a few lines on top of
+the shared numerics; scikit-learn's ``ARDRegression`` implements the Gaussian case on a fixed
+design but not on a kernel design held in blocks, nor the Bernoulli case.
 """
 
 from __future__ import annotations
@@ -15,16 +16,11 @@ import math
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.design import Design
-from bayes_fdi.rvm.sbl_bernoulli import posterior_mode
-from bayes_fdi.rvm.sbl_gaussian import _BETA_MAX_FACTOR
-from bayes_fdi.rvm.sbl_numerics import (
-    SBLResult,
-    _factor,
-    _gaussian_log_ml,
-    _result,
-    _unit_columns,
-)
+from bayes_fdi.rvm.sbl.design import Design
+from bayes_fdi.rvm.sbl.laplace import posterior_mode
+from bayes_fdi.rvm.sbl.noise import initial_noise_precision, reestimated_noise_precision
+from bayes_fdi.rvm.sbl.precision_factor import factor_precision, gaussian_log_evidence
+from bayes_fdi.rvm.sbl.result import SBLResult, result_in_caller_basis, unit_columns
 
 __all__ = ["em_bernoulli", "em_gaussian"]
 
@@ -38,7 +34,7 @@ def em_gaussian(
     prune: float = 1e8,
     columns: Tensor | None = None,
 ) -> SBLResult:
-    """Tipping's (2001) re-estimation (the paper's eqs. 10-11), Gaussian noise.
+    """Tipping's (2001) re-estimation (eqs. 10-11 there), Gaussian noise.
 
     Starts from the whole candidate basis; costs ``O(M^3 + N M^2)`` per iteration, so it
     is a reference implementation for small problems.
@@ -66,25 +62,15 @@ def em_gaussian(
     """
     N = design.n_samples
     dtype, device = design.dtype, design.device
-    norms, valid = _unit_columns(design)
+    norms, valid = unit_columns(design)
     if columns is not None:
-        columns = torch.as_tensor(columns, dtype=torch.long, device=device)
-        if columns.numel() and (int(columns.min()) < 0 or int(columns.max()) >= valid.numel()):
-            raise ValueError(f"columns must index the design's {valid.numel()} columns")
-        chosen = torch.zeros_like(valid)
-        chosen[columns] = True
-        valid = valid & chosen
-        if not bool(valid.any()):
-            raise ValueError("columns contains no usable (non-zero) design column")
+        valid = _restricted(valid, columns, device)
     active = valid.nonzero().squeeze(1)
     Phi_all = design.columns(active) / norms[active]
     G_all = Phi_all.T @ Phi_all
     Pt_all = Phi_all.T @ t
-    t_var = float(t.var(unbiased=False))
     t_sq = float(t @ t)
-    var_floor = max(t_var, 1e-12 * t_sq / N, 1e-300)
-    beta_max = _BETA_MAX_FACTOR / var_floor
-    beta = min(1.0 / (0.1 * math.sqrt(var_floor)) ** 2, beta_max)
+    beta, beta_max = initial_noise_precision(t, N)
     alpha = torch.full(
         (active.numel(),), active.numel() / max(t_sq, 1e-300), dtype=dtype, device=device
     )
@@ -96,18 +82,14 @@ def em_gaussian(
     mu = Sigma = None
     log_ml = -math.inf
     for it in range(1, max_iter + 1):  # noqa: B007
-        fac = _factor(alpha, beta * G_all[keep][:, keep])
-        mu = beta * fac.solve(Pt_all[keep])
-        Sigma = fac.covariance()
-        resid = t - Phi_all[:, keep] @ mu
-        ee = float(resid @ resid)
-        log_ml = _gaussian_log_ml(N, beta, ee, alpha, mu, fac)
+        mu, Sigma, ee, log_ml = _gaussian_posterior(
+            Phi_all[:, keep], G_all, Pt_all, t, keep, alpha, beta
+        )
         gain = log_ml - trace[-1] if trace else math.inf
         trace.append(log_ml)
         gamma = (1.0 - alpha * Sigma.diagonal()).clamp(0.0, 1.0)
         new_alpha = (gamma / (mu * mu).clamp_min(1e-300)).clamp_min(alpha_floor)
-        new_beta = min((N - float(gamma.sum())) / max(ee, 1e-300), beta_max)
-        new_beta = max(new_beta, 1e-300)
+        new_beta = reestimated_noise_precision(N, float(gamma.sum()), ee, beta_max)
         d_alpha = float((torch.log(new_alpha) - torch.log(alpha)).abs().max())
         d_beta = abs(math.log(new_beta) - math.log(beta))
         if (d_alpha < tol and d_beta < tol) or abs(gain) < 1e-3 * tol:
@@ -119,13 +101,11 @@ def em_gaussian(
             small = alpha == alpha.min()
         keep, alpha = keep[small], alpha[small]
     if not converged:  # statistics of the last hyperparameters
-        fac = _factor(alpha, beta * G_all[keep][:, keep])
-        mu = beta * fac.solve(Pt_all[keep])
-        Sigma = fac.covariance()
-        resid = t - Phi_all[:, keep] @ mu
-        log_ml = _gaussian_log_ml(N, beta, float(resid @ resid), alpha, mu, fac)
+        mu, Sigma, _, log_ml = _gaussian_posterior(
+            Phi_all[:, keep], G_all, Pt_all, t, keep, alpha, beta
+        )
         trace.append(log_ml)
-    return _result(
+    return result_in_caller_basis(
         active[keep],
         mu,
         Sigma,
@@ -139,6 +119,33 @@ def em_gaussian(
     )
 
 
+def _restricted(valid: Tensor, columns: Tensor, device: torch.device) -> Tensor:
+    """``valid`` restricted to the design columns ``columns`` (indices, validated)."""
+    columns = torch.as_tensor(columns, dtype=torch.long, device=device)
+    if columns.numel() and (int(columns.min()) < 0 or int(columns.max()) >= valid.numel()):
+        raise ValueError(f"columns must index the design's {valid.numel()} columns")
+    chosen = torch.zeros_like(valid)
+    chosen[columns] = True
+    valid = valid & chosen
+    if not bool(valid.any()):
+        raise ValueError("columns contains no usable (non-zero) design column")
+    return valid
+
+
+def _gaussian_posterior(
+    Phi: Tensor, G_all: Tensor, Pt_all: Tensor, t: Tensor, keep: Tensor, alpha: Tensor, beta: float
+) -> tuple[Tensor, Tensor, float, float]:
+    """Posterior mean and covariance of the kept columns ``Phi`` (positions ``keep`` of the
+    Gram matrix ``G_all`` and of ``Pt_all = Phi_all^T t``), ``||t - Phi mu||^2`` and the exact
+    log evidence."""
+    fac = factor_precision(alpha, beta * G_all[keep][:, keep])
+    mu = beta * fac.solve(Pt_all[keep])
+    Sigma = fac.covariance()
+    resid = t - Phi @ mu
+    ee = float(resid @ resid)
+    return mu, Sigma, ee, gaussian_log_evidence(t.shape[0], beta, ee, alpha, mu, fac)
+
+
 def em_bernoulli(
     design: Design,
     t: Tensor,
@@ -147,7 +154,7 @@ def em_bernoulli(
     tol: float = 1e-3,
     prune: float = 1e8,
 ) -> SBLResult:
-    """Tipping's (2001) re-estimation with the Laplace approximation (paper eqs. 26-29).
+    """Tipping's (2001) re-estimation with the Laplace approximation (eqs. 26-29 there).
 
     Parameters
     ----------
@@ -160,7 +167,7 @@ def em_bernoulli(
         precision ``y(1-y)`` is at most 1/4, so a basis is pruned when ``alpha > prune / 4``).
     """
     dtype, device = design.dtype, design.device
-    norms, valid = _unit_columns(design)
+    norms, valid = unit_columns(design)
     active = valid.nonzero().squeeze(1)
     Phi_all = design.columns(active) / norms[active]
     keep = torch.arange(active.numel(), device=device)
@@ -191,7 +198,7 @@ def em_bernoulli(
         mode = posterior_mode(Phi_all[:, keep], t, alpha, mu)
         trace.append(mode.log_ml)
     assert mode is not None
-    return _result(
+    return result_in_caller_basis(
         active[keep],
         mode.mu,
         mode.Sigma,

@@ -19,6 +19,8 @@ some order, so
 eta ||v||_1`` with ``delta' = (1 + delta)^2 (1 + u) - 1``, which also covers the squared entries
 of :meth:`TriangleCopy.square_matmul`: :meth:`TriangleCopy.error` turns it into a bound relative
 to ``||b_i|| ||v||``.
+
+Imports :mod:`bayes_fdi.rvm.kernels` only.
 """
 
 from __future__ import annotations

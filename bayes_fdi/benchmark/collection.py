@@ -1,0 +1,172 @@
+"""What the benchmark collects run by run, and the calibration of the group probabilities.
+
+`RunCollector` scores each run's 1 Hz decision stream against its scenario (the decision
+signals of `bayes_fdi.scoring.decision_signals`, PICalc's indices of
+`bayes_fdi.scoring.picalc`), counts confident wrong isolations, keeps the normal models'
+spread and a sample of detected faulty seconds; `group_calibration` turns that sample into the
+top-label ECE of the group probabilities with a run-level bootstrap interval.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from bayes_fdi.benchmark.scenarios import BenchmarkScenario
+from bayes_fdi.scoring.decision_signals import decision_signals
+from bayes_fdi.scoring.picalc import picalc
+
+__all__ = ["CALIBRATION_SECONDS_PER_RUN", "CONFIDENT", "RunCollector", "group_calibration"]
+
+#: Each run contributes at most this many detected faulty seconds (evenly spaced) to the
+#: calibration sample, so the day-long ramps (84 600 faulty s) do not outweigh the abrupt
+#: faults (600 faulty s).
+CALIBRATION_SECONDS_PER_RUN = 600
+#: A group probability above this is "confident" (the isolation target counts confident wrong
+#: groups).
+CONFIDENT = 0.9
+
+
+class RunCollector:
+    """Accumulates per-run indices, calibration samples and counts over the batches.
+
+    `add` scores one run's decision stream; the attributes hold what the benchmark reports:
+    ``rows`` (one per run: fault, mode, size, seed, PICalc indices), ``faulty_seconds`` and
+    ``confident_wrong`` (seconds of a fault with a wrong group above `CONFIDENT`),
+    ``model_std`` (median predictive std of X and F before each fault) and the calibration
+    sample (``proba``, ``true``, ``cluster``: at most `CALIBRATION_SECONDS_PER_RUN` detected
+    faulty seconds per run) with the stream's group ``labels`` and ``attrs``.
+    """
+
+    def __init__(self, seed: int) -> None:
+        self.rows: list[dict[str, Any]] = []
+        self.proba: list[np.ndarray] = []
+        self.true: list[np.ndarray] = []
+        self.cluster: list[np.ndarray] = []
+        self.labels: list[str] | None = None
+        self.attrs: dict[str, Any] = {}
+        self.faulty_seconds = 0
+        self.confident_wrong = 0
+        self.model_std: dict[str, list[float]] = {"X": [], "F": []}
+        self.rng = np.random.default_rng(seed)
+
+    def add(self, scenario: BenchmarkScenario, seed: int, one: xr.Dataset) -> dict[str, Any]:
+        """Score the decision stream ``one`` of ``scenario`` with noise ``seed``; its row."""
+        t = np.asarray(one["time"].values, dtype=np.float64)
+        sig = decision_signals(one, scenario.fault)
+        indices = picalc(
+            t,
+            sig.dd,
+            sig.pid,
+            sig.cid,
+            t_on=scenario.t_on,
+            t_from=scenario.t_from,
+            t_hor=scenario.t_hor,
+            strength=scenario.strength_at(t),
+            indicated=sig.indicated,
+            group_sizes=sig.group_sizes,
+        )
+        row = {
+            "fault": scenario.fault,
+            "mode": scenario.mode,
+            "size": scenario.size,
+            "seed": int(seed),
+            "indices": indices,
+        }
+        self.rows.append(row)
+        labels = [str(g) for g in one["group"].values]
+        if self.labels is None:
+            self.labels = labels
+            self.attrs = {k: one.attrs.get(k) for k in ("groups", "undetectable")}
+        elif labels != self.labels:
+            raise ValueError("run_benchmark: the stream's groups changed between runs")
+        faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
+        proba = one["group_proba"].transpose("time", "group").values
+        known = np.isfinite(proba).all(axis=1)
+        filled = np.where(known[:, None], proba, 0.0)  # undefined rows are never confident
+        top, pred = filled.max(axis=1), filled.argmax(axis=1)
+        wrong = top > CONFIDENT
+        if sig.true_group is not None:
+            wrong &= pred != sig.true_group
+        self.faulty_seconds += int(faulty.sum())
+        self.confident_wrong += int((wrong & faulty).sum())
+        fault_free = (t >= scenario.t_on) & (t < scenario.t_from)
+        for c in ("X", "F"):
+            std = one[f"{c}_hat_std"].values[fault_free]
+            if np.isfinite(std).any():
+                self.model_std[c].append(float(np.nanmedian(std)))
+        keep = np.flatnonzero(faulty & sig.dd & known)
+        if sig.true_group is not None and keep.size:
+            if keep.size > CALIBRATION_SECONDS_PER_RUN:
+                pos = np.linspace(0, keep.size - 1, CALIBRATION_SECONDS_PER_RUN)
+                keep = keep[np.round(pos).astype(np.int64)]
+            self.proba.append(proba[keep])
+            self.true.append(np.full(keep.size, sig.true_group))
+            self.cluster.append(np.full(keep.size, len(self.rows) - 1))
+        return row
+
+
+def group_calibration(
+    col: RunCollector, n_bootstrap: int, seed: int, figure: Path | None
+) -> dict[str, Any]:
+    """Top-label ECE of the group probabilities with a run-level (cluster) bootstrap interval.
+
+    Draws the reliability diagram into ``figure`` (a path, or None for no figure); returns the
+    ``calibration`` entry of ``benchmark.json``.
+    """
+    from bayes_fdi.calibration import expected_calibration_error, reliability_diagram
+
+    if not col.proba:
+        return {"n_seconds": 0, "note": "no detected faulty second of an isolable fault"}
+    proba = np.concatenate(col.proba)
+    labels = np.asarray(col.labels)
+    y = labels[np.concatenate(col.true)]
+    cluster = np.concatenate(col.cluster)
+    res = expected_calibration_error(y, proba, classes=labels, n_bins=15)
+    # seconds of one run are strongly correlated: resample whole runs, not seconds
+    runs = np.unique(cluster)
+    members = [np.flatnonzero(cluster == r) for r in runs]
+    rng = np.random.default_rng(seed)
+    boots = np.empty(n_bootstrap)
+    for b in range(n_bootstrap):
+        take = np.concatenate([members[i] for i in rng.integers(0, runs.size, runs.size)])
+        boots[b] = expected_calibration_error(y[take], proba[take], classes=labels, n_bins=15).value
+    lo = hi = float("nan")
+    if n_bootstrap:
+        q_lo, q_hi = np.quantile(boots, [0.025, 0.975])
+        lo, hi = max(0.0, 2 * res.value - q_hi), max(0.0, 2 * res.value - q_lo)  # basic interval
+    res = res._replace(ci_low=float(lo), ci_high=float(hi))
+    if figure is not None:
+        import matplotlib.pyplot as plt
+
+        from bayes_fdi.atomic import save_figure
+
+        fig, ax = plt.subplots(figsize=(5, 5))
+        reliability_diagram(
+            res,
+            ax=ax,
+            title=f"group-level top-label ECE = {res.value:.3f} "
+            f"[{lo:.3f}, {hi:.3f}] (runs resampled)\n{len(y)} s of {runs.size} runs",
+        )
+        save_figure(fig, figure, dpi=110)
+    return {
+        "n_seconds": len(y),
+        "n_runs": int(runs.size),
+        "ece": res.value,
+        "ci_low": res.ci_low,
+        "ci_high": res.ci_high,
+        "noise_floor": res.noise_floor,
+        "mce": res.mce,
+        "accuracy": float(np.mean(labels[np.argmax(proba, axis=1)] == y)),
+        "mean_confidence": float(np.mean(np.max(proba, axis=1))),
+        "bins": {
+            "edges": res.bin_edges,
+            "counts": res.bin_counts,
+            "confidence": res.bin_confidence,
+            "accuracy": res.bin_accuracy,
+        },
+        "n_bootstrap": int(n_bootstrap),
+    }

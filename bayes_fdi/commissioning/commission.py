@@ -1,0 +1,191 @@
+"""Commissioning a valve: its own normal models, digital twin, fault library and isolation.
+
+`commission` learns the valve a diagnoser sits on from the plant's healthy data:
+
+1. checks the data (`bayes_fdi.commissioning.healthy`);
+2. fits the Bayesian digital twin (`bayes_fdi.twin.ActuatorTwin`) on the first part of the
+   data and checks its posterior predictive on the rest (coverage, RMS against the nominal
+   model);
+3. transplants every fault of the library (the 19 DAMADICS faults and the bias or drift of one
+   reading) onto the healthy data, with parameters drawn from the twin's posterior: one
+   library trains the isolation, one finds the isolability groups, one calibrates the group
+   probabilities (disjoint parameter and noise draws: seeds ``10 seed + 1, 2, 3``);
+4. fits the online diagnoser (`bayes_fdi.diagnosis.OnlineDiagnoser`) with the valve's own normal
+   models, detector threshold and input envelope on all the healthy data, and the isolation on
+   those libraries;
+5. measures what to expect on held-out transplants (`expected_performance`, seed
+   ``10 seed + 4``) and writes it, with the twin's fit and what the data identify, into the
+   diagnoser's ``commissioning_`` record, which its model file keeps.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Any, NamedTuple
+
+import xarray as xr
+
+from bayes_fdi.commissioning.expectations import expected_performance
+from bayes_fdi.commissioning.healthy import check_healthy, operating_range
+from bayes_fdi.progress import busy
+
+__all__ = ["LIBRARY_FAULTS", "Commissioning", "commission"]
+
+#: The faults transplanted by default: the DAMADICS faults, then a bias or drift of one reading.
+LIBRARY_FAULTS: tuple[str, ...] = (
+    *(f"f{i}" for i in range(1, 20)),
+    "bias_X",
+    "bias_F",
+    "bias_P1",
+    "bias_P2",
+)
+#: Share of the healthy data the twin is fitted on; the rest checks its predictive.
+TWIN_FIT_SHARE = 0.8
+
+
+class Commissioning(NamedTuple):
+    """What `commission` returns."""
+
+    diagnoser: Any  #: the fitted `OnlineDiagnoser` (its ``commissioning_`` holds the report)
+    twin: Any  #: the fitted `ActuatorTwin`
+    report: dict  #: the commissioning report (also ``diagnoser.commissioning_``)
+
+
+def _split_for_twin(runs: xr.Dataset) -> tuple[xr.Dataset, xr.Dataset | None]:
+    """The first `TWIN_FIT_SHARE` of the time axis, and the rest (None when under 300 s)."""
+    n = runs.sizes["time"]
+    cut = round(TWIN_FIT_SHARE * n)
+    rest = runs.isel(time=slice(cut, None))
+    return runs.isel(time=slice(0, cut)), (rest if n - cut >= 300 else None)
+
+
+def _twin_report(twin: Any, check: Any) -> dict[str, Any]:
+    from bayes_fdi.twin import identification
+
+    table, names, corr = identification(twin.inference_data_)
+    strong = [
+        {"a": names[i], "b": names[j], "correlation": float(corr[i, j])}
+        for i in range(len(names))
+        for j in range(i + 1, len(names))
+        if abs(corr[i, j]) >= 0.8
+    ]
+    out: dict[str, Any] = {
+        "parameters": [row._asdict() for row in table],
+        "strong_correlations": strong,
+        "pareto_k": float(twin.pareto_k_),
+        "fit_seconds": float(twin.fit_seconds_),
+    }
+    if check is not None:
+        out["heldout"] = check._asdict()
+    return out
+
+
+def commission(
+    healthy: xr.Dataset | Sequence[xr.Dataset],
+    *,
+    faults: Sequence[str] = LIBRARY_FAULTS,
+    runs_per_fault: int = 6,
+    duration: int = 600,
+    sizes: Sequence[float] = (0.25, 0.5, 0.75),
+    evaluation_runs: int = 2,
+    normal_models: Any = None,
+    seed: int = 0,
+    progress: bool = True,
+) -> Commissioning:
+    """Commission a valve on its healthy data (see the module docstring).
+
+    Parameters
+    ----------
+    healthy
+        Fault-free recordings of the valve (channels CV, P1, P2, T1, X, F normalised; NaN
+        gaps allowed), a dataset or a list of them.
+    faults
+        The fault library (`LIBRARY_FAULTS`).
+    runs_per_fault, duration
+        Transplanted runs per fault in each library, and their length (s; at most the
+        length of the healthy data).
+    sizes, evaluation_runs
+        Fault sizes of the held-out check, and runs per fault and size.
+    normal_models
+        Unfitted normal models (default: `DynamicNormalModels`).
+    seed
+        Seed of everything drawn (the twin's draws, the libraries, the folds).
+    progress
+        Progress on stderr.
+
+    Returns
+    -------
+    Commissioning
+    """
+    from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+    from bayes_fdi.diagnosis.online.training import stack_runs
+    from bayes_fdi.twin import ActuatorTwin, transplant_library
+
+    t_start = time.perf_counter()
+    runs = check_healthy(stack_runs(healthy))
+    duration = int(min(duration, runs.sizes["time"] - 60))
+    seconds: dict[str, float] = {}
+    fit_part, check_part = _split_for_twin(runs)
+    t0 = time.perf_counter()
+    with busy("commissioning: fitting the digital twin", enabled=progress):
+        twin = ActuatorTwin(random_state=seed).fit(fit_part)
+        check = twin.check(check_part, seed=seed) if check_part is not None else None
+    seconds["twin"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with busy("commissioning: transplanting the fault library", enabled=progress):
+        libraries = [
+            transplant_library(
+                runs,
+                twin,
+                faults=faults,
+                runs_per_fault=runs_per_fault,
+                duration=duration,
+                seed=10 * seed + k,
+            )
+            for k in (1, 2, 3)
+        ]
+    seconds["library"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with busy("commissioning: fitting the normal models, detector and isolation", enabled=progress):
+        diagnoser = OnlineDiagnoser(
+            normal_models, calibrator=TemperatureScaler(), random_state=seed
+        ).fit(runs, libraries[0], validation_runs=libraries[1], calibration_runs=libraries[2])
+    seconds["diagnoser"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    with busy("commissioning: checking it on held-out transplants", enabled=progress):
+        expected = expected_performance(
+            diagnoser,
+            runs,
+            twin,
+            faults=faults,
+            sizes=sizes,
+            runs_per_size=evaluation_runs,
+            duration=duration,
+            seed=10 * seed + 4,
+        )
+    seconds["expectations"] = time.perf_counter() - t0
+    seconds["total"] = time.perf_counter() - t_start
+    report = {
+        "healthy": operating_range(runs),
+        "twin": _twin_report(twin, check),
+        "library": {
+            "faults": list(faults),
+            "runs_per_fault": int(runs_per_fault),
+            "duration": int(duration),
+            "seeds": [10 * seed + k for k in (1, 2, 3)],
+        },
+        "detection": {
+            "threshold": float(diagnoser.threshold_),
+            "false_alarm_hours": float(diagnoser.false_alarm_hours),
+        },
+        "groups": [list(g) for g in diagnoser.groups_],
+        "undetectable": list(diagnoser.undetectable_),
+        "detection_rates": {k: float(v) for k, v in diagnoser.detection_rates_.items()},
+        "expected": expected,
+        "seconds": seconds,
+        "seed": int(seed),
+    }
+    diagnoser.commissioning_ = report
+    return Commissioning(diagnoser, twin, report)

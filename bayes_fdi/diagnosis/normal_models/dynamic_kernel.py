@@ -1,0 +1,167 @@
+"""The inputs and the compiled per-second predictor of the dynamic normal models: its parameters,
+its state and its kernel.
+
+`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` predicts X and F second by
+second through `predict_seconds`, a compiled loop over the samples of one run that keeps the
+last ``D`` values of CV and of the signed root ``s`` of the pressure drop
+(`NormalModelsState`) and takes the fitted values as one named tuple (`NormalModelsParams`:
+the input standardisation, the two `~bayes_fdi.diagnosis.normal_models.compiled.LeanRVR`
+regressions and the std factors per command-speed bin). Whole recordings and single seconds go
+through the same loop, so they give the same numbers. `dynamic_inputs` is a vectorised reference
+of the inputs the loop builds, and the fit's.
+
+Written by hand: no library compiles this per-sample chain of two RVM predictions.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+import xarray as xr
+from numba import njit
+
+from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR, rvr_predict
+
+__all__ = [
+    "PREDICTION_COLUMNS",
+    "NormalModelsParams",
+    "NormalModelsState",
+    "dynamic_inputs",
+    "predict_seconds",
+    "signed_root",
+]
+
+#: Columns of `predict_seconds`' output.
+PREDICTION_COLUMNS = ("X_hat", "X_hat_std", "F_hat", "F_hat_std", "command_speed")
+
+
+def signed_root(p1: Any, p2: Any) -> np.ndarray:
+    """``sign(P1 - P2) sqrt(|P1 - P2|)`` (the paper's ``sqrt(P1 - P2)``, kept for P1 < P2)."""
+    d = np.asarray(p1, dtype=np.float64) - np.asarray(p2, dtype=np.float64)
+    return np.sign(d) * np.sqrt(np.abs(d))
+
+
+def _held_shift(a: np.ndarray, k: int) -> np.ndarray:
+    out = np.empty_like(a)
+    k = min(k, a.shape[1])
+    out[:, :k] = a[:, :1]
+    out[:, k:] = a[:, : a.shape[1] - k]
+    return out
+
+
+def dynamic_inputs(runs: xr.Dataset, n_differences: int) -> np.ndarray:
+    """The unscaled inputs of the position model, ``(n_runs, n_times, 2 + 2 D)``.
+
+    Columns ``CV, s, dCV_0 .. dCV_{D-1}, ds_0 .. ds_{D-1}`` (see
+    `bayes_fdi.diagnosis.normal_models.dynamic`); before a run's first sample CV and ``s`` are
+    held at their first values (increments 0); a NaN stays NaN in every increment that uses it.
+    A vectorised reference of the compiled kernel's inputs.
+    """
+    cv = np.asarray(runs["CV"].transpose("run", "time").values, dtype=np.float64)
+    s = signed_root(
+        runs["P1"].transpose("run", "time").values, runs["P2"].transpose("run", "time").values
+    )
+    cols = [cv, s]
+    for v in (cv, s):
+        for k in range(n_differences):
+            cols.append(_held_shift(v, k) - _held_shift(v, k + 1))
+    return np.stack(cols, axis=-1)
+
+
+class NormalModelsState(NamedTuple):
+    """The state of the dynamic normal models' predictor (one run)."""
+
+    #: ``(2, D)`` the last ``D`` values of CV (row 0) and ``s`` (row 1), newest first
+    history: np.ndarray
+    #: ``(1,)`` int64: 1 once a sample has been seen (before it, the history is undefined)
+    seen: np.ndarray
+
+
+class NormalModelsParams(NamedTuple):
+    """The fitted values `predict_seconds` takes."""
+
+    input_mean: np.ndarray  #: ``(2 + 2 D,)`` standardisation of the position model's inputs
+    input_scale: np.ndarray  #: ``(2 + 2 D,)``
+    x_model: LeanRVR  #: the position model
+    f_model: LeanRVR  #: the flow model, of ``(X_hat, s)``
+    speed_edges: np.ndarray  #: inner edges of the command-speed bins
+    x_std_scale: np.ndarray  #: std factor of X per speed bin
+    f_std_scale: np.ndarray  #: std factor of F per speed bin
+    x_std_scale_all: float  #: std factor of X where the speed is undefined
+    f_std_scale_all: float  #: std factor of F there
+    low: float  #: lower rail of the predictions
+    high: float  #: upper rail of the predictions
+
+
+# one compiled loop over the seconds, clearer whole than cut into pieces
+@njit(cache=True, error_model="numpy")
+def predict_seconds(cv, p1, p2, params, state, out):  # pragma: no cover - compiled
+    """Predictions of one run's consecutive samples into ``out`` ``(n, 5)`` (columns
+    `PREDICTION_COLUMNS`); ``state`` (a `NormalModelsState`) is updated in place."""
+    hist = state.history
+    n_seen = state.seen
+    n_d = hist.shape[1]
+    n_u = 2 + 2 * n_d
+    u = np.empty(n_u)
+    v = np.empty(2)
+    phi_x = np.empty(params.x_model.weights.size)
+    phi_f = np.empty(params.f_model.weights.size)
+    edges = params.speed_edges
+    for t in range(cv.size):
+        c = cv[t]
+        dp = p1[t] - p2[t]
+        s = math.sqrt(dp) if dp >= 0.0 else -math.sqrt(-dp)
+        if n_seen[0] == 0:
+            for k in range(n_d):
+                hist[0, k] = c
+                hist[1, k] = s
+            n_seen[0] = 1
+        # raw inputs: levels, then the increments of CV and of s
+        u[0] = c
+        u[1] = s
+        prev_c = c
+        prev_s = s
+        for k in range(n_d):
+            u[2 + k] = prev_c - hist[0, k]
+            u[2 + n_d + k] = prev_s - hist[1, k]
+            prev_c = hist[0, k]
+            prev_s = hist[1, k]
+        speed = abs(u[2]) if n_d > 0 else math.nan
+        for k in range(n_d - 1, 0, -1):
+            hist[0, k] = hist[0, k - 1]
+            hist[1, k] = hist[1, k - 1]
+        if n_d > 0:
+            hist[0, 0] = c
+            hist[1, 0] = s
+        ok = True
+        for j in range(u.size):
+            if not np.isfinite(u[j]):
+                ok = False
+        if not ok:
+            for j in range(5):
+                out[t, j] = np.nan
+            continue
+        for j in range(u.size):
+            u[j] = (u[j] - params.input_mean[j]) / params.input_scale[j]
+        xm, xv = rvr_predict(u, params.x_model, phi_x)
+        xm = min(max(xm, params.low), params.high)
+        v[0] = xm
+        v[1] = s
+        fm, fv = rvr_predict(v, params.f_model, phi_f)
+        fm = min(max(fm, params.low), params.high)
+        if np.isfinite(speed):
+            b = 0
+            while b < edges.size and speed >= edges[b]:
+                b += 1
+            xs = params.x_std_scale[b]
+            fs = params.f_std_scale[b]
+        else:
+            xs = params.x_std_scale_all
+            fs = params.f_std_scale_all
+        out[t, 0] = xm
+        out[t, 1] = math.sqrt(xv) * xs
+        out[t, 2] = fm
+        out[t, 3] = math.sqrt(fv) * fs
+        out[t, 4] = speed

@@ -1,0 +1,145 @@
+"""One step of the online diagnoser's stream: consecutive seconds of one run through its
+components.
+
+`OnlineDiagnoser` (`bayes_fdi.diagnosis.online.diagnoser`) hands its fitted components to
+`step` as one named tuple (`Components`) with the run's state (`RunState`) and gets back every
+per-second quantity and the state after the last second; the state passed in is never changed.
+Per second: the normal models' predictions, the standardised residuals and their whitened
+innovations, the sequential tests and the detection decision DD, the isolation signature since
+the detection and its fault and group probabilities with novelty, and the input envelope's
+checks. ``run`` over a recording and ``update`` for one second both call it, so they give the
+same numbers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from bayes_fdi.diagnosis.detection.decision import DetectionDecision
+from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
+from bayes_fdi.diagnosis.isolation.signatures import SignatureInputs, SignatureWindow
+from bayes_fdi.diagnosis.normal_models.dynamic import standardised_residuals
+from bayes_fdi.diagnosis.normal_models.dynamic_kernel import signed_root
+from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, InputEnvelope
+from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
+from bayes_fdi.diagnosis.online.stream import MODEL_OUTPUTS
+
+__all__ = ["Components", "check_stream_state", "init_run_state", "step"]
+
+
+class Components(NamedTuple):
+    """The fitted online components of a diagnoser, in the order a second goes through them."""
+
+    normal_models: Any  #: `DynamicNormalModels` (or a model with its stream interface)
+    whiteners: PerOutput  #: `ARWhitener` of X and F
+    detector: Any  #: `CUSUM` or `GLR`, one per output (the same parameters)
+    decision: DetectionDecision
+    signature: SignatureWindow
+    envelope: InputEnvelope
+    isolator: FaultIsolator | None  #: None: detection only
+
+
+def init_run_state(components: Components) -> RunState:
+    """A fresh stream state of one run."""
+    return RunState(
+        models=components.normal_models.init_state(),
+        whiten=PerOutput(*(w.init_state() for w in components.whiteners)),
+        detect=PerOutput(components.detector.init_state(), components.detector.init_state()),
+        decision=components.decision.init_state(),
+        signature=components.signature.init_state(),
+        onset=components.envelope.init_state(),
+        seconds=0,
+    )
+
+
+def check_stream_state(components: Components, state: Any, n_runs: int) -> None:
+    """Raise a `ValueError` unless ``state`` is a `StreamState` of ``n_runs`` runs of these
+    components (naming the field that does not fit)."""
+    if not isinstance(state, StreamState):
+        raise ValueError(
+            f"state must be the StreamState returned by run(..., return_state=True), got "
+            f"{type(state).__name__}"
+        )
+    state.check_layout()
+    if state.n_runs != n_runs:
+        raise ValueError(f"state is of {state.n_runs} run(s), the recording has {n_runs}")
+    one = state.run(0)
+    components.normal_models.check_state(one.models)
+    for whitener, whiten in zip(components.whiteners, one.whiten, strict=True):
+        whitener.check_state(whiten)
+    for detect in one.detect:
+        components.detector.check_state(detect)
+    components.decision.check_state(one.decision)
+    components.signature.check_state(one.signature)
+    components.envelope.check_state(one.onset)
+
+
+def _isolate(isolator: FaultIsolator | None, feats: np.ndarray) -> dict[str, np.ndarray]:
+    """Fault/group probabilities and novelty of feature rows (NaN rows stay NaN)."""
+    if isolator is None:
+        n = feats.shape[0]
+        return {
+            "fault_proba": np.full((n, 0), np.nan),
+            "group_proba": np.full((n, 0), np.nan),
+            "novelty": np.full(n, np.nan),
+        }
+    return isolator.run(feats)._asdict()
+
+
+def step(
+    components: Components, channels: Mapping[str, np.ndarray], state: RunState
+) -> tuple[dict[str, Any], RunState]:
+    """Every per-second quantity of consecutive seconds of one run, and the state after them.
+
+    Parameters
+    ----------
+    components
+        The fitted components.
+    channels
+        ``(n,)`` float64 arrays of CV, P1, P2, T1, X, F (NaN = missing).
+    state
+        The run's state after the preceding second (not changed).
+
+    Returns
+    -------
+    quantities : dict
+        ``(n,)`` arrays ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``, ``r_X``, ``r_F``
+        (innovations), ``stat_X``, ``stat_F``, ``DD``, ``novel_inputs``, ``novel_onset``,
+        ``novelty``; ``features`` ``(n, 10)``, ``fault_proba`` ``(n, n_faults)``,
+        ``group_proba`` ``(n, n_groups)``.
+    state : RunState
+    """
+    models = components.normal_models
+    pred, models_state = models.run(channels, state.models)
+    out: dict[str, Any] = {k: pred[:, j] for j, k in enumerate(MODEL_OUTPUTS)}
+    r_x, z_x = standardised_residuals(channels["X"], pred[:, 0], pred[:, 1])
+    r_f, z_f = standardised_residuals(channels["F"], pred[:, 2], pred[:, 3])
+    e_x, whiten_x = components.whiteners.X.run(z_x, state.whiten.X)
+    e_f, whiten_f = components.whiteners.F.run(z_f, state.whiten.F)
+    test_x, detect_x = components.detector.run(e_x, state.detect.X)
+    test_f, detect_f = components.detector.run(e_f, state.detect.F)
+    out["r_X"], out["r_F"] = e_x, e_f
+    out["stat_X"], out["stat_F"] = test_x.statistic, test_f.statistic
+    stats = np.column_stack([test_x.statistic, test_f.statistic])
+    dd, decision = components.decision.run(stats, state.decision)
+    out["DD"] = dd
+    p1, p2, t1 = channels["P1"], channels["P2"], channels["T1"]
+    window = SignatureInputs(dd, r_x, r_f, pred[:, 0], pred[:, 2], signed_root(p1, p2), p1, p2, t1)
+    out["features"], signature = components.signature.run(window, state.signature)
+    inputs = np.column_stack([channels[c] for c in ENVELOPE_CHANNELS])
+    out["novel_inputs"] = components.envelope.outside(inputs)
+    out["novel_onset"], onset = components.envelope.run(inputs, dd, state.onset)
+    out.update(_isolate(components.isolator, out["features"]))
+    end = RunState(
+        models=models_state,
+        whiten=PerOutput(whiten_x, whiten_f),
+        detect=PerOutput(detect_x, detect_f),
+        decision=decision,
+        signature=signature,
+        onset=onset,
+        seconds=state.seconds + int(dd.size),
+    )
+    return out, end

@@ -1,0 +1,273 @@
+"""`ActuatorTwin`: a Bayesian digital twin of one actuator, calibrated on its healthy data.
+
+``ActuatorTwin().fit(healthy)`` learns the posterior of the actuator parameters that a healthy
+recording identifies, given the recording's own inputs (CV, P1, P2, T1) and outputs (X, F):
+the Pyro model of `bayes_fdi.twin.model` (logit-normal priors around DABLib's nominal values,
+the simulator, an AR(1) residual per channel), its Laplace approximation at the posterior mode
+(`bayes_fdi.twin.laplace`), checked by Pareto-smoothed importance sampling. The result is an
+ArviZ ``InferenceData`` (`bayes_fdi.twin.inference`); `sample_parameters` draws actuator
+parameter records from the posterior, `predict` gives the posterior predictive of X and F for
+any inputs, `check` scores it on held-out healthy data. See ``docs/twin.md``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+import xarray as xr
+from sklearn.base import BaseEstimator
+
+from bayes_fdi.actuator import NOMINAL, ActuatorParameters
+from bayes_fdi.rvm.threads import limit_fit_threads
+from bayes_fdi.twin.checks import TwinCheck, predictive_check
+from bayes_fdi.twin.fixed_order import cholesky, matvec
+from bayes_fdi.twin.inference import inference_data
+from bayes_fdi.twin.laplace import fit_laplace, importance_check
+from bayes_fdi.twin.likelihood import ar1_paths
+from bayes_fdi.twin.model import TwinProblem
+from bayes_fdi.twin.priors import (
+    DEFAULT_PRIORS,
+    NOISE_PRIOR,
+    NoisePrior,
+    ParameterPrior,
+    check_priors,
+)
+from bayes_fdi.twin.simulator import OUTPUTS, WindowSimulator, cut_windows
+
+__all__ = ["ActuatorTwin"]
+
+#: independent random streams of one seed: ``default_rng([seed, stream])``
+STREAM_FIT, STREAM_PREDICT = 0, 1
+
+
+class ActuatorTwin(BaseEstimator):
+    """Bayesian digital twin of an actuator: a posterior over its identifiable parameters.
+
+    Parameters
+    ----------
+    priors
+        Parameter name -> `ParameterPrior` of the fitted parameters (default
+        `DEFAULT_PRIORS`: Kv, the characteristic's exponent, the F' zero, the X' zero and span,
+        the positioner's air capacity and set-point lag, the backlash).
+    noise_prior
+        Prior of the AR(1) residual model of X and F.
+    base
+        Values of the parameters not fitted (default: nominal).
+    window, settle
+        The recording is fitted in gap-free windows of ``window`` s, each simulated from its
+        first sample; its first ``settle`` s are simulated but not fitted.
+    max_fit_seconds
+        Longer recordings are fitted on evenly spaced windows holding about this many seconds
+        (`bayes_fdi.twin.simulator.cut_windows`); None fits everything.
+    n_draws
+        Posterior draws (Laplace draws, importance-checked) kept in ``inference_data_``.
+    fd_fraction
+        Finite-difference step of each parameter, as a fraction of its prior interval.
+    max_iter, tol
+        Levenberg-Marquardt steps and the convergence tolerance (nats) of the mode search.
+    integrator, hold, warmup
+        As in `bayes_fdi.actuator.simulate`.
+    random_state
+        Seed of the posterior and prior draws (the fit itself is deterministic).
+    """
+
+    def __init__(
+        self,
+        priors: Mapping[str, ParameterPrior] | None = None,
+        *,
+        noise_prior: NoisePrior = NOISE_PRIOR,
+        base: ActuatorParameters = NOMINAL,
+        window: int = 900,
+        settle: int = 10,
+        max_fit_seconds: int | None = 3600,
+        n_draws: int = 400,
+        fd_fraction: float = 0.01,
+        max_iter: int = 40,
+        tol: float = 0.01,
+        integrator: str = "fast",
+        hold: str = "linear",
+        warmup: int = 30,
+        random_state: int = 0,
+    ) -> None:
+        self.priors = priors
+        self.noise_prior = noise_prior
+        self.base = base
+        self.window = window
+        self.settle = settle
+        self.max_fit_seconds = max_fit_seconds
+        self.n_draws = n_draws
+        self.fd_fraction = fd_fraction
+        self.max_iter = max_iter
+        self.tol = tol
+        self.integrator = integrator
+        self.hold = hold
+        self.warmup = warmup
+        self.random_state = random_state
+
+    # ------------------------------------------------------------------ fitting
+    def _check_settings(self) -> dict[str, ParameterPrior]:
+        priors = check_priors(DEFAULT_PRIORS if self.priors is None else self.priors)
+        if not isinstance(self.base, ActuatorParameters):
+            raise ValueError(f"base must be an ActuatorParameters, got {self.base!r}")
+        self.base.validated()
+        if not isinstance(self.noise_prior, NoisePrior):
+            raise ValueError(f"noise_prior must be a NoisePrior, got {self.noise_prior!r}")
+        for name in ("window", "settle", "n_draws", "max_iter", "warmup", "random_state"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+        if self.n_draws < 20:
+            raise ValueError(f"n_draws must be at least 20, got {self.n_draws}")
+        if not 0.0 < float(self.fd_fraction) < 0.1:
+            raise ValueError(f"fd_fraction must lie in (0, 0.1), got {self.fd_fraction!r}")
+        if self.max_fit_seconds is not None and self.max_fit_seconds < self.window:
+            raise ValueError("max_fit_seconds must be None or at least one window")
+        return priors
+
+    def _simulate_options(self) -> dict[str, Any]:
+        return {"integrator": self.integrator, "hold": self.hold, "warmup": self.warmup}
+
+    @limit_fit_threads
+    def fit(self, healthy: xr.Dataset) -> ActuatorTwin:
+        """Fit the posterior on a healthy recording (channels CV, P1, P2, T1, X, F; NaN gaps are
+        cut out). Returns ``self``.
+
+        torch and the BLAS libraries run on `bayes_fdi.rvm.threads.get_fit_threads` threads
+        (default 1: the same numbers whatever the caller's thread settings); the simulations
+        run on numba's threads, one run each.
+        """
+        t_start = time.perf_counter()
+        priors = self._check_settings()
+        if "state" in healthy.coords:
+            faulty = sorted(set(map(str, healthy["state"].values)) - {"fn"})
+            if faulty:
+                raise ValueError(f"the twin is fitted on healthy runs only; found states {faulty}")
+        names = tuple(priors)
+        windows = cut_windows(
+            healthy, window=int(self.window), settle=int(self.settle),
+            max_seconds=self.max_fit_seconds,
+        )  # fmt: skip
+        simulator = WindowSimulator(windows.inputs, self.base, names, **self._simulate_options())
+        steps = np.array([self.fd_fraction * (p.high - p.low) for p in priors.values()])
+        problem = TwinProblem(
+            simulator, tuple(priors.values()), self.noise_prior,
+            torch.as_tensor(windows.observed), torch.as_tensor(windows.mask), steps,
+        )  # fmt: skip
+        start = _start(problem, windows)
+        laplace = fit_laplace(problem, start, max_iter=int(self.max_iter), tol=float(self.tol))
+        rng = np.random.default_rng([int(self.random_state), STREAM_FIT])
+        check = importance_check(problem, laplace, int(self.n_draws), rng)
+        self.names_ = names
+        self.priors_ = priors
+        self.laplace_ = laplace
+        self.pareto_k_ = check.pareto_k
+        self.importance_ess_ = check.ess
+        self.windows_ = windows.origin
+        mode = problem.physical(torch.as_tensor(laplace.mode[: len(names)])).numpy()
+        self.parameters_ = self.base._replace(**dict(zip(names, map(float, mode), strict=True)))
+        sigma, phi = _noise(laplace.mode, len(names))
+        self.noise_ = {c: (float(sigma[i]), float(phi[i])) for i, c in enumerate(OUTPUTS)}
+        self.inference_data_ = inference_data(problem, windows, laplace, check, rng)
+        self.fit_seconds_ = time.perf_counter() - t_start
+        self.inference_data_.attrs["fit_seconds"] = self.fit_seconds_
+        return self
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "laplace_"):
+            raise ValueError("ActuatorTwin is not fitted; call fit(healthy) first")
+
+    # ------------------------------------------------------------------ draws
+    def sample_latent(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` draws ``(n, p + 4)`` of the latent vector from the Laplace posterior."""
+        self._check_fitted()
+        chol = cholesky(self.laplace_.covariance)
+        return self.laplace_.mode + matvec(chol, rng.standard_normal((int(n), chol.shape[0])))
+
+    def latent_to_parameters(self, latent: np.ndarray) -> list[ActuatorParameters]:
+        """Parameter records of latent vectors ``(n, p + 4)`` (unfitted fields from ``base``)."""
+        self._check_fitted()
+        latent = np.atleast_2d(latent)
+        out = []
+        for row in latent:
+            values = {
+                name: float(prior.to_value(row[i]))
+                for i, (name, prior) in enumerate(self.priors_.items())
+            }
+            out.append(self.base._replace(**values))
+        return out
+
+    def sample_parameters(self, n: int, seed: int) -> list[ActuatorParameters]:
+        """``n`` actuator parameter records drawn from the posterior with stream ``seed``.
+
+        Draw ``k`` of seed ``s`` is the ``k``-th row of ``default_rng([s, 2])``'s Gaussian
+        draws, so different seeds give independent draws (disjoint with probability one) and
+        the same seed the same records.
+        """
+        rng = np.random.default_rng([int(seed), 2])
+        return self.latent_to_parameters(self.sample_latent(n, rng))
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, inputs: xr.Dataset, *, n_draws: int = 200, seed: int = 0) -> xr.Dataset:
+        """Posterior predictive of X and F for the inputs of every run of a dataset.
+
+        Each draw takes actuator and noise parameters from the posterior and simulates every run
+        from its first sample (``X_model``, ``F_model``: the simulated X', F'); ``X``, ``F`` add
+        a stationary AR(1) path of the draw's noise parameters. Returns a dataset of dims
+        ``(draw, run, time)``. The random stream is ``default_rng([seed, 1])``.
+        """
+        self._check_fitted()
+        if isinstance(n_draws, bool) or not isinstance(n_draws, int) or n_draws < 1:
+            raise ValueError(f"n_draws must be a positive integer, got {n_draws!r}")
+        rng = np.random.default_rng([int(seed), STREAM_PREDICT])
+        latent = self.sample_latent(n_draws, rng)
+        n_runs, n_t = inputs.sizes["run"], inputs.sizes["time"]
+        simulator = WindowSimulator(inputs, self.base, self.names_, **self._simulate_options())
+        records = self.latent_to_parameters(latent)
+        thetas = np.array([[getattr(p, n) for n in self.names_] for p in records])
+        model = simulator.outputs(thetas)  # (draw, run, time, 2)
+        sigma, phi = _noise(latent, len(self.names_))
+        dims = ("draw", "run", "time")
+        data = {}
+        for c, name in enumerate(OUTPUTS):
+            shape = (n_draws, n_runs)
+            s = np.broadcast_to(sigma[:, c, None], shape)
+            f = np.broadcast_to(phi[:, c, None], shape)
+            data[name] = (dims, model[..., c] + ar1_paths(rng, s, f, n_t))
+            data[f"{name}_model"] = (dims, model[..., c])
+        coords = {"draw": np.arange(n_draws), "run": inputs["run"].values,
+                  "time": inputs["time"].values}  # fmt: skip
+        return xr.Dataset(data, coords=coords, attrs={"seed": int(seed)})
+
+    def check(
+        self, heldout: xr.Dataset, *, n_draws: int = 200, seed: int = 0, level: float = 0.95
+    ) -> TwinCheck:
+        """Score the posterior predictive on held-out healthy data (`predictive_check`)."""
+        self._check_fitted()
+        return predictive_check(self, heldout, n_draws=n_draws, seed=seed, level=level)
+
+
+def _noise(latent: np.ndarray, n_parameters: int) -> tuple[np.ndarray, np.ndarray]:
+    """(sigma, phi) of X and F from latent vector(s): ``(..., 2)`` each."""
+    latent = np.asarray(latent)
+    sigma = np.exp(latent[..., n_parameters : n_parameters + 2])
+    phi = np.tanh(latent[..., n_parameters + 2 : n_parameters + 4])
+    return sigma, phi
+
+
+def _start(problem: TwinProblem, windows) -> np.ndarray:
+    """Start of the mode search: the priors' medians; the AR(1) model of their residual."""
+    z = problem.prior_loc().numpy()
+    theta = problem.physical(torch.as_tensor(z)).numpy()
+    residual = windows.observed - problem.simulator.outputs(theta[None])[0]
+    log_sigma, atanh_phi = [], []
+    for c in range(len(OUTPUTS)):
+        e = residual[..., c][windows.mask]
+        e = e - np.mean(e)
+        r1 = float(np.clip(np.sum(e[1:] * e[:-1]) / np.sum(e * e), -0.9, 0.9))
+        log_sigma.append(np.log(max(float(np.std(e)), 1e-6) * np.sqrt(1.0 - r1 * r1)))
+        atanh_phi.append(np.arctanh(r1))
+    return np.concatenate([z, log_sigma, atanh_phi])

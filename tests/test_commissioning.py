@@ -1,0 +1,85 @@
+"""Commissioning a valve on its healthy data (bayes_fdi.commissioning)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayes_fdi import model_files
+from bayes_fdi.actuator import simulate
+from bayes_fdi.actuator.excitation import level_loop_inputs
+from bayes_fdi.commissioning import check_healthy, commission, operating_range
+from bayes_fdi.diagnosis import DynamicNormalModels, OnlineDiagnoser
+
+
+@pytest.fixture(scope="module")
+def healthy():
+    """A simulated valve in a level loop: 1500 s of healthy data."""
+    return simulate(level_loop_inputs(1, 1500, seed=4), seed=4)
+
+
+@pytest.fixture(scope="module")
+def commissioned(healthy):
+    models = DynamicNormalModels(
+        x_widths=(8.0,),
+        f_widths=(0.1,),
+        evidence_max_samples=200,
+        max_train_samples=400,
+        calibration_folds=2,
+        random_state=0,
+    )
+    return commission(
+        healthy,
+        faults=("f1", "f18", "bias_X"),
+        runs_per_fault=4,
+        duration=400,
+        sizes=(0.75,),
+        evaluation_runs=1,
+        normal_models=models,
+        progress=False,
+    )
+
+
+def test_bad_healthy_data_is_refused_naming_the_problem(healthy):
+    stuck = healthy.copy()
+    stuck["X"] = stuck["X"] * 0 + 0.6
+    with pytest.raises(ValueError, match=r"X hardly moves .* stuck stem"):
+        check_healthy(stuck)
+    with pytest.raises(ValueError, match="only 600 complete seconds"):
+        check_healthy(healthy.isel(time=slice(0, 600)))
+    faulty = healthy.assign_coords(state=("run", ["f1"]))
+    with pytest.raises(ValueError, match="must be fault-free"):
+        check_healthy(faulty)
+
+
+def test_operating_range_reports_percentiles(healthy):
+    covered = operating_range(healthy)
+    assert covered["seconds"] == 1500
+    x = healthy["X"].values.ravel()
+    assert covered["X"]["p50"] == pytest.approx(float(np.median(x)))
+    assert covered["CV"]["p01"] <= covered["CV"]["p50"] <= covered["CV"]["p99"]
+
+
+def test_commissioning_gives_a_diagnoser_of_this_valve_with_its_report(commissioned, healthy):
+    diag, _, report = commissioned
+    assert isinstance(diag, OnlineDiagnoser) and diag.commissioning_ is report
+    faults = {f for g in diag.groups_ for f in g} | set(diag.undetectable_)
+    assert faults == {"f1", "f18", "bias_X"}
+    # the healthy data it was fitted on raise no alarm
+    stream = diag.run(healthy[["CV", "P1", "P2", "T1", "X", "F"]])
+    assert not stream["DD"].values.any()
+    assert set(report) >= {"healthy", "twin", "library", "groups", "expected", "seconds"}
+    assert {row["fault"] for row in report["expected"]} == {"f1", "f18", "bias_X"}
+    f18 = next(r for r in report["expected"] if r["fault"] == "f18")
+    assert f18["detected_share"] == 1.0  # a big bypass opening is seen at once
+    assert report["twin"]["heldout"]["n_samples"] > 0
+    names = [p["name"] for p in report["twin"]["parameters"]]
+    assert "kv" in names
+
+
+def test_the_commissioning_report_travels_with_the_model_file(commissioned, tmp_path):
+    diag = commissioned.diagnoser
+    diag.save(tmp_path / "plant.npz")
+    back = OnlineDiagnoser.load(tmp_path / "plant.npz")
+    assert back.commissioning_ == diag.commissioning_
+    assert model_files.read_metadata(tmp_path / "plant.npz")["root_class"] == "OnlineDiagnoser"
