@@ -176,8 +176,7 @@ def on_nav(nav, config, files):
     """Append the "API reference" section: the overview, then one page per public face."""
     children = [Page("Overview", files.get_file_from_path("api/index.md"), config)]
     children += [
-        Page(package, files.get_file_from_path(_uri(package)), config)
-        for package in public_faces()
+        Page(package, files.get_file_from_path(_uri(package)), config) for package in public_faces()
     ]
     nav.items.append(Section("API reference", children))
     return nav
