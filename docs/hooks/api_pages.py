@@ -46,6 +46,7 @@ _OPTIONS = {
     "show_submodules": "false",
     "show_symbol_type_heading": "true",
     "show_symbol_type_toc": "true",
+    "separate_signature": "true",
 }
 
 

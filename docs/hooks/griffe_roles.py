@@ -9,7 +9,8 @@ package is loaded, this extension rewrites every docstring in it:
   and ```~name``` -> a cross-reference to the name's entry in the API reference when the name
   is documented there (under the public path a user imports it from: ``docs/hooks/api_pages.py``
   decides what is documented), else inline code of the name. ``~`` keeps only the name's last
-  part, as Sphinx shows it; without ``~`` the public path is shown;
+  part, as Sphinx shows it; without ``~`` a full path is shown as the public path, a relative
+  name as written;
 - ``:math:`x``` -> ``$x$`` and a ``.. math::`` block -> ``$$ ... $$``, which
   ``pymdownx.arithmatex`` and the ``mathml`` hook render as MathML.
 
@@ -51,7 +52,8 @@ def _reference(short: bool, target: str, obj: griffe.Object | None, resolve: Res
         label, target = label.strip(), target.strip()
     public = resolve(target, obj)
     if label is None:
-        shown = public or target
+        # a full path shows where the user imports the name from; a relative one, as written
+        shown = public if public and target.startswith("bayes_fdi.") else target
         label = shown.rsplit(".", 1)[-1] if short else shown
     return f"[`{label}`][{public}]" if public else f"`{label}`"
 
