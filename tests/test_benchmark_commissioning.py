@@ -123,7 +123,7 @@ def tiny_run(detection_only, tmp_path_factory):
 
 
 def test_the_tiny_run_writes_its_report(tiny_run):
-    results, out, _ = tiny_run
+    _, out, _ = tiny_run
     written = json.loads((out / "benchmark.json").read_text())
     assert set(written) >= {"plants", "targets", "settings", "timing", "load"}
     (plant,) = written["plants"]
@@ -132,9 +132,7 @@ def test_the_tiny_run_writes_its_report(tiny_run):
     # two scenarios, one seed, both models
     assert len(plant["cases"]) == 4
     assert {r["model"] for r in plant["cases"]} == {"commissioned", "default"}
-    f18 = next(
-        r for r in plant["cases"] if r["model"] == "commissioned" and r["fault"] == "f18"
-    )
+    f18 = next(r for r in plant["cases"] if r["model"] == "commissioned" and r["fault"] == "f18")
     assert f18["effect"]["deflection"] > 5  # a big bypass opening moves the residuals
     assert f18["indices"]["t_dt"] != -1  # and is detected
     md = (out / "benchmark.md").read_text()
@@ -186,3 +184,46 @@ def test_score_case_counts_the_named_seconds_and_confident_wrong_ones(detection_
     assert out["true_group"] is None  # f1 is unknown to it
     effect = innovation_effect(one, one, t_from=400, noise={"r_X": 1.0, "r_F": 1.0})
     assert effect["deflection"] == 0.0 and effect["oracle_time"] is None
+
+
+@pytest.mark.slow
+def test_the_real_hour_part(detection_only, tmp_path):
+    """Commissioned on the first half of the real hour; the second half clean and with every
+    library fault transplanted (one twin draw, the quick commissioning)."""
+    from bayes_fdi.benchmark.commissioning import small_commission_options
+    from bayes_fdi.benchmark.commissioning_report import write_commissioning_report
+    from bayes_fdi.benchmark.commissioning_summary import targets
+    from bayes_fdi.benchmark.real_hour import real_hour_benchmark
+    from bayes_fdi.commissioning import LIBRARY_FAULTS
+    from bayes_fdi.datasets import load_lublin_example
+
+    real = real_hour_benchmark(
+        detection_only, draws=1, commission_options=small_commission_options(), progress=False
+    )
+    assert real["zones"] == {"t_on": 0.0, "t_from": 300.0, "t_hor": 1800.0}
+    assert len(real["cases"]) == len(LIBRARY_FAULTS) * 3 * 2
+    assert all(r["faulty_seconds"] == 1500 for r in real["cases"])
+    assert real["parameter_seeds"] == [10_000]
+    # the default model's clean-half alarms, counted by hand
+    second = load_lublin_example().isel(time=slice(1800, None))
+    dd = detection_only.run(second[["CV", "P1", "P2", "T1", "X", "F"]]).isel(run=0)["DD"].values
+    dd = np.asarray(dd, dtype=bool)
+    assert real["clean"]["default"]["alarms"] == int(dd[0] + np.sum(dd[1:] & ~dd[:-1]))
+    com = {(r["fault"], r["size"]): r for r in real["cases"] if r["model"] == "commissioned"}
+    # a bias of the stem reading moves the X residual up and leaves F's exactly (F is
+    # predicted from the command, not from the X reading)
+    shift = com[("bias_X", "big")]["effect"]["residual_shift"]
+    assert shift["X"] > 1.0 and shift["F"] == 0.0
+    # a big bypass opening is seen in F and detected
+    assert com[("f18", "big")]["effect"]["deflection"] > 5
+    assert com[("f18", "big")]["indices"]["t_dt"] != -1
+    results = {
+        "real_hour": real,
+        "plants": [],
+        "settings": {"n_plants": 0, "n_seeds": 1, "draws": 1, "n_scenarios": 0},
+        "timing": {"wall_s": 1.0, "cpu_s": 1.0},
+    }
+    results["targets"] = targets(results)
+    _, md = write_commissioning_report(results, tmp_path)
+    text = md.read_text()
+    assert "## The real hour" in text and "Group-level confusion" in text
