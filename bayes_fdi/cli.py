@@ -43,6 +43,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "rvm-demo": ("bayes_fdi.rvm.demo", "fit an RVM on a small sinc problem and print it"),
     "fit": ("bayes_fdi.deployment.fitting", "fit an online diagnoser and save it to a file"),
+    "commission": (
+        "bayes_fdi.deployment.commission",
+        "learn a valve from its healthy recordings: normal models, digital twin, fault library",
+    ),
     "diagnose": ("bayes_fdi.deployment.diagnose", "diagnose recordings, 1 s at a time"),
     "serve": (
         "bayes_fdi.deployment.serve.service",

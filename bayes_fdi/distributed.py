@@ -138,9 +138,9 @@ def run_tasks(
         raise ValueError("sizes must have one entry per task")
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from bayes_fdi.progress import progress_bar
 
-        bar = tqdm(total=sum(sizes), desc=desc or None, unit=unit)
+        bar = progress_bar(sum(sizes), desc or "tasks", unit=unit)
     try:
         if workers is None and scheduler is None:
             results = []

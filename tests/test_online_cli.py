@@ -31,11 +31,13 @@ print(json.dumps({"status": status, "modules": sorted(m for m in sys.modules
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    """A fresh default-model cache with the small settings, filled by ``bayes-fdi diagnose
-    --example`` run in a fresh interpreter (which fits the default model on first use); also
-    the modules that run loaded."""
+    """A fresh default-model cache with the small settings, filled by ``bayes-fdi diagnose`` of
+    the shipped hour (written to a file) run in a fresh interpreter, which fits the default model
+    on first use; also the modules that run loaded."""
     folder = tmp_path_factory.mktemp("cache")
     out = tmp_path_factory.mktemp("diagnosed")
+    hour = out.parent / "lublin-hour.nc"
+    load_lublin_example().to_netcdf(hour)
     env = dict(os.environ, **{model_fitting.CACHE_ENV: str(folder), model_fitting.SMALL_ENV: "1"})
     proc = subprocess.run(
         [
@@ -43,7 +45,7 @@ def cache(tmp_path_factory):
             "-c",
             _DIAGNOSE_AND_LIST_MODULES,
             "diagnose",
-            "--example",
+            str(hour),
             "--out",
             str(out),
             "--quiet",
@@ -60,7 +62,7 @@ def cache(tmp_path_factory):
         mp.setenv(model_fitting.CACHE_ENV, str(folder))
         mp.setenv(model_fitting.SMALL_ENV, "1")
         path = model_fitting.default_model_path()
-        yield path, out / "lublin-example", mp, loaded["modules"]
+        yield path, out / "lublin-hour", mp, loaded["modules"], hour
 
 
 def test_diagnose_loads_no_module_of_the_paper_or_the_benchmark(cache):
@@ -72,12 +74,12 @@ def test_diagnose_loads_no_module_of_the_paper_or_the_benchmark(cache):
 
 
 def test_diagnose_fits_the_default_model_once_and_caches_it(cache, tmp_path, capsys):
-    path, *_ = cache
+    path, *_, hour = cache
     assert path.exists() and path.name.endswith("-small.npz")
     stamp = path.stat().st_mtime_ns
-    assert main(["diagnose", "--example", "--out", str(tmp_path), "--quiet", "--no-figure"]) == 0
+    assert main(["diagnose", str(hour), "--out", str(tmp_path), "--quiet", "--no-figure"]) == 0
     assert path.stat().st_mtime_ns == stamp  # loaded, not fitted again
-    assert "lublin-example: 3600 s" in capsys.readouterr().out
+    assert "lublin-hour: 3600 s" in capsys.readouterr().out
     assert isinstance(OnlineDiagnoser.load(path), OnlineDiagnoser)
 
 

@@ -270,3 +270,130 @@ def test_project_format_netcdf_and_day_files(tmp_path, rng):
         read_recording(day, units="physical")
     with pytest.raises(ValueError, match="cannot tell the format"):
         read_recording(tmp_path / "rec.xlsx")
+
+
+# ----------------------------------------------------------------------------------------------
+# files that used to be read wrongly: each read against hand-written values
+# ----------------------------------------------------------------------------------------------
+HEADER = "time,CV,P1,P2,T1,X,F"
+
+
+def _write(path, lines):
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("header", [HEADER, HEADER + ","])
+def test_a_delimiter_at_the_end_of_every_line_ends_the_row(tmp_path, header):
+    rows = [f"{t},0.5,0.8,0.6,0.2,{x},0.3," for t, x in [(0, 0.41), (1, 0.42), (2, 0.43)]]
+    ds = read_csv(_write(tmp_path / "trailing.csv", [header, *rows]))
+    np.testing.assert_array_equal(ds["time"].values, [0.0, 1.0, 2.0])
+    np.testing.assert_array_equal(ds["X"].values[0], [0.41, 0.42, 0.43])
+    np.testing.assert_array_equal(ds["CV"].values[0], [0.5, 0.5, 0.5])
+    np.testing.assert_array_equal(ds["F"].values[0], [0.3, 0.3, 0.3])
+    assert json.loads(ds.attrs["ignored_columns"]) == []
+
+
+def test_unused_duplicate_columns_are_listed_not_refused(tmp_path):
+    lines = [
+        HEADER + ",note,note ",
+        "0,0.5,0.8,0.6,0.2,0.4,0.3,a,b",
+        "1,0.5,0.8,0.6,0.2,0.4,0.3,c,d",
+    ]
+    ds = read_csv(_write(tmp_path / "notes.csv", lines))
+    assert json.loads(ds.attrs["ignored_columns"]) == ["note", "note"]
+
+
+@pytest.mark.parametrize(
+    "stamps, offsets",
+    [  # spring forward (one hour of wall clock skipped), fall back (one hour repeated), UTC
+        (["2024-03-31T01:59:58+01:00", "2024-03-31T01:59:59+01:00",
+          "2024-03-31T03:00:00+02:00", "2024-03-31T03:00:01+02:00"], ["+01:00", "+02:00"]),
+        (["2024-10-27T02:59:58+02:00", "2024-10-27T02:59:59+02:00",
+          "2024-10-27T02:00:00+01:00", "2024-10-27T02:00:01+01:00"], ["+02:00", "+01:00"]),
+        (["2024-01-10T11:00:00Z", "2024-01-10T11:00:01Z", "2024-01-10T11:00:02Z",
+          "2024-01-10T11:00:03Z"], ["+00:00"]),
+    ],
+)  # fmt: skip
+def test_date_times_with_utc_offsets_are_instants(tmp_path, stamps, offsets):
+    lines = [HEADER, *(f"{s},0.5,0.8,0.6,0.2,0.{i + 1},0.3" for i, s in enumerate(stamps))]
+    ds = read_csv(_write(tmp_path / "dst.csv", lines))
+    np.testing.assert_array_equal(ds["time"].values, [0.0, 1.0, 2.0, 3.0])  # 1 s apart each
+    np.testing.assert_array_equal(ds["X"].values[0], [0.1, 0.2, 0.3, 0.4])
+    first = stamps[0].replace("Z", "+00:00")
+    assert ds.attrs["time_origin"] == first  # the first instant, with the offset it was written in
+    assert json.loads(ds.attrs["time_offsets"]) == offsets
+
+
+def test_one_utc_offset_keeps_its_instants_and_the_offset(tmp_path):
+    stamps = [f"2024-01-10T12:00:0{i}+01:00" for i in (0, 1, 2, 4)]
+    lines = [HEADER, *(f"{s},0.5,0.8,0.6,0.2,0.4,0.3" for s in stamps)]
+    with pytest.warns(RecordingGapWarning, match="1 s without any sample"):
+        ds = read_csv(_write(tmp_path / "cet.csv", lines))
+    np.testing.assert_array_equal(ds["time"].values, [0.0, 1.0, 2.0, 3.0, 4.0])
+    assert np.isnan(ds["X"].values[0, 3])  # 12:00:03 is missing: a gap, nothing shifted
+    assert ds.attrs["time_origin"] == "2024-01-10T12:00:00+01:00"  # not 11:00 without an offset
+    assert json.loads(ds.attrs["time_offsets"]) == ["+01:00"]
+    naive = read_csv(_write(tmp_path / "local.csv", [HEADER, "2024-01-10T12:00:00,1,1,1,1,1,1"]))
+    assert naive.attrs["time_origin"] == "2024-01-10T12:00:00" and "time_offsets" not in naive.attrs
+
+
+def test_chunks_keep_values_and_name_the_right_line(tmp_path, monkeypatch):
+    from bayes_fdi.datasets import csv_columns
+
+    monkeypatch.setattr(csv_columns, "CHUNK_ROWS", 3)  # 12 lines: four chunks
+    x = [round(0.05 * (i + 1), 2) for i in range(10)]
+    rows = [f"{i},0.5,0.8,0.6,0.2,{v},0.3" for i, v in enumerate(x)]
+    lines = [HEADER, *rows[:4], "", *rows[4:7], "", *rows[7:]]  # empty lines 6 and 10
+    ds = read_csv(_write(tmp_path / "chunked.csv", lines))
+    np.testing.assert_array_equal(ds["X"].values[0], x)
+    np.testing.assert_array_equal(ds["time"].values, np.arange(10.0))
+    lines[12] = "9,0.5,0.8,0.6,0.2,oops,0.3"  # rows[9], line 13
+    with pytest.raises(ValueError, match=r"line 13, column 'X': 'oops' is not a number"):
+        read_csv(_write(tmp_path / "chunked.csv", lines))
+    # chunk 1 (lines 2-4) with UTC offsets, chunk 2 (lines 5-7) without
+    stamps = [f"2024-01-10T12:00:0{i}" + ("+01:00" if i < 3 else "") for i in range(6)]
+    lines = [HEADER, *(f"{s},0.5,0.8,0.6,0.2,0.4,0.3" for s in stamps)]
+    with pytest.raises(ValueError, match=r"line 2 \('2024-01-10T12:00:00\+01:00'\) has a UTC "
+                       r"offset but line 5 \('2024-01-10T12:00:03'\) has none"):  # fmt: skip
+        read_csv(_write(tmp_path / "mixed.csv", lines))
+
+
+def test_a_long_real_gap_is_kept(tmp_path):
+    """Spans up to a day are never refused; longer ones only where one jump makes them."""
+    row = "0.5,0.8,0.6,0.2,0.4,0.3"
+    lines = [HEADER, *(f"{t},{row}" for t in [0, 1, 2, 80_000, 80_001])]
+    with pytest.warns(RecordingGapWarning, match="79997 s without any sample"):
+        ds = read_csv(_write(tmp_path / "night.csv", lines))
+    assert ds.sizes["time"] == 80_002
+    # two stretches of 20000 s, 180000 s apart: a span of 5.5x the samples, kept
+    lines = [HEADER, *(f"{t},{row}" for t in [*range(20_000), *range(200_000, 220_000)])]
+    with pytest.warns(RecordingGapWarning, match="180000 s without any sample"):
+        assert read_csv(_write(tmp_path / "two.csv", lines)).sizes["time"] == 220_000
+    # two stretches of 10000 s, 190000 s apart: 21x the samples, refused
+    lines = [HEADER, *(f"{t},{row}" for t in [*range(10_000), *range(200_000, 210_000)])]
+    with pytest.raises(
+        ValueError, match=r"sample 10001 \(line 10002, time 200000\) is 190001 s \(2\.2 days\) "
+        r"away from sample 10000 \(line 10001, time 9999\): the 20000 samples would span "
+        r"209999 s on the 1-s grid, over 10 times the 20000 s they cover"
+    ):  # fmt: skip
+        read_csv(_write(tmp_path / "far.csv", lines))
+
+
+def test_units_check_names_likely_units_and_can_be_turned_off(tmp_path):
+    from bayes_fdi.datasets.units import check_plausible_units, likely_units
+
+    lines = [HEADER, *(f"{i},50,3500,2600,43,61,17" for i in range(5))]
+    path = _write(tmp_path / "physical.csv", lines)
+    as_is = read_csv(path, check_units=False)  # the values as they are: X = 61 x full stroke
+    np.testing.assert_array_equal(as_is["X"].values[0], [61.0] * 5)
+    assert likely_units(as_is, "normalised") == {
+        "CV": ["%"], "P1": ["kPa"], "P2": ["kPa", "Pa"], "T1": ["degC"], "X": ["%"],
+        "F": ["t/h", "kg/s"],
+    }  # fmt: skip
+    ds = read_csv(path, units="physical")
+    np.testing.assert_allclose(ds["X"].values[0], [0.61] * 5, rtol=1e-15)
+    np.testing.assert_allclose(ds["P1"].values[0], [0.875] * 5, rtol=1e-15)
+    assert check_plausible_units(ds, "physical") == PHYSICAL_UNITS
+    real = load_lublin_example()  # a real hour passes as it is
+    assert check_plausible_units(real, "normalised") == dict.fromkeys(CHANNELS, "1")

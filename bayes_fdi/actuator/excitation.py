@@ -61,7 +61,7 @@ class OperatingRange(NamedTuple):
     of its fast fluctuation (white, held for one second).
     """
 
-    p1: tuple[float, float] = (2.5e6, 3.9e6)
+    p1: tuple[float, float] = (2.5e6, 3.7e6)
     dp: tuple[float, float] = (0.3e6, 1.2e6)  #: P1 - P2
     t1: tuple[float, float] = (20.0, 110.0)
     p1_drift: float = 60e3
@@ -239,7 +239,7 @@ class LevelLoop(NamedTuple):
     setpoint_hold: tuple[float, float] = (300.0, 1200.0)  #: seconds between set-point changes
     setpoint_ramp: float = 60.0  #: seconds a set-point change takes
     demand: tuple[float, float] = (0.02, 0.09)  #: outflow demand level
-    demand_drift: float = 0.2  #: relative std of the demand's drift
+    demand_drift: float = 0.1  #: relative std of the demand's drift
     positioner_seconds: float = 2.0  #: the stem's first-order lag behind CV
     dp_nominal: float = 0.9e6  #: pressure drop of the nominal flow [Pa]
     #: the valve's equal-percentage exponent n in the loop's flow law (inflow ~ exp(-n X))

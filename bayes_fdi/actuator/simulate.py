@@ -166,9 +166,9 @@ def _run_model(
     chunk = n_runs if not progress else max(1, min(n_runs, 64))
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from bayes_fdi.progress import progress_bar
 
-        bar = tqdm(total=n_runs, desc=f"simulating ({integrator})", unit="run")
+        bar = progress_bar(n_runs, f"simulating ({integrator})", unit="run")
     for start in range(0, n_runs, chunk):
         sl = slice(start, min(n_runs, start + chunk))
         model.simulate_batch(

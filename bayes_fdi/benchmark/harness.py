@@ -272,9 +272,9 @@ def _run_scenarios(
     batches = list(_batches(scenarios, seeds, max_batch_samples))
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from bayes_fdi.progress import progress_bar
 
-        bar = tqdm(total=len(scenarios) * len(seeds), desc="benchmark", unit="run")
+        bar = progress_bar(len(scenarios) * len(seeds), "benchmark", unit="run")
     figures_written: dict[str, str] = {}
     simulations = _Simulations(scenarios, seeds)
     try:

@@ -7,7 +7,8 @@
   files and the table of the real fault events.
 - `bayes_fdi.datasets.readers`: recordings from CSV, MATLAB, netCDF and day files, in any declared
   units, on the model's 1-s grid (`read_recording`; `bayes_fdi.datasets.time_grid`: time
-  columns in seconds, resampling onto the grid and the gaps).
+  columns in seconds, resampling onto the grid and the gaps; `bayes_fdi.datasets.csv_columns`:
+  CSV files read in chunks; `bayes_fdi.datasets.units`: units, and values implausible in them).
 - `bayes_fdi.datasets.plotting`: signal plots of chosen runs (the ``bayes-fdi plot`` command).
 """
 

@@ -12,12 +12,15 @@ One dataset type is used throughout the project:
 
 Datasets are saved and loaded as netCDF (``.nc``); saving is atomic (a temporary file in the
 destination's folder renamed over it, see `bayes_fdi.atomic`), so an interrupted or failed save
-never leaves a partial file. `make_dataset` copies the arrays it is given: the dataset never shares
-memory with the caller's arrays.
+never leaves a partial file; a save that fills the disk says so (``OSError`` with
+``errno.ENOSPC``, where netCDF itself only reports "HDF error"). `make_dataset` copies the arrays
+it is given: the dataset never shares memory with the caller's arrays.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
 from collections.abc import Iterable, Sequence
 
@@ -25,6 +28,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.atomic import atomic_path, check_output_path
+from bayes_fdi.memory import format_bytes
 
 __all__ = [
     "CHANNELS",
@@ -272,12 +276,52 @@ def save_dataset(ds: xr.Dataset, path: str | os.PathLike) -> None:
     ValueError
         If ``ds`` is not a valid dataset, or ``path`` does not end in ``.nc`` / ``.nc4``, is a
         folder, or its folder does not exist or is not writable (checked before writing).
+    OSError
+        If the write fails; ``errno.ENOSPC`` ("No space left on device", with the space free)
+        where the disk filled up. Nothing is left at ``path`` nor beside it.
     """
     validate_dataset(ds, require=(), allow_nan=True)
     check_output_path(path, suffixes=NETCDF_SUFFIXES, what="dataset file")
     encoding = {name: {"zlib": True, "complevel": 4} for name in ds.data_vars}
     with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
+        try:
+            ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
+        except (RuntimeError, OSError) as exc:
+            full = _disk_full(exc, ds, tmp, os.fspath(path))
+            # HDF5 keeps a failed file open: emptied, it gives its blocks back at once
+            # (removed by atomic_path, it would hold them until the process ends)
+            with contextlib.suppress(OSError):
+                os.truncate(tmp, 0)
+            if full is not None:
+                raise full from exc
+            raise
+
+
+def _disk_full(exc: BaseException, ds: xr.Dataset, tmp: str, path: str) -> OSError | None:
+    """``OSError(ENOSPC)`` where a failed write left less free space than a variable needs.
+
+    netCDF reports a full disk as "NetCDF: HDF error"; the free space, read while the partial
+    temporary file still holds its blocks, tells.
+    """
+    if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+        return None  # already says so
+    try:
+        stats = os.statvfs(os.path.dirname(os.path.abspath(tmp)))
+    except (OSError, AttributeError):  # no statvfs (Windows)
+        return None
+    root = getattr(os, "geteuid", lambda: -1)() == 0  # root may use the reserved blocks
+    blocks = stats.f_bfree if root else stats.f_bavail
+    free = blocks * stats.f_frsize
+    largest = max((ds[name].nbytes for name in ds.data_vars), default=0)
+    if free >= max(largest, 1 << 20):
+        return None
+    return OSError(
+        errno.ENOSPC,
+        f"No space left on device: {format_bytes(free)} free after writing part of the "
+        f"dataset ({format_bytes(ds.nbytes)} uncompressed; netCDF said: {exc}); nothing "
+        "was written",
+        path,
+    )
 
 
 def load_dataset(path: str | os.PathLike) -> xr.Dataset:

@@ -11,6 +11,9 @@ giving the unit of every channel, e.g. ``{"CV": "%", "X": "%", "P1": "MPa", "P2"
 "T1": "K", "F": "kg/s"}`` (known units: :data:`UNITS`). The normalisation is DABLib's:
 ``P' = P / 4 MPa``, ``T1' = T1 / 200 degC``, ``F' = F / 40 t/h``, ``CV' = CV / 100 %``,
 ``X' = X / 100 %``. Nothing is clipped: a value outside the nominal range stays outside ``[0, 1]``.
+Values implausible by orders of magnitude in their declared units are refused, naming the likely
+units (`bayes_fdi.datasets.units.check_plausible_units`; ``check_units=False`` reads them as they
+are): the default ``"normalised"`` has no silent effect on physical-looking data.
 
 Sampling: the model runs at 1 Hz. A recording at another rate is an error unless the caller asks
 for resampling (``resample="mean"``: the mean of the samples in each second, for faster
@@ -20,16 +23,20 @@ most two sampling steps apart, for slower ones). A second whose samples include 
 no sample covers, is NaN. Missing timestamps at 1 Hz become NaN rows: gaps stay gaps (listed in
 the ``gaps`` attribute, warned with :class:`RecordingGapWarning`; the diagnosis marks those
 seconds BLIND). Nothing is filled or dropped; columns a reader does not use are listed in the
-``ignored_columns`` attribute.
+``ignored_columns`` attribute. A span that one jump makes over ten times what the samples cover
+(a mistyped timestamp) is refused, naming the sample, and a 1-s grid beyond the memory available
+too, before it is allocated (`bayes_fdi.datasets.time_grid`).
 
 Formats
 -------
 CSV (:func:`read_csv`)
     A header row naming the columns ``time, CV, P1, P2, T1, X, F`` (any order, other columns
     allowed), or a ``columns`` mapping from the file's names to the channels. ``time`` holds
-    seconds (or date-times, converted to seconds from the first row; the first is kept in the
-    ``time_origin`` attribute); without a time column give ``rate`` (Hz). Empty cells and ``NaN``
-    are gaps; any other non-number is an error naming its line and column.
+    seconds (or ISO date-times, converted to seconds from the first row; the first is kept in
+    the ``time_origin`` attribute; with UTC offsets they are instants in UTC, the offsets met
+    in ``time_offsets``); without a time column give ``rate`` (Hz). Empty cells and ``NaN``
+    are gaps; any other non-number is an error naming its line and column. Read in chunks;
+    duplicate names, trailing delimiters and shifted columns: `bayes_fdi.datasets.csv_columns`.
 MATLAB (:func:`read_mat`)
     One vector variable per channel (and ``time``), named as the channels or through
     ``columns``. v4/v5/v7 files are read with scipy, v7.3 (HDF5) files with h5py.
@@ -54,12 +61,13 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.datasets.csv_columns import read_csv_columns
 from bayes_fdi.datasets.format import CHANNELS, validate_dataset
 from bayes_fdi.datasets.time_grid import (
     RESAMPLE_METHODS,
@@ -71,13 +79,14 @@ from bayes_fdi.datasets.time_grid import (
     warn_gaps,
 )
 from bayes_fdi.datasets.units import (
-    _ALIASES,
     PHYSICAL_UNITS,
+    UNIT_ALIASES,
     UNITS,
-    _units_attr,
+    check_plausible_units,
     normalise,
     parse_units,
     to_physical,
+    units_attribute,
 )
 
 __all__ = [
@@ -119,15 +128,22 @@ def _build(
     source: str,
     fmt: str,
     attrs: Mapping[str, Any] | None = None,
+    check_units: bool = True,
+    label: Callable[[int], str] | None = None,
 ) -> xr.Dataset:
     """Normalise, put on the 1-s grid, and wrap into an unlabelled one-run dataset."""
     unit_of = parse_units(units)
+    name_of = label or (lambda i: f"sample {i + 1}")
     for name, values in raw.items():
         if np.isinf(values).any():
             row = int(np.flatnonzero(np.isinf(values))[0])
-            raise ValueError(f"{source}: {name} of sample {row + 1} is infinite")
-    normalised = {name: normalise(raw[name], name, unit_of[name]) for name in CHANNELS}
-    grid, channels, info = to_second_grid(time, normalised, resample, source)
+            raise ValueError(f"{source}: {name} of {name_of(row)} is infinite")
+    # the raw values are let go one by one (the readers hand over their arrays)
+    normalised = {name: normalise(raw.pop(name), name, unit_of[name]) for name in CHANNELS}
+    if check_units:
+        check_plausible_units(xr.Dataset({c: ("time", v) for c, v in normalised.items()}),
+                              unit_of, source)  # fmt: skip
+    grid, channels, info = to_second_grid(time, normalised, resample, source, label, copy=False)
     gaps = gap_summary(grid, channels)
     ds = xr.Dataset(
         {name: (("run", "time"), channels[name][None, :]) for name in CHANNELS},
@@ -135,7 +151,7 @@ def _build(
         attrs={
             "source": source,
             "format": fmt,
-            "units": _units_attr(unit_of),
+            "units": units_attribute(unit_of),
             "sampling_step": info["sampling_step"],
             "resampled": info["resampled"],
             "gaps": json.dumps(gaps),
@@ -195,6 +211,7 @@ def read_csv(
     resample: str | None = None,
     rate: float | None = None,
     delimiter: str | None = None,
+    check_units: bool = True,
 ) -> xr.Dataset:
     """Read a CSV recording (see the module docstring for the rules).
 
@@ -212,64 +229,26 @@ def read_csv(
         Samples per second, for a file without a time column.
     delimiter
         Column separator; default ``","`` (``"\\t"`` for ``.tsv``).
+    check_units
+        Refuse values implausible in the declared units
+        (`bayes_fdi.datasets.units.check_plausible_units`); ``False`` reads them as they are.
 
     Returns
     -------
     xarray.Dataset
         An unlabelled one-run dataset (attrs ``source``, ``format``, ``units``, ``gaps``,
-        ``ignored_columns``, ``resampled``, ``sampling_step``, and ``time_origin`` for
-        date-times).
+        ``ignored_columns``, ``resampled``, ``sampling_step``, and for date-times
+        ``time_origin``, with ``time_offsets`` where they carry UTC offsets).
     """
-    import pandas as pd
-
     source = os.fspath(path)
+    if not os.path.exists(source):
+        raise FileNotFoundError(2, "no such file", source)
     sep = delimiter or ("\t" if source.lower().endswith(".tsv") else ",")
-    try:
-        frame = pd.read_csv(
-            source, sep=sep, dtype=str, keep_default_na=False, skipinitialspace=True
-        )
-    except pd.errors.EmptyDataError:
-        raise ValueError(f"{source}: the file is empty") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{source}: not a readable CSV file ({exc})") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
-    chosen, ignored = _pick_columns(list(frame.columns), columns, source, rate)
-    raw = {name: _numbers(frame[chosen[name]], chosen[name], source) for name in CHANNELS}
-    attrs: dict[str, Any] = {"ignored_columns": json.dumps(ignored)}
-    if "time" in chosen:
-        column = frame[chosen["time"]].str.strip()
-        if (column == "").any():
-            row = int(np.flatnonzero((column == "").to_numpy())[0])
-            raise ValueError(f"{source}: line {row + 2}: the time cell is empty")
-        try:
-            time = column.astype(np.float64).to_numpy()
-            origin = ""
-        except ValueError:
-            time, origin = to_seconds(column.to_numpy(dtype=object), source)
-        if origin:
-            attrs["time_origin"] = origin
-    else:
-        time = _rate_time(len(frame), rate)
-    return _build(time, raw, units, resample, source, "csv", attrs)
-
-
-def _numbers(column: Any, name: str, source: str) -> np.ndarray:
-    """Cells as floats: empty or NaN cells are NaN; anything else must be a number."""
-    text = column.str.strip()
-    blank = text.isin(["", "NaN", "nan", "NA", "N/A"]).to_numpy()
-    values = np.full(len(text), np.nan)
-    import pandas as pd
-
-    parsed = pd.to_numeric(text.where(~blank), errors="coerce").to_numpy(dtype=np.float64)
-    bad = np.isnan(parsed) & ~blank
-    if bad.any():
-        row = int(np.flatnonzero(bad)[0])
-        raise ValueError(
-            f"{source}: line {row + 2}, column {name!r}: {text.iloc[row]!r} is not a number "
-            "(write gaps as an empty cell or NaN)"
-        )
-    values[~blank] = parsed[~blank]
-    return values
+    read = read_csv_columns(source, sep, lambda names: _pick_columns(names, columns, source, rate))
+    time = read.time if read.time is not None else _rate_time(read.lines.size, rate)
+    return _build(
+        time, read.channels, units, resample, source, "csv", read.attrs, check_units, read.label
+    )
 
 
 def read_mat(
@@ -279,6 +258,7 @@ def read_mat(
     units: str | Mapping[str, str] = "normalised",
     resample: str | None = None,
     rate: float | None = None,
+    check_units: bool = True,
 ) -> xr.Dataset:
     """Read a MATLAB recording: one vector variable per channel (v5 via scipy, v7.3 via h5py).
 
@@ -324,7 +304,7 @@ def read_mat(
     n = next(iter(lengths.values()))
     time = vectors.pop("time") if "time" in vectors else _rate_time(n, rate)
     attrs = {"ignored_columns": json.dumps(ignored)}
-    return _build(time, vectors, units, resample, source, fmt, attrs)
+    return _build(time, vectors, units, resample, source, fmt, attrs, check_units)
 
 
 def read_netcdf(
@@ -334,12 +314,15 @@ def read_netcdf(
     units: str | Mapping[str, str] = "normalised",
     resample: str | None = None,
     chunks: Mapping[str, int] | None = None,
+    check_units: bool = True,
 ) -> xr.Dataset:
     """Read a netCDF recording (see the module docstring).
 
     Parameters are those of :func:`read_csv`, plus ``chunks`` (e.g. ``{"time": 86400}``): keep
     the data lazy in dask chunks (needs dask; the 1-s grid and units are checked, the values are
-    read chunk by chunk by the diagnosis). A lazy recording must already be on the 1-s grid.
+    read chunk by chunk by the diagnosis). A lazy recording must already be on the 1-s grid;
+    its units are checked on its first :data:`LAZY_UNITS_SAMPLE` seconds. A dataset already in
+    the project's format is taken as normalised (its units are not checked).
     """
     source = os.fspath(path)
     if not os.path.exists(source):
@@ -361,7 +344,7 @@ def read_netcdf(
     unit_of = parse_units(units)
     for name in CHANNELS:
         declared = opened[chosen[name]].attrs.get("units")
-        if declared is not None and _ALIASES.get(str(declared), str(declared)) != unit_of[name]:
+        if declared is not None and UNIT_ALIASES.get(str(declared), str(declared)) != unit_of[name]:
             raise ValueError(
                 f"{source}: variable {chosen[name]!r} declares units {declared!r} but "
                 f"{name} was given as {unit_of[name]!r} ('1' = normalised); pass units= to match"
@@ -371,12 +354,18 @@ def read_netcdf(
     if origin:
         attrs["time_origin"] = origin
     if chunks:
-        return _lazy(opened, chosen, unit_of, time, source, attrs)
+        lazy = _lazy(opened, chosen, unit_of, time, source, attrs)
+        if check_units:
+            head = lazy.isel(time=slice(0, LAZY_UNITS_SAMPLE)).load()
+            check_plausible_units(head, unit_of, source)
+        return lazy
     raw = {name: np.asarray(opened[chosen[name]].values, dtype=np.float64) for name in CHANNELS}
     opened.close()
-    return _build(time, raw, unit_of, resample, source, "netcdf", attrs)
+    return _build(time, raw, unit_of, resample, source, "netcdf", attrs, check_units)
 
 
+#: Seconds at the start of a lazily read recording whose units are checked.
+LAZY_UNITS_SAMPLE = 86400
 #: Chunk cache (bytes) of each variable of a lazily read netCDF file: netCDF's default of 64 MB
 #: per variable fills up as a long recording is read chunk by chunk (384 MB for six channels).
 LAZY_CHUNK_CACHE = 16 * 2**20
@@ -446,7 +435,7 @@ def _lazy(
         attrs={
             "source": source,
             "format": "netcdf",
-            "units": _units_attr(unit_of),
+            "units": units_attribute(unit_of),
             "sampling_step": 1.0,
             "resampled": "no",
             **attrs,

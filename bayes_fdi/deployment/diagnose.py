@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
+import numpy as np
 import xarray as xr
 
 from bayes_fdi.cli_arguments import UsageError, input_file
@@ -45,6 +46,7 @@ class _Job(NamedTuple):
     figure: bool
     progress: bool
     model_info: dict
+    commission_seconds: int | None  #: commission on the first seconds, diagnose the rest
 
 
 def _read(path: str | None, reading: Mapping[str, Any], chunk_seconds: int) -> xr.Dataset:
@@ -76,9 +78,99 @@ def _diagnose_job(job: _Job) -> RecordingResult:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # gaps are reported in the files, not as warnings
         recording = _read(job.path, job.reading, job.chunk_seconds)
-    return diagnose_recording(job.diagnoser, recording, job.out, name=job.name,
-                              chunk_seconds=job.chunk_seconds, figure=job.figure,
-                              progress=job.progress, model_info=job.model_info)  # fmt: skip
+    diagnoser, info, attachments = job.diagnoser, job.model_info, None
+    if job.commission_seconds is not None:
+        healthy, recording = split_healthy(recording, job.commission_seconds, job.name)
+        done, info, attachments = commission_in_place(healthy, progress=job.progress)
+        diagnoser = done.diagnoser
+    return diagnose_recording(
+        diagnoser,
+        recording,
+        job.out,
+        name=job.name,
+        chunk_seconds=job.chunk_seconds,
+        figure=job.figure,
+        progress=job.progress,
+        model_info=info,
+        attachments=attachments,
+    )
+
+
+def diagnose_example(out: str | os.PathLike, **options: Any) -> list[RecordingResult]:
+    """The first example: commission on the first half of the shipped Lublin hour, diagnose the
+    second half (``EXAMPLE_NAME``) and the same half with the bypass valve half opened (f18,
+    strength 0.5) from 300 s into it, transplanted with the commissioned twin's parameters
+    (``EXAMPLE_NAME-f18``). ``options``: those of `diagnose_recording`."""
+    from bayes_fdi.actuator import Fault
+    from bayes_fdi.datasets import load_lublin_example
+    from bayes_fdi.twin import transplant
+
+    hour = load_lublin_example()
+    first, second = split_healthy(hour, 1800, EXAMPLE_NAME)
+    done, info, attachments = commission_in_place(first, progress=options.get("progress", True))
+    faulty = transplant(second, [Fault("f18", 0.5, onset=300.0)], done.twin.parameters_)
+    info = {**info, "file": f"../{EXAMPLE_NAME}/model.npz"}
+    return [
+        diagnose_recording(
+            done.diagnoser,
+            second,
+            out,
+            name=EXAMPLE_NAME,
+            model_info={**info, "file": "model.npz"},
+            attachments=attachments,
+            **options,
+        ),
+        diagnose_recording(
+            done.diagnoser,
+            faulty,
+            out,
+            name=f"{EXAMPLE_NAME}-f18",
+            model_info={**info, "transplanted": "f18 0.5 from 300 s into the half"},
+            **options,
+        ),
+    ]
+
+
+def split_healthy(recording: xr.Dataset, seconds: int, name: str) -> tuple[xr.Dataset, xr.Dataset]:
+    """The first ``seconds`` of a recording (declared healthy) and the rest."""
+    recording = recording.load()
+    t = recording["time"].values
+    cut = int(np.searchsorted(t, t[0] + seconds))
+    if cut >= t.size:
+        raise UsageError(
+            f"{name}: --commission-seconds {seconds} leaves nothing to diagnose (the recording "
+            f"holds {t.size} s)"
+        )
+    return recording.isel(time=slice(0, cut)), recording.isel(time=slice(cut, None))
+
+
+def commission_in_place(healthy: xr.Dataset, *, progress: bool, seed: int = 0) -> tuple:
+    """Commission on ``healthy``: the diagnoser, its ``summary.json`` entry, and the files it
+    adds to the recording's folder (``model.npz``, ``commissioning.md``, ``commissioning.json``)."""
+    from bayes_fdi.commissioning import commission
+
+    done = commission(healthy, seed=seed, progress=progress)
+    return (done, *_commission_files(done))
+
+
+def _commission_files(done: Any) -> tuple[dict, dict]:
+    """``summary.json``'s entry of a commissioned model and the files it adds to a folder."""
+    from bayes_fdi import model_files
+    from bayes_fdi.atomic import write_text
+    from bayes_fdi.commissioning.report import render_report
+    from bayes_fdi.reporting import write_json
+
+    info = {
+        "commissioned_on_seconds": int(done.report["healthy"]["seconds"]),
+        "file": "model.npz",
+        "class": type(done.diagnoser).__name__,
+    }
+    attachments = {
+        "model.npz": lambda path: model_files.save(done.diagnoser, path),
+        "commissioning.md": lambda path: write_text(path, render_report(done.report)),
+        "commissioning.json": lambda path: write_json(done.report, path),
+    }
+    return info, attachments
 
 
 def diagnose_files(
@@ -93,8 +185,13 @@ def diagnose_files(
     workers: int | None = None,
     scheduler: str | None = None,
     model_info: Mapping[str, Any] | None = None,
+    commission_seconds: int | None = None,
 ) -> list[RecordingResult]:
     """Diagnose recording files (``None``: the shipped Lublin hour), one task per recording.
+
+    ``commission_seconds``: each recording's first seconds are declared healthy, a model is
+    commissioned on them (`commission_in_place`; ``diagnoser`` is then unused) and the rest is
+    diagnosed with it; the model and its report go into the recording's folder.
 
     ``reading`` holds the reader's options (`bayes_fdi.datasets.readers.read_recording`);
     netCDF recordings are read lazily in chunks when dask is installed.
@@ -115,11 +212,29 @@ def diagnose_files(
     jobs = []
     for p, name in zip(paths, names, strict=True):
         path = None if p is None else os.fspath(p)
-        jobs.append(_Job(diagnoser, path, name, os.fspath(out), reading, chunk_seconds, figure,
-                         progress and serial, info))  # fmt: skip
-    return run_tasks(_diagnose_job, jobs, workers=workers, scheduler=scheduler,
-                     progress=progress and len(jobs) > 1, desc="recordings",
-                     unit="recording")  # fmt: skip
+        jobs.append(
+            _Job(
+                diagnoser,
+                path,
+                name,
+                os.fspath(out),
+                reading,
+                chunk_seconds,
+                figure,
+                progress and serial,
+                info,
+                commission_seconds,
+            )
+        )
+    return run_tasks(
+        _diagnose_job,
+        jobs,
+        workers=workers,
+        scheduler=scheduler,
+        progress=progress and len(jobs) > 1,
+        desc="recordings",
+        unit="recording",
+    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -141,7 +256,10 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--example",
         action="store_true",
-        help=f"also diagnose the real Lublin hour shipped with bayes_fdi (as '{EXAMPLE_NAME}')",
+        help="the first example: commission a model on the first half of the real Lublin hour "
+        f"shipped with bayes_fdi, then diagnose its second half as '{EXAMPLE_NAME}' and the same "
+        f"half with a bypass opening transplanted 300 s in as '{EXAMPLE_NAME}-f18' (with "
+        "--model: diagnose the whole hour with that model instead)",
     )
     parser.add_argument(
         "--out", required=True, type=output_folder, help="output folder (one sub-folder each)"
@@ -159,6 +277,15 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         default=DEFAULT_CHUNK_SECONDS,
         help=f"seconds diagnosed at a time (memory bound; default {DEFAULT_CHUNK_SECONDS})",
     )
+    parser.add_argument(
+        "--commission-seconds",
+        type=positive_int,
+        default=None,
+        metavar="N",
+        help="commission a model on each recording's first N seconds, which you declare "
+        "healthy, and diagnose the rest with it (the model and its report are written beside "
+        "the results)",
+    )
     parser.add_argument("--no-figure", action="store_true", help="do not draw timeline.png")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     add_reading_arguments(parser)
@@ -175,24 +302,42 @@ def run_from_cli(args: argparse.Namespace) -> int:
     )
 
     paths: list[str | None] = list(args.recordings)
-    if args.example:
-        paths.append(None)
-    if not paths:
+    if not paths and not args.example:
         raise UsageError("give one or more recordings, or --example for the shipped Lublin hour")
     reading = reading_options(args)
     t0 = time.perf_counter()
-    if args.model:
-        diagnoser = load_online_model(args.model)
-        info = {"file": os.path.abspath(args.model)}
-    else:
-        diagnoser = default_model(progress=not args.quiet)
-        info = {"file": os.fspath(default_model_path()), "default": True}
-    info["class"] = type(diagnoser).__name__
     os.makedirs(args.out, exist_ok=True)
-    results = diagnose_files(diagnoser, paths, args.out, reading=reading,
-                             chunk_seconds=args.chunk_seconds, figure=not args.no_figure,
-                             progress=not args.quiet, workers=args.workers,
-                             scheduler=args.scheduler, model_info=info)  # fmt: skip
+    common = {
+        "chunk_seconds": args.chunk_seconds,
+        "figure": not args.no_figure,
+        "progress": not args.quiet,
+    }
+    results: list[RecordingResult] = []
+    if args.example and not args.model:
+        results += diagnose_example(args.out, **common)
+    elif args.example:
+        paths.append(None)
+    diagnoser, info = None, {}
+    if paths and args.commission_seconds is None:
+        if args.model:
+            diagnoser = load_online_model(args.model)
+            info = {"file": os.path.abspath(args.model)}
+        else:
+            diagnoser = default_model(progress=not args.quiet)
+            info = {"file": os.fspath(default_model_path()), "default": True}
+        info["class"] = type(diagnoser).__name__
+    if paths:
+        results += diagnose_files(
+            diagnoser,
+            paths,
+            args.out,
+            reading=reading,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            model_info=info,
+            commission_seconds=args.commission_seconds,
+            **common,
+        )
     for r in results:
         counts = ", ".join(f"{k} {v} s" for k, v in sorted(r.status_counts.items()))
         print(f"{r.name}: {r.seconds} s, {r.alarms} alarm(s); {counts} -> {r.folder}")

@@ -26,7 +26,7 @@ from __future__ import annotations
 import inspect
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -110,6 +110,7 @@ def diagnose_recording(
     figure: bool = True,
     progress: bool = False,
     model_info: Mapping[str, Any] | None = None,
+    attachments: Mapping[str, Callable[[Path], Any]] | None = None,
 ) -> RecordingResult:
     """Diagnose one recording and write its files in ``out/name`` (see the module docstring).
 
@@ -132,6 +133,9 @@ def diagnose_recording(
         A progress bar over the recording's seconds.
     model_info
         Recorded in ``summary.json`` (e.g. the model file).
+    attachments
+        Other files of the recording's folder: name -> a function writing it to the given
+        path (e.g. the model commissioned on the recording's first seconds).
 
     Returns
     -------
@@ -154,6 +158,8 @@ def diagnose_recording(
         )
     destination = Path(out) / name
     with atomic_folder(destination) as folder:
+        for file_name, write in (attachments or {}).items():
+            write(folder / file_name)
         counts, found, files = _write_outputs(
             diagnoser,
             recording,
@@ -166,6 +172,7 @@ def diagnose_recording(
             figure,
             progress,
             model_info,
+            tuple(attachments or {}),
         )
     return RecordingResult(
         name, os.fspath(destination), int(n_t), int(n_runs), len(found), counts, tuple(files)
@@ -202,6 +209,7 @@ def _write_outputs(
     figure: bool,
     progress: bool,
     model_info: Mapping[str, Any] | None,
+    attached: tuple[str, ...],
 ) -> tuple[dict[str, int], list, list[str]]:
     """Diagnose ``recording`` chunk by chunk into the files of ``folder``."""
     n_runs, n_t = recording.sizes["run"], recording.sizes["time"]
@@ -215,9 +223,9 @@ def _write_outputs(
     counts: dict[str, int] = {}
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from bayes_fdi.progress import progress_bar
 
-        bar = tqdm(total=n_t, desc=f"diagnosing {name}", unit="s", leave=False)
+        bar = progress_bar(n_t, f"diagnosing {name}", unit="s", leave=False)
     state = None
     try:
         for a in range(0, n_t, chunk):
@@ -275,7 +283,7 @@ def _write_outputs(
         write_events(scored, folder / "events.csv")
         files.append("events.csv")
         summary["lublin_events"] = event_summary(stream_one, events, scored)
-    files.append("summary.json")
+    files += [*attached, "summary.json"]
     summary["files"] = files
     _write_json(summary, folder / "summary.json")
     return counts, found, files
