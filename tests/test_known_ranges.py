@@ -3,6 +3,8 @@ unit that fits, a recording far outside in every unit is named, one inside passe
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -10,7 +12,7 @@ import xarray as xr
 
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import load_lublin_example
-from bayes_fdi.datasets.known_ranges import channel_ranges, check_known_ranges
+from bayes_fdi.datasets.known_ranges import channel_ranges, check_known_ranges, units_of
 from bayes_fdi.diagnosis import OnlineDiagnoser
 
 #: normalised training ranges, [1st percentile, median, 99th percentile]
@@ -42,10 +44,18 @@ def test_far_outside_in_every_unit_is_a_note_and_inside_is_silent():
     assert check_known_ranges(_recording(F=0.20, X=0.70), RANGES, "physical") == []  # within
 
 
+def test_units_of_a_read_recording_and_none_where_unknown():
+    units = '{"CV": "%", "P1": "kPa", "P2": "kPa", "T1": "degC", "X": "%", "F": "t/h"}'
+    assert units_of(xr.Dataset(attrs={"units": units})) == json.loads(units)
+    assert units_of(xr.Dataset(attrs={"units": "CV = raw / 100 %"})) is None  # free text
+    assert units_of(xr.Dataset()) is None
+
+
 def test_diagnose_refuses_a_recording_declared_in_the_wrong_units(tmp_path, capsys):
     hour = load_lublin_example()
     model = OnlineDiagnoser(random_state=0).fit(hour.isel(time=slice(0, 900)))
     assert set(model.training_ranges_) == {"CV", "P1", "P2", "T1", "X", "F"}
+    model.training_units_ = {c: "1" for c in ("CV", "P1", "P2", "T1", "X", "F")}
     model.save(tmp_path / "m.npz")
     assert OnlineDiagnoser.load(tmp_path / "m.npz").training_ranges_ == model.training_ranges_
     run = hour.isel(run=0, time=slice(900, 1500))
@@ -60,6 +70,7 @@ def test_diagnose_refuses_a_recording_declared_in_the_wrong_units(tmp_path, caps
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert "far outside what the model was fitted on" in err and "in 'kg/s'" in err
+    assert "the model was fitted on recordings declared as CV=1,P1=1" in err
     assert not (tmp_path / "out" / "kgs").exists()  # nothing written
     assert main([*argv, "--no-unit-check"]) == 0  # the user's word: diagnosed as they are
     assert (tmp_path / "out" / "kgs" / "seva.csv").exists()

@@ -6,11 +6,13 @@ files. `check_known_ranges` compares a recording with it before diagnosing: a ch
 median lies far outside what the model knows, but inside it had its raw values been declared in
 another unit of the same quantity (F in kg/s declared as t/h, pressures in MPa declared as bar),
 is refused with a message naming that unit; a channel far outside in every unit is returned so
-that the caller can say so (the diagnoser then answers "mismatch").
+that the caller can say so (the diagnoser then answers "mismatch"). `units_of` reads the units a
+read recording was declared in, which fitted diagnosers keep beside the ranges.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from typing import Any
 
@@ -26,7 +28,7 @@ from bayes_fdi.datasets.units import (
     to_physical,
 )
 
-__all__ = ["FAR_OUTSIDE", "channel_ranges", "check_known_ranges"]
+__all__ = ["FAR_OUTSIDE", "channel_ranges", "check_known_ranges", "units_of"]
 
 #: How far outside a model's training range a recording's median must lie to be "far": beyond
 #: either end of the 1st-to-99th-percentile range by the larger of a quarter of its span and
@@ -47,6 +49,20 @@ def channel_ranges(runs: Any) -> dict[str, list[float]]:
             [float(q) for q in np.quantile(v, [0.01, 0.5, 0.99])] if v.size else [np.nan] * 3
         )
     return out
+
+
+def units_of(runs: Any) -> dict[str, str] | None:
+    """The units the recordings of ``runs`` were declared in (channel -> unit, as the readers
+    record them in the ``units`` attribute), or None where unknown (simulated data, a file
+    whose ``units`` attribute is free text, recordings declared in different units)."""
+    text = getattr(runs, "attrs", {}).get("units")
+    try:
+        units = json.loads(text) if isinstance(text, str) else None
+    except json.JSONDecodeError:
+        return None
+    if not isinstance(units, dict) or set(units) != set(CHANNELS):
+        return None
+    return {c: str(units[c]) for c in CHANNELS}
 
 
 def _far(median: float, known: list[float]) -> bool:

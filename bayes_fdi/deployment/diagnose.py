@@ -107,7 +107,16 @@ def _check_ranges(diagnoser: Any, recording: xr.Dataset, units: Any, name: str) 
     ranges = getattr(diagnoser, "training_ranges_", None)
     if not ranges:
         return  # a model file written before the ranges were recorded
-    for note in check_known_ranges(recording, ranges, units, source=name):
+    try:
+        notes = check_known_ranges(recording, ranges, units, source=name)
+    except ValueError as exc:
+        known = getattr(diagnoser, "training_units_", None)
+        if not known:
+            raise
+        pairs = ",".join(f"{c}={u}" for c, u in known.items())
+        hint = f"the model was fitted on recordings declared as {pairs}"
+        raise ValueError(f"{exc} ({hint})") from None
+    for note in notes:
         print(f"note: {note}: expect 'mismatch' (commission this valve)", file=sys.stderr)
 
 

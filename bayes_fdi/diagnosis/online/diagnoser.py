@@ -22,7 +22,7 @@ from sklearn.base import BaseEstimator, clone
 
 from bayes_fdi import model_files
 from bayes_fdi.datasets import CHANNELS, validate_dataset
-from bayes_fdi.datasets.known_ranges import channel_ranges
+from bayes_fdi.datasets.known_ranges import channel_ranges, units_of
 from bayes_fdi.diagnosis.detection.detectors import CUSUM, sequential_test
 from bayes_fdi.diagnosis.isolation.signatures import SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
@@ -127,9 +127,9 @@ class OnlineDiagnoser(BaseEstimator):
         The isolation signatures' window.
     envelope_ : InputEnvelope
         The input envelope (``input_low_``, ``input_high_``: its bounds of CV, P1, P2, T1).
-    training_ranges_ : dict
-        Channel -> 1st, 50th and 99th percentile of the fault-free training data, normalised
-        (`bayes_fdi.datasets.known_ranges.channel_ranges`; absent from older model files).
+    training_ranges_, training_units_ : dict
+        Channel -> 1st, 50th, 99th percentile of the fault-free data (normalised), and -> the
+        unit its recordings were declared in, if known (`bayes_fdi.datasets.known_ranges`).
     isolator_ : FaultIsolator or None
         None when fitted without fault runs (detection only).
     groups_ : tuple of tuple of str
@@ -240,6 +240,7 @@ class OnlineDiagnoser(BaseEstimator):
             raise ValueError("the detector threshold could not be calibrated (no finite ARL fit)")
         self.envelope_ = InputEnvelope(margin=self.input_margin).fit(normal_runs)
         self.training_ranges_ = channel_ranges(normal_runs)
+        self.training_units_ = units_of(normal_runs)
         self.signature_ = SignatureWindow()
         seconds["detection"] = time.perf_counter() - t0
         self.isolator_ = None
@@ -303,8 +304,7 @@ class OnlineDiagnoser(BaseEstimator):
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike[str]) -> str:
-        """Write the fitted diagnoser to ``path`` (`bayes_fdi.model_files.format`: a
-        versioned ``.npz`` of JSON and arrays, no pickle; written atomically).
+        """Write the fitted diagnoser to ``path`` (a versioned ``.npz``, no pickle, atomically).
 
         Everything fitted is saved (normal models, whitening filters, detector, isolator,
         groups), and the `update` stream's state, so a loaded diagnoser gives exactly the same
