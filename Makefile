@@ -23,6 +23,7 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)
 
 demo: $(STAMP)
+	$(VENV)/bin/bayes-fdi diagnose --example --out results/example
 	$(VENV)/bin/bayes-fdi reproduce --out results
 	$(VENV)/bin/bayes-fdi benchmark --small --out results/benchmark-small
 

@@ -31,7 +31,9 @@ def _terminal() -> bool:
 
 
 @contextlib.contextmanager
-def busy(desc: str, *, enabled: bool = True, interval: float = 0.5) -> Iterator[None]:
+def busy(
+    desc: str, *, enabled: bool = True, interval: float = 0.5, heartbeat: float = 20.0
+) -> Iterator[None]:
     """Show ``desc`` and the elapsed time on stderr while the block runs.
 
     Parameters
@@ -42,15 +44,15 @@ def busy(desc: str, *, enabled: bool = True, interval: float = 0.5) -> Iterator[
         ``False``: show nothing.
     interval
         Seconds between refreshes.
+    heartbeat
+        When stderr is not a terminal (a log file, a pipe): seconds between the plain lines
+        that say the step is still running (no ``\\r`` frames).
     """
     if not enabled:
         yield
         return
     if not _terminal():
-        start = time.perf_counter()
-        print(f"{desc} ...", file=sys.stderr, flush=True)
-        yield
-        print(f"{desc}: done in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+        yield from _plain_busy(desc, heartbeat)
         return
     from tqdm.auto import tqdm
 
@@ -69,6 +71,27 @@ def busy(desc: str, *, enabled: bool = True, interval: float = 0.5) -> Iterator[
         stop.set()
         ticker.join()
         bar.close()
+
+
+def _plain_busy(desc: str, heartbeat: float) -> Iterator[None]:
+    """`busy` for a log file: a line at the start, one every ``heartbeat`` s, one at the end."""
+    start = time.perf_counter()
+    print(f"{desc} ...", file=sys.stderr, flush=True)
+    stop = threading.Event()
+
+    def beat() -> None:
+        while not stop.wait(heartbeat):
+            elapsed = time.perf_counter() - start
+            print(f"{desc}: still running, {elapsed:.0f} s", file=sys.stderr, flush=True)
+
+    ticker = threading.Thread(target=beat, name="bayes_fdi-busy", daemon=True)
+    ticker.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        ticker.join()
+    print(f"{desc}: done in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
 class PlainProgress:

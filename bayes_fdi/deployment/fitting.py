@@ -307,6 +307,13 @@ def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
         default=3,
         help="actuator of a Lublin day file DDMM2001.txt (default 3)",
     )
+    group.add_argument(
+        "--no-unit-check",
+        dest="check_units",
+        action="store_false",
+        help="read values as they are, even where they look declared in the wrong units "
+        "(implausible by orders of magnitude, or far outside the model's training data)",
+    )
 
 
 def reading_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -325,6 +332,8 @@ def reading_options(args: argparse.Namespace) -> dict[str, Any]:
         raise UsageError(str(exc)) from None
     options = {"units": args.units, "columns": columns, "resample": args.resample,
                "rate": args.rate, "actuator": args.actuator}  # fmt: skip
+    if not args.check_units:
+        options["check_units"] = False
     return options
 
 

@@ -24,6 +24,7 @@ from sklearn.base import BaseEstimator, clone
 
 from bayes_fdi import model_files
 from bayes_fdi.datasets import CHANNELS, validate_dataset
+from bayes_fdi.datasets.known_ranges import channel_ranges
 from bayes_fdi.diagnosis.detection.detectors import CUSUM, sequential_test
 from bayes_fdi.diagnosis.isolation.signatures import SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
@@ -126,6 +127,11 @@ class OnlineDiagnoser(BaseEstimator):
         The isolation signatures' window.
     envelope_ : InputEnvelope
         The input envelope (``input_low_``, ``input_high_``: its bounds of CV, P1, P2, T1).
+    training_ranges_ : dict
+        Channel -> 1st percentile, median and 99th percentile of the fault-free training
+        data, normalised to full scale (`bayes_fdi.datasets.known_ranges.channel_ranges`):
+        recordings far outside it are checked for wrongly declared units before diagnosis.
+        Absent from model files written before it was recorded.
     isolator_ : FaultIsolator or None
         None when fitted without fault runs (detection only).
     groups_ : tuple of tuple of str
@@ -235,6 +241,7 @@ class OnlineDiagnoser(BaseEstimator):
         if not math.isfinite(self.threshold_):
             raise ValueError("the detector threshold could not be calibrated (no finite ARL fit)")
         self.envelope_ = InputEnvelope(margin=self.input_margin).fit(normal_runs)
+        self.training_ranges_ = channel_ranges(normal_runs)
         self.signature_ = SignatureWindow()
         seconds["detection"] = time.perf_counter() - t0
         self.isolator_ = None
