@@ -63,3 +63,16 @@ def test_diagnose_refuses_a_recording_declared_in_the_wrong_units(tmp_path, caps
     assert not (tmp_path / "out" / "kgs").exists()  # nothing written
     assert main([*argv, "--no-unit-check"]) == 0  # the user's word: diagnosed as they are
     assert (tmp_path / "out" / "kgs" / "seva.csv").exists()
+
+
+def test_fit_reports_the_range_it_covers_and_that_it_detects_only(tmp_path, capsys):
+    run = load_lublin_example().isel(run=0, time=slice(0, 1200))
+    frame = pd.DataFrame({"time": run["time"].values, **{c: run[c].values for c in
+                          ("CV", "P1", "P2", "T1", "X", "F")}})  # fmt: skip
+    frame.to_csv(tmp_path / "healthy.csv", index=False)
+    argv = ["fit", "--normal", str(tmp_path / "healthy.csv"), "--out", str(tmp_path / "m.npz")]
+    assert main([*argv, "--quiet"]) == 0
+    out = capsys.readouterr().out
+    low, high = np.percentile(run["CV"].values * 100, [1, 99])  # the same percentiles, in %
+    assert f"CV {low:.4g} to {high:.4g} %" in out
+    assert "detection only" in out and "bayes-fdi commission" in out

@@ -11,7 +11,6 @@ share. Without ``--model`` the default model is used (`bayes_fdi.deployment.fitt
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -86,7 +85,7 @@ def _diagnose_job(job: _Job) -> RecordingResult:
         done, info, attachments = commission_in_place(healthy, progress=job.progress)
         diagnoser = done.diagnoser
     elif job.reading.get("check_units", True):
-        _check_ranges(diagnoser, recording, job.name)
+        _check_ranges(diagnoser, recording, job.reading.get("units") or "normalised", job.name)
     return diagnose_recording(
         diagnoser,
         recording,
@@ -100,7 +99,7 @@ def _diagnose_job(job: _Job) -> RecordingResult:
     )
 
 
-def _check_ranges(diagnoser: Any, recording: xr.Dataset, name: str) -> None:
+def _check_ranges(diagnoser: Any, recording: xr.Dataset, units: Any, name: str) -> None:
     """Refuse a recording that looks declared in the wrong units for this model; say where it
     lies far outside the model's training data in every unit (`check_known_ranges`)."""
     from bayes_fdi.datasets.known_ranges import check_known_ranges
@@ -108,7 +107,6 @@ def _check_ranges(diagnoser: Any, recording: xr.Dataset, name: str) -> None:
     ranges = getattr(diagnoser, "training_ranges_", None)
     if not ranges:
         return  # a model file written before the ranges were recorded
-    units = json.loads(recording.attrs["units"]) if "units" in recording.attrs else "normalised"
     for note in check_known_ranges(recording, ranges, units, source=name):
         print(f"note: {note}: expect 'mismatch' (commission this valve)", file=sys.stderr)
 

@@ -28,6 +28,7 @@ from bayes_fdi.datasets.known_ranges import channel_ranges
 from bayes_fdi.diagnosis.detection.detectors import CUSUM, sequential_test
 from bayes_fdi.diagnosis.isolation.signatures import SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
+from bayes_fdi.diagnosis.online.clock import check_next_time, check_time_axis
 from bayes_fdi.diagnosis.online.envelope import InputEnvelope
 from bayes_fdi.diagnosis.online.legacy import upgrade_diagnoser
 from bayes_fdi.diagnosis.online.records import last_values, second_record, status_reasons
@@ -128,10 +129,8 @@ class OnlineDiagnoser(BaseEstimator):
     envelope_ : InputEnvelope
         The input envelope (``input_low_``, ``input_high_``: its bounds of CV, P1, P2, T1).
     training_ranges_ : dict
-        Channel -> 1st percentile, median and 99th percentile of the fault-free training
-        data, normalised to full scale (`bayes_fdi.datasets.known_ranges.channel_ranges`):
-        recordings far outside it are checked for wrongly declared units before diagnosis.
-        Absent from model files written before it was recorded.
+        Channel -> 1st, 50th and 99th percentile of the fault-free training data, normalised
+        (`bayes_fdi.datasets.known_ranges.channel_ranges`; absent from older model files).
     isolator_ : FaultIsolator or None
         None when fitted without fault runs (detection only).
     groups_ : tuple of tuple of str
@@ -371,6 +370,7 @@ class OnlineDiagnoser(BaseEstimator):
             `update` continues that stream exactly. None: a fresh stream.
         """
         self._check_fitted()
+        self._last_time = None  # the first sample may carry any time
         if state is None:
             self._stream = init_run_state(self._components())
         else:
@@ -392,7 +392,8 @@ class OnlineDiagnoser(BaseEstimator):
         ----------
         sample
             Mapping with ``CV, P1, P2, T1, X, F`` (normalised; NaN = missing) and optionally
-            ``time`` (s; default the number of seconds since `reset`).
+            ``time`` (s; default the number of seconds since `reset`), which must follow the
+            previous sample's by 1 s (`bayes_fdi.diagnosis.online.clock.check_next_time`).
 
         Returns
         -------
@@ -409,6 +410,8 @@ class OnlineDiagnoser(BaseEstimator):
             raise ValueError(f"sample lacks channel(s) {missing}")
         arrays = {c: np.array([float(sample[c])], dtype=np.float64) for c in CHANNELS}
         t = float(sample.get("time", self._stream.seconds))
+        check_next_time(getattr(self, "_last_time", None), t)
+        self._last_time = t
         out, self._stream = step(self._components(), arrays, self._stream)
         dec = self._decide(arrays, out)
         self.last_ = last_values(out, dec, t)
@@ -433,7 +436,8 @@ class OnlineDiagnoser(BaseEstimator):
         Parameters
         ----------
         recording
-            Channels CV, P1, P2, T1, X, F (normalised; NaN = missing).
+            Channels CV, P1, P2, T1, X, F (normalised; NaN = missing); its ``time``, if any,
+            a 1 Hz grid (`bayes_fdi.diagnosis.online.clock.check_time_axis`).
         state
             The `StreamState` returned by an earlier call with ``return_state=True`` on the
             preceding part of the same runs (same number of runs): the stream continues
@@ -485,6 +489,8 @@ class OnlineDiagnoser(BaseEstimator):
             ds = ds.drop_vars([c for c in ds.coords if ds[c].ndim == 0]).expand_dims("run")
         channels = ds[[c for c in CHANNELS if c in ds.data_vars]].reset_coords(drop=True)
         validate_dataset(channels, require=CHANNELS, allow_nan=True)
+        if "time" in ds.coords:
+            check_time_axis(ds["time"].values)
         n_runs, n_t = ds.sizes["run"], ds.sizes["time"]
         components = self._components()
         if state is not None:
