@@ -38,7 +38,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     ),
     "benchmark": (
         "bayes_fdi.benchmark.harness",
-        "score the online diagnoser on the DAMADICS benchmark's 44 scenarios (PICalc indices)",
+        "score the online diagnoser on the DAMADICS benchmark's 44 scenarios (PICalc indices); "
+        "--commissioning: commissioned diagnosers on the real hour and perturbed plants",
     ),
     "rvm-demo": ("bayes_fdi.commands.rvm_demo", "fit an RVM on a small sinc problem and print it"),
     "fit": ("bayes_fdi.deployment.fitting", "fit an online diagnoser and save it to a file"),

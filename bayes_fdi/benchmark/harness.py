@@ -350,20 +350,36 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "--seeds",
         type=int,
         default=None,
-        help="noise seeds per scenario (default 10; 2 with --small)",
+        help="noise seeds per scenario (default 10; 2 with --small; with --commissioning: "
+        "seeds per plant and scenario, default 2, 1 with --small)",
     )
     parser.add_argument(
         "--small",
         action="store_true",
         help="quick version: small training, 2 seeds, horizons cut at 2400 s, "
-        "1 fault-free hour (not the benchmark's numbers)",
+        "1 fault-free hour (with --commissioning: 1 plant, 1 seed, lighter commissioning); "
+        "not the benchmark's numbers",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    from bayes_fdi.benchmark import commissioning
+
+    commissioning.configure_parser(parser)
 
 
 def run_from_cli(args: argparse.Namespace) -> int:
-    """Fit the online diagnoser on its training campaigns, run the benchmark, write the report."""
+    """Fit the online diagnoser on its training campaigns, run the benchmark, write the report
+    (with ``--commissioning``: the commissioning benchmark,
+    `bayes_fdi.benchmark.commissioning.run_from_cli`)."""
     from bayes_fdi.default_diagnoser import fit_online_diagnoser
+
+    if args.commissioning:
+        from bayes_fdi.benchmark import commissioning
+
+        return commissioning.run_from_cli(args)
+    if args.plants is not None:
+        from bayes_fdi.cli_arguments import UsageError
+
+        raise UsageError("--plants belongs to --commissioning")
 
     n_seeds = args.seeds if args.seeds is not None else (2 if args.small else 10)
     t0 = time.perf_counter()

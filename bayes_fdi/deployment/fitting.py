@@ -238,9 +238,8 @@ def fit_from_recordings(
     """
     from sklearn.base import clone
 
-    from bayes_fdi.progress import busy
-
     from bayes_fdi.commissioning import check_healthy
+    from bayes_fdi.progress import busy
 
     normal_runs = check_healthy(
         recordings_as_runs(normal, ["fn"] * len(normal), [0.0] * len(normal))

@@ -48,8 +48,7 @@ def check_time_axis(time: np.ndarray) -> None:
     median = float(np.median(steps))
     raise ValueError(
         f"time advances by {steps[i]:g} s at index {i + 1} ({t[i]:g} s then {t[i + 1]:g} s; "
-        f"median step {median:g} s): the online diagnoser needs one sample per second; "
-        + _RESAMPLE
+        f"median step {median:g} s): the online diagnoser needs one sample per second; " + _RESAMPLE
     )
 
 
@@ -62,8 +61,7 @@ def check_next_time(previous: float | None, time: float) -> None:
     if time <= previous:
         what = "goes back" if time < previous else "repeats"
         raise ValueError(
-            f"sample time {what} ({previous:g} s then {time:g} s): feed each second once, "
-            "in order"
+            f"sample time {what} ({previous:g} s then {time:g} s): feed each second once, in order"
         )
     raise ValueError(
         f"sample time jumps from {previous:g} s to {time:g} s: feed the missing seconds as "

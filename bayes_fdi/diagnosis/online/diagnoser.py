@@ -1,13 +1,11 @@
 """The online self-validating diagnoser: every second, detect, isolate and say how far to trust
 X and F.
 
-`OnlineDiagnoser` fits its online components (normal models, whiteners, detector, detection
-decision, signature window, input envelope, isolator) and runs them second by second
-(`bayes_fdi.diagnosis.online.step`): ``run(recording)`` returns the whole 1 Hz decision stream
-(its variables are listed in `OnlineDiagnoser.run`), ``update(sample)`` processes one second and
-returns its `~bayes_fdi.diagnosis.seva.record.SevaRecord` in O(1) time and memory. Both go
-through the same compiled kernels with the same state (`bayes_fdi.diagnosis.online.state`), so
-feeding a run second by second gives exactly the stream of ``run`` (tested).
+`OnlineDiagnoser` fits its online components (normal models, whiteners, detector, decision,
+signature window, input envelope, isolator) and runs them second by second (``online.step``):
+``run(recording)`` gives the 1 Hz decision stream, ``update(sample)`` one second's
+`~bayes_fdi.diagnosis.seva.record.SevaRecord` in O(1) time and memory, through the same
+compiled kernels and state (``online.state``): second by second equals ``run`` exactly (tested).
 """
 
 from __future__ import annotations
@@ -28,6 +26,7 @@ from bayes_fdi.datasets.known_ranges import channel_ranges
 from bayes_fdi.diagnosis.detection.detectors import CUSUM, sequential_test
 from bayes_fdi.diagnosis.isolation.signatures import SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
+from bayes_fdi.diagnosis.online.checks import check_fitted_values, check_settings
 from bayes_fdi.diagnosis.online.clock import check_next_time, check_time_axis
 from bayes_fdi.diagnosis.online.envelope import InputEnvelope
 from bayes_fdi.diagnosis.online.legacy import upgrade_diagnoser
@@ -275,20 +274,12 @@ class OnlineDiagnoser(BaseEstimator):
 
     def _check_params(self) -> None:
         self._detector_prototype()
-        checks = {
-            "false_alarm_hours": self.false_alarm_hours > 0,
-            "cusum_k": self.cusum_k >= 0,
-            "glr_window": isinstance(self.glr_window, int) and self.glr_window >= 1,
-            "p_fault": 0 <= self.p_fault <= 1,
-            "novelty_ratio": self.novelty_ratio > 0,
-            "coverage": 0 < self.coverage < 1,
-            "detect_rate": 0 <= self.detect_rate <= 1,
-            "input_margin": self.input_margin >= 0,
-            "max_signatures_per_fault": self.max_signatures_per_fault >= 2,
-        }
-        for name, ok in checks.items():
-            if not ok:
-                raise ValueError(f"{name} is out of range: {getattr(self, name)!r}")
+        check_settings(self.get_params())
+
+    def check_model_file(self) -> None:
+        """Called by the model-file loader: refuse fitted values that cannot be right
+        (`bayes_fdi.diagnosis.online.checks.check_fitted_values`)."""
+        check_fitted_values(vars(self))
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "normal_models_"):
@@ -324,15 +315,13 @@ class OnlineDiagnoser(BaseEstimator):
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], **kwargs: Any) -> OnlineDiagnoser:
-        """Read a diagnoser written by `save` (``kwargs``: those of
-        `bayes_fdi.model_files.format.load`); a ``ValueError`` names a corrupt, foreign or
-        newer file, or one that holds another class."""
+        """Read a diagnoser written by `save` (``kwargs``: those of `model_files.format.load`);
+        a ``ValueError`` names a corrupt, foreign or newer file, or another class in it."""
         return model_files.load(path, expected=cls, **kwargs)
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
-        """A saved diagnoser's attributes in today's layout
-        (`bayes_fdi.diagnosis.online.legacy.upgrade_diagnoser`)."""
+        """A saved diagnoser's attributes in today's layout (``online.legacy``)."""
         return upgrade_diagnoser(data)
 
     # ------------------------------------------------------------------ the per-second core
