@@ -37,7 +37,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "write a calibration report for a diagnoser on a test dataset",
     ),
     "benchmark": (
-        "bayes_fdi.benchmark.harness",
+        "bayes_fdi.commands.benchmark",
         "score the online diagnoser on the DAMADICS benchmark's 44 scenarios (PICalc indices); "
         "--commissioning: commissioned diagnosers on the real hour and perturbed plants",
     ),

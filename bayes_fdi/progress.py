@@ -19,7 +19,7 @@ import contextlib
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 __all__ = ["PlainProgress", "busy", "progress_bar"]
@@ -57,19 +57,10 @@ def busy(
     from tqdm.auto import tqdm
 
     bar = tqdm(total=None, desc=desc, bar_format="{desc}: {elapsed}", leave=True)
-    stop = threading.Event()
-
-    def refresh() -> None:
-        while not stop.wait(interval):
-            bar.refresh()
-
-    ticker = threading.Thread(target=refresh, name="bayes_fdi-busy", daemon=True)
-    ticker.start()
     try:
-        yield
+        with _every(interval, bar.refresh):
+            yield
     finally:
-        stop.set()
-        ticker.join()
         bar.close()
 
 
@@ -77,21 +68,32 @@ def _plain_busy(desc: str, heartbeat: float) -> Iterator[None]:
     """`busy` for a log file: a line at the start, one every ``heartbeat`` s, one at the end."""
     start = time.perf_counter()
     print(f"{desc} ...", file=sys.stderr, flush=True)
-    stop = threading.Event()
 
     def beat() -> None:
-        while not stop.wait(heartbeat):
-            elapsed = time.perf_counter() - start
-            print(f"{desc}: still running, {elapsed:.0f} s", file=sys.stderr, flush=True)
+        elapsed = time.perf_counter() - start
+        print(f"{desc}: still running, {elapsed:.0f} s", file=sys.stderr, flush=True)
 
-    ticker = threading.Thread(target=beat, name="bayes_fdi-busy", daemon=True)
+    with _every(heartbeat, beat):
+        yield
+    print(f"{desc}: done in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _every(seconds: float, action: Callable[[], None]) -> Iterator[None]:
+    """Call ``action`` every ``seconds`` from a background thread while the block runs."""
+    stop = threading.Event()
+
+    def loop() -> None:
+        while not stop.wait(seconds):
+            action()
+
+    ticker = threading.Thread(target=loop, name="bayes_fdi-busy", daemon=True)
     ticker.start()
     try:
         yield
     finally:
         stop.set()
         ticker.join()
-    print(f"{desc}: done in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
 
 
 class PlainProgress:

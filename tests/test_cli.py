@@ -48,3 +48,10 @@ def test_help_of_every_command_loads_neither_torch_nor_numba():
         if heavy:
             slow[name] = heavy
     assert slow == {}
+
+
+def test_benchmark_help_states_the_commissioning_benchmark_settings():
+    from bayes_fdi.benchmark.commissioning import FULL, SMALL
+    from bayes_fdi.commands.benchmark import PLANTS_FULL, PLANTS_SMALL
+
+    assert (PLANTS_FULL, PLANTS_SMALL) == (FULL["plants"], SMALL["plants"])

@@ -181,24 +181,6 @@ def run_commissioning_benchmark(
     return results
 
 
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    """Options of ``bayes-fdi benchmark`` that only the commissioning benchmark reads."""
-    parser.add_argument(
-        "--commissioning",
-        action="store_true",
-        help="the commissioning benchmark instead: the real hour (commissioned on its first "
-        "half, faults transplanted onto the second) and perturbed plants (commissioned on 1 h, "
-        "then the 44 scenarios), the default model beside",
-    )
-    parser.add_argument(
-        "--plants",
-        type=int,
-        default=None,
-        help=f"with --commissioning: perturbed plants (default {FULL['plants']}; "
-        f"{SMALL['plants']} with --small)",
-    )
-
-
 def run_from_cli(args: argparse.Namespace) -> int:
     """Fit the default diagnoser, run the commissioning benchmark, write the report."""
     from bayes_fdi.cli_arguments import UsageError
