@@ -23,6 +23,7 @@ $(STAMP): pyproject.toml constraints.txt
 install: $(STAMP)
 
 demo: $(STAMP)
+	$(VENV)/bin/bayes-fdi diagnose --example --out results/example
 	$(VENV)/bin/bayes-fdi reproduce --out results
 	$(VENV)/bin/bayes-fdi benchmark --small --out results/benchmark-small
 
@@ -51,8 +52,9 @@ pytest: $(STAMP)
 pytest-slow: $(STAMP)
 	$(VENV)/bin/pytest -m slow
 
-# The notebooks run on small settings into build/notebooks (the test: any error fails it); the
-# docs show those executed copies (docs/notebooks links there), so they run once per `make test`.
+# The notebooks run on small settings into build/notebooks (the test: any error fails it, and so
+# does a machine path or numpy repr in their outputs); the docs show those executed copies
+# (docs/notebooks links there), so they run once per `make test`.
 NOTEBOOKS := $(wildcard notebooks/*.ipynb)
 EXECUTED := $(patsubst notebooks/%,build/notebooks/%,$(NOTEBOOKS))
 PACKAGE_SOURCES := $(shell find bayes_fdi -name '*.py')
@@ -60,6 +62,7 @@ PACKAGE_SOURCES := $(shell find bayes_fdi -name '*.py')
 notebooks: $(STAMP)
 	rm -f $(EXECUTED)
 	$(MAKE) --no-print-directory -j 2 $(EXECUTED)
+	$(PY) notebooks/check_outputs.py $(EXECUTED)
 
 build/notebooks/%.ipynb: notebooks/%.ipynb $(PACKAGE_SOURCES) | $(STAMP)
 	@mkdir -p build/notebooks

@@ -31,16 +31,17 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "simulate a campaign TOML file into a netCDF dataset",
     ),
     "plot": ("bayes_fdi.datasets.plotting", "plot the signals of chosen runs of a dataset"),
-    "reproduce": ("bayes_fdi.paper.reproduce", "reproduce the paper's tables (the main job)"),
+    "reproduce": ("bayes_fdi.commands.reproduce", "reproduce the paper's tables (the main job)"),
     "calibration-report": (
-        "bayes_fdi.calibration.report",
+        "bayes_fdi.commands.calibration_report",
         "write a calibration report for a diagnoser on a test dataset",
     ),
     "benchmark": (
-        "bayes_fdi.benchmark.harness",
-        "score the online diagnoser on the DAMADICS benchmark's 44 scenarios (PICalc indices)",
+        "bayes_fdi.commands.benchmark",
+        "score the online diagnoser on the DAMADICS benchmark's 44 scenarios (PICalc indices); "
+        "--commissioning: commissioned diagnosers on the real hour and perturbed plants",
     ),
-    "rvm-demo": ("bayes_fdi.rvm.demo", "fit an RVM on a small sinc problem and print it"),
+    "rvm-demo": ("bayes_fdi.commands.rvm_demo", "fit an RVM on a small sinc problem and print it"),
     "fit": ("bayes_fdi.deployment.fitting", "fit an online diagnoser and save it to a file"),
     "commission": (
         "bayes_fdi.deployment.commission",

@@ -19,7 +19,7 @@ import contextlib
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 __all__ = ["PlainProgress", "busy", "progress_bar"]
@@ -31,7 +31,9 @@ def _terminal() -> bool:
 
 
 @contextlib.contextmanager
-def busy(desc: str, *, enabled: bool = True, interval: float = 0.5) -> Iterator[None]:
+def busy(
+    desc: str, *, enabled: bool = True, interval: float = 0.5, heartbeat: float = 20.0
+) -> Iterator[None]:
     """Show ``desc`` and the elapsed time on stderr while the block runs.
 
     Parameters
@@ -42,33 +44,56 @@ def busy(desc: str, *, enabled: bool = True, interval: float = 0.5) -> Iterator[
         ``False``: show nothing.
     interval
         Seconds between refreshes.
+    heartbeat
+        When stderr is not a terminal (a log file, a pipe): seconds between the plain lines
+        that say the step is still running (no ``\\r`` frames).
     """
     if not enabled:
         yield
         return
     if not _terminal():
-        start = time.perf_counter()
-        print(f"{desc} ...", file=sys.stderr, flush=True)
-        yield
-        print(f"{desc}: done in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+        yield from _plain_busy(desc, heartbeat)
         return
     from tqdm.auto import tqdm
 
     bar = tqdm(total=None, desc=desc, bar_format="{desc}: {elapsed}", leave=True)
+    try:
+        with _every(interval, bar.refresh):
+            yield
+    finally:
+        bar.close()
+
+
+def _plain_busy(desc: str, heartbeat: float) -> Iterator[None]:
+    """`busy` for a log file: a line at the start, one every ``heartbeat`` s, one at the end."""
+    start = time.perf_counter()
+    print(f"{desc} ...", file=sys.stderr, flush=True)
+
+    def beat() -> None:
+        elapsed = time.perf_counter() - start
+        print(f"{desc}: still running, {elapsed:.0f} s", file=sys.stderr, flush=True)
+
+    with _every(heartbeat, beat):
+        yield
+    print(f"{desc}: done in {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _every(seconds: float, action: Callable[[], None]) -> Iterator[None]:
+    """Call ``action`` every ``seconds`` from a background thread while the block runs."""
     stop = threading.Event()
 
-    def refresh() -> None:
-        while not stop.wait(interval):
-            bar.refresh()
+    def loop() -> None:
+        while not stop.wait(seconds):
+            action()
 
-    ticker = threading.Thread(target=refresh, name="bayes_fdi-busy", daemon=True)
+    ticker = threading.Thread(target=loop, name="bayes_fdi-busy", daemon=True)
     ticker.start()
     try:
         yield
     finally:
         stop.set()
         ticker.join()
-        bar.close()
 
 
 class PlainProgress:

@@ -20,6 +20,7 @@ HERE = Path(__file__).resolve().parent
 BENCHMARKS = {
     "rvm": "rvm_fit.py",
     "actuator": "actuator_speed.py",
+    "cli": "cli_latency.py",
 }
 
 

@@ -664,17 +664,20 @@ def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
 
 
 def format_report(rows: Sequence[Mapping[str, Any]], meta: Mapping[str, Any]) -> str:
-    """Full Markdown report: setup, then per problem a results table and the target checks."""
+    """Full Markdown report: setup, then per problem a results table and the target checks.
+
+    The report goes into the documentation, which describes the product as it is: the run's
+    date and source revision stay in the saved ``rvm_fit.json`` (``meta``), not in the report.
+    """
     rows = add_ratios(rows)
     problems = list(dict.fromkeys(r.get("problem", "smooth") for r in rows)) or ["smooth"]
     parts = [
         "### RVM regression fit benchmark",
         "",
-        f"{meta.get('date', '')} · {meta.get('cpu', '')} · load average at start "
+        f"{meta.get('cpu', '')} · load average at start "
         f"{meta.get('load_start', '–')}, at end {meta.get('load_end', '–')} · "
         f"single-threaded fresh process per fit · {meta.get('n_test')} test points · "
-        f"noise std {meta.get('noise_std')} · seed {meta.get('seed')} · "
-        f"bayes_fdi source {meta.get('bayes_fdi_source', '?')}",
+        f"noise std {meta.get('noise_std')} · seed {meta.get('seed')}",
     ]
     for name in problems:
         prob = PROBLEMS[name]

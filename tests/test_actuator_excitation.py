@@ -83,11 +83,14 @@ def test_step_ramp_holds_levels_for_at_least_the_shortest_hold():
         assert cv.min() >= 0.35 and cv.max() <= 0.9
 
 
-def test_level_loop_integral_action_holds_the_level_at_the_set_point():
+@pytest.mark.parametrize("characteristic, kv_ratio", [(5.0, 1.0), (3.6, 0.75), (6.2, 1.3)])
+def test_level_loop_integral_action_holds_the_level_at_the_set_point(characteristic, kv_ratio):
     """With a constant set-point and demand the PI loop settles: the level's mean equals the
-    set-point and the CV equals the opening that balances inflow and demand (exp(-5 X) = d /
-    sqrt(dp / dp_nominal) for the valve's equal-percentage law)."""
+    set-point and the CV equals the opening that balances inflow and demand (r exp(-n X) = d /
+    sqrt(dp / dp_nominal) for the valve's equal-percentage law of exponent n and Kv ratio r)."""
     loop = LevelLoop(
+        characteristic=characteristic,
+        kv_ratio=kv_ratio,
         kp=(2.0, 2.0),
         ti=(60.0, 60.0),
         level_noise=(0.0, 0.0),
@@ -100,7 +103,8 @@ def test_level_loop_integral_action_holds_the_level_at_the_set_point():
     ds = level_loop_inputs(2, 3000, seed=1, loop=loop, operating=op)
     tail = slice(2000, None)
     np.testing.assert_allclose(ds["level"].values[:, tail], 0.5, atol=1e-6)
-    np.testing.assert_allclose(ds["CV"].values[:, tail], -np.log(0.05) / 5.0, atol=1e-6)
+    balance = -np.log(0.05 / kv_ratio) / characteristic
+    np.testing.assert_allclose(ds["CV"].values[:, tail], balance, atol=1e-6)
 
 
 def test_the_actuator_model_runs_on_every_family():
@@ -116,6 +120,7 @@ def test_the_actuator_model_runs_on_every_family():
         (lambda: sine_sum_inputs(1, 10, frequencies=(0.1, 0.01)), "frequencies"),
         (lambda: step_ramp_inputs(1, 10, ramp_share=2.0), "ramp_share"),
         (lambda: level_loop_inputs(1, 10, loop=LevelLoop(kp=(-1.0, 1.0))), "loop.kp"),
+        (lambda: level_loop_inputs(1, 10, loop=LevelLoop(kv_ratio=0.0)), "loop.kv_ratio"),
     ],
 )
 def test_bad_arguments_are_named(call, message):

@@ -66,6 +66,22 @@ def _garbage(tmp: Path, name: str) -> str:
     return str(path)
 
 
+def _healthy_csv(tmp: Path, seconds: int = 1200, stuck_x: bool = False) -> str:
+    """A fault-free recording of the shipped hour (normalised), its stem frozen if asked."""
+    from bayes_fdi.datasets import load_lublin_example
+
+    run = load_lublin_example().isel(run=0, time=slice(0, seconds))
+    columns = {"time": run["time"].values, **{c: run[c].values for c in
+               ("CV", "P1", "P2", "T1", "X", "F")}}  # fmt: skip
+    if stuck_x:
+        columns["X"] = np.full(seconds, 0.6)
+    path = tmp / ("stuck.csv" if stuck_x else "healthy.csv")
+    header = ",".join(columns)
+    np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=header,
+               comments="", fmt="%.6g")  # fmt: skip
+    return str(path)
+
+
 class CliCase(NamedTuple):
     argv: Callable[[Path], list[str]]
     status: int
@@ -207,6 +223,16 @@ CLI_CASES: dict[str, CliCase] = {
         lambda t: ["reproduce", "--out", str(t / "o"), "--states", "fn,f42"],
         2,
         r"unknown state\(s\) \['f42'\]",
+    ),
+    "fit --normal: a stuck stem": CliCase(
+        lambda t: ["fit", "--normal", _healthy_csv(t, stuck_x=True), "--out", str(t / "m.npz")],
+        1,
+        r"X hardly moves in the healthy data \(standard deviation \S+ of full scale.*stuck stem",
+    ),
+    "fit --normal: too short": CliCase(
+        lambda t: ["fit", "--normal", _healthy_csv(t, seconds=300), "--out", str(t / "m.npz")],
+        1,
+        r"only 300 complete seconds of healthy data.*at least 900 s",
     ),
     "calibration-report: missing dataset": CliCase(
         lambda t: [

@@ -13,6 +13,7 @@ import xarray as xr
 from bayes_fdi.calibration import recalibrator_selection, summaries
 from bayes_fdi.calibration import report as cr
 from bayes_fdi.calibration.recalibration import LOG_LOSS_RTOL
+from bayes_fdi.commands import calibration_report as cr_command
 from bayes_fdi.datasets import make_dataset, save_dataset
 
 CLASSES = ["fn", "f1", "f2"]
@@ -205,14 +206,14 @@ def test_cli_fits_on_train_and_reports(setup, tmp_path, monkeypatch):
             runs.attrs["key"] = "test"
             return super().diagnose(runs)
 
-    monkeypatch.setattr(cr, "_build_diagnoser", lambda method, seed: Fittable(feats))
+    monkeypatch.setattr(cr_command, "_build_diagnoser", lambda method, seed: Fittable(feats))
     parser = argparse.ArgumentParser()
-    cr.configure_parser(parser)
+    cr_command.configure_parser(parser)
     args = parser.parse_args(
         ["--train", str(tmp_path / "train.nc"), "--test", str(tmp_path / "test.nc"),
          "--out", str(tmp_path / "out"), "--n-bootstrap", "10", "--seed", "1"]
     )  # fmt: skip
-    assert cr.run_from_cli(args) == 0
+    assert cr_command.run_from_cli(args) == 0
     assert fitted == {"normal_states": {"fn"}, "n_labelled": 1200}
     assert (tmp_path / "out" / "report.md").exists()
 

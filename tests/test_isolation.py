@@ -169,6 +169,23 @@ def test_isolator_groups_and_probabilities(rng):
     assert iso.temperature() is not None and iso.temperature() > 0
 
 
+def test_one_group_has_probability_one_and_no_calibrator(rng):
+    from bayes_fdi.calibration import TemperatureScaler
+
+    # two faults the validation cannot tell apart: one group, certain, nothing to calibrate
+    centres = [(0, 0), (0, 0)]
+    X, y = _blobs(rng, centres, 40)
+    iso = FaultIsolator(calibrator=TemperatureScaler()).fit(
+        X, y, validation=_blobs(rng, centres, 40), calibration=_blobs(rng, centres, 40)
+    )
+    assert iso.groups_ == (("f1", "f2"),)
+    assert iso.calibrator_ is None
+    rows = _blobs(rng, centres, 5)[0]
+    out = iso.run(rows)
+    np.testing.assert_allclose(out.group_proba, 1.0, rtol=1e-12)
+    np.testing.assert_allclose(out.fault_proba, iso.fault_proba(rows), rtol=1e-10)
+
+
 def test_isolator_run_equals_the_temperature_scaled_group_sums(rng):
     from bayes_fdi.calibration import TemperatureScaler
 

@@ -39,6 +39,7 @@ FLOORS: dict[str, int] = {
     "paper": 9,
     "benchmark": 9,
     "deployment": 9,
+    "commands": 10,
     "cli": 10,
     "__main__": 11,
 }

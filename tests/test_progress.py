@@ -30,6 +30,18 @@ def test_plain_lines_when_stderr_is_a_file(capsys):
     assert lines[5] == "fitting ..." and lines[6].startswith("fitting: done in ")
 
 
+def test_a_long_step_says_it_is_still_running(capsys):
+    """In a log, a step longer than the heartbeat writes a line each heartbeat, never a frame."""
+    with busy("fitting", heartbeat=0.05):
+        time.sleep(0.28)
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0] == "fitting ..." and lines[-1].startswith("fitting: done in ")
+    beats = lines[1:-1]
+    # 0.28 s at one line per 0.05 s: at most 5 beats; a loaded machine may delay some
+    assert 1 <= len(beats) <= 5
+    assert all(line.startswith("fitting: still running, ") for line in beats)
+
+
 def test_a_command_logs_plain_lines_to_a_file(tmp_path):
     """``bayes-fdi simulate`` with stderr redirected to a file writes no carriage return."""
     campaign = tmp_path / "c.toml"

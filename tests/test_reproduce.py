@@ -10,9 +10,9 @@ import pytest
 from sklearn.metrics import brier_score_loss
 
 from bayes_fdi.campaigns.cache import split_train_test
+from bayes_fdi.commands.reproduce import configure_parser
 from bayes_fdi.datasets import make_dataset
 from bayes_fdi.paper.pipeline import evaluate_dataset
-from bayes_fdi.paper.reproduce import configure_parser
 from bayes_fdi.paper.scores import classification_metrics
 from bayes_fdi.paper.separability import find_groups, group_metrics, pairwise_separability
 

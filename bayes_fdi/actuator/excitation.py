@@ -12,8 +12,9 @@ seeded per run (``numpy.random.default_rng([seed, family, run])``):
 `level_loop_inputs`
     CV the output of a PI level controller of a tank whose inflow the valve sets, with set-point
     changes and a drifting outflow demand: the excitation of a level loop such as the Lublin
-    boiler feed-water valve. The loop is simulated with the valve's nominal static flow law
-    (equal-percentage characteristic, the positioner as a first-order lag); the CV it produces
+    boiler feed-water valve. The loop is simulated with a static flow law of the valve
+    (equal-percentage characteristic, nominal unless `LevelLoop` gives the valve's exponent
+    and Kv ratio; the positioner as a first-order lag); the CV it produces
     is then an input of the actuator model like any other, so a fault changes the valve but not
     the controller's reaction to it (the loop is open at the fault).
 
@@ -241,6 +242,9 @@ class LevelLoop(NamedTuple):
     demand_drift: float = 0.1  #: relative std of the demand's drift
     positioner_seconds: float = 2.0  #: the stem's first-order lag behind CV
     dp_nominal: float = 0.9e6  #: pressure drop of the nominal flow [Pa]
+    #: the valve's equal-percentage exponent n in the loop's flow law (inflow ~ exp(-n X))
+    characteristic: float = 5.0
+    kv_ratio: float = 1.0  #: the valve's flow coefficient over the nominal one
 
 
 #: The default level loop of `level_loop_inputs`.
@@ -272,8 +276,9 @@ def _loop_run(
                                                         loop.level_noise))  # fmt: skip
     setpoint = _setpoints(rng, n, loop)
     demand = rng.uniform(*loop.demand) * np.exp(_ou(rng, n, loop.demand_drift, 600.0))
-    flow_scale = np.sqrt(np.maximum(dp, 0.0) / loop.dp_nominal)
-    x_stem = float(np.clip(-math.log(max(demand[0] / flow_scale[0], 1e-6)) / 5.0, 0.0, 1.0))
+    flow_scale = loop.kv_ratio * np.sqrt(np.maximum(dp, 0.0) / loop.dp_nominal)
+    n_char = loop.characteristic
+    x_stem = float(np.clip(-math.log(max(demand[0] / flow_scale[0], 1e-6)) / n_char, 0.0, 1.0))
     level = setpoint[0]
     integral = x_stem / kp * ti  # a bumpless start at the balancing opening
     cv = np.empty(n)
@@ -287,7 +292,7 @@ def _loop_run(
         if cv[k] == out:  # anti-windup: integrate only while the output is not clipped
             integral += error
         x_stem = a_pos * x_stem + (1.0 - a_pos) * cv[k]
-        inflow = math.exp(-5.0 * x_stem) * flow_scale[k]  # X is the fraction of closing
+        inflow = math.exp(-n_char * x_stem) * flow_scale[k]  # X is the fraction of closing
         level = min(max(level + (inflow - demand[k]) / area, 0.0), 1.0)
     return cv, measured
 
@@ -313,6 +318,8 @@ def level_loop_inputs(
         _check_band(getattr(loop, name), f"loop.{name}", who, 0.0, 1e9)
     if not (loop.positioner_seconds > 0 and loop.setpoint_ramp >= 1):
         raise ValueError(f"{who}: the positioner lag and the set-point ramp must be positive")
+    if not (loop.characteristic > 0 and loop.kv_ratio > 0):
+        raise ValueError(f"{who}: loop.characteristic and loop.kv_ratio must be positive")
     cv = np.empty((n_runs, duration))
     level = np.empty((n_runs, duration))
     points = []

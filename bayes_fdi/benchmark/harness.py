@@ -47,7 +47,6 @@ from bayes_fdi.diagnosis.online.timeline import plot_timeline
 from bayes_fdi.scoring.decision_signals import decision_high, rising_edges
 
 __all__ = [
-    "configure_parser",
     "run_benchmark",
     "run_from_cli",
 ]
@@ -343,27 +342,22 @@ def _is_full(scenarios: Sequence[BenchmarkScenario]) -> bool:
 # ----------------------------------------------------------------------------------------------
 # command line
 # ----------------------------------------------------------------------------------------------
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    """Options of ``bayes-fdi benchmark``."""
-    parser.add_argument("--out", required=True, help="output folder (created)")
-    parser.add_argument(
-        "--seeds",
-        type=int,
-        default=None,
-        help="noise seeds per scenario (default 10; 2 with --small)",
-    )
-    parser.add_argument(
-        "--small",
-        action="store_true",
-        help="quick version: small training, 2 seeds, horizons cut at 2400 s, "
-        "1 fault-free hour (not the benchmark's numbers)",
-    )
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
-
-
 def run_from_cli(args: argparse.Namespace) -> int:
-    """Fit the online diagnoser on its training campaigns, run the benchmark, write the report."""
+    """Run ``bayes-fdi benchmark`` (its options: `bayes_fdi.commands.benchmark`).
+
+    Fit the online diagnoser on its training campaigns, run the benchmark, write the report
+    (with ``--commissioning``: the commissioning benchmark,
+    `bayes_fdi.benchmark.commissioning.run_from_cli`)."""
     from bayes_fdi.default_diagnoser import fit_online_diagnoser
+
+    if args.commissioning:
+        from bayes_fdi.benchmark import commissioning
+
+        return commissioning.run_from_cli(args)
+    if args.plants is not None:
+        from bayes_fdi.cli_arguments import UsageError
+
+        raise UsageError("--plants belongs to --commissioning")
 
     n_seeds = args.seeds if args.seeds is not None else (2 if args.small else 10)
     t0 = time.perf_counter()

@@ -90,6 +90,7 @@ def commission(
     sizes: Sequence[float] = (0.25, 0.5, 0.75),
     evaluation_runs: int = 2,
     normal_models: Any = None,
+    twin: Any = None,
     seed: int = 0,
     progress: bool = True,
 ) -> Commissioning:
@@ -109,6 +110,9 @@ def commission(
         Fault sizes of the held-out check, and runs per fault and size.
     normal_models
         Unfitted normal models (default: `DynamicNormalModels`).
+    twin
+        Unfitted digital twin, cloned before fitting (default:
+        ``ActuatorTwin(random_state=seed)``; e.g. fewer fitted parameters for a quick check).
     seed
         Seed of everything drawn (the twin's draws, the libraries, the folds).
     progress
@@ -118,6 +122,8 @@ def commission(
     -------
     Commissioning
     """
+    from sklearn.base import clone
+
     from bayes_fdi.calibration import TemperatureScaler
     from bayes_fdi.diagnosis import OnlineDiagnoser
     from bayes_fdi.diagnosis.online.training import stack_runs
@@ -130,7 +136,7 @@ def commission(
     fit_part, check_part = _split_for_twin(runs)
     t0 = time.perf_counter()
     with busy("commissioning: fitting the digital twin", enabled=progress):
-        twin = ActuatorTwin(random_state=seed).fit(fit_part)
+        twin = (ActuatorTwin(random_state=seed) if twin is None else clone(twin)).fit(fit_part)
         check = twin.check(check_part, seed=seed) if check_part is not None else None
     seconds["twin"] = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -49,8 +49,8 @@ def check_healthy(runs: xr.Dataset) -> xr.Dataset:
     n = data["X"].size
     if n < MIN_HEALTHY_SECONDS:
         raise ValueError(
-            f"only {n} complete seconds of healthy data (every channel present); commissioning "
-            f"needs at least {MIN_HEALTHY_SECONDS} s, an hour or more is better"
+            f"only {n} complete seconds of healthy data (every channel present); the normal models "
+            f"need at least {MIN_HEALTHY_SECONDS} s, an hour or more is better"
         )
     for c in ("CV", "X", "F"):
         spread = float(np.std(data[c]))

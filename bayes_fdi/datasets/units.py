@@ -24,6 +24,7 @@ __all__ = [
     "DABLIB_RANGES",
     "PHYSICAL_UNITS",
     "PLAUSIBLE_RANGES",
+    "QUANTITIES",
     "UNITS",
     "UNIT_ALIASES",
     "check_plausible_units",
@@ -53,7 +54,8 @@ PHYSICAL_UNITS: dict[str, str] = {
     "X": "%",
     "F": "t/h",
 }
-_QUANTITY = {"CV": "fraction", "X": "fraction", "P1": "pressure", "P2": "pressure",
+#: The quantity of each channel (its unit family in `UNITS`).
+QUANTITIES: dict[str, str] = {"CV": "fraction", "X": "fraction", "P1": "pressure", "P2": "pressure",
              "T1": "temperature", "F": "flow"}  # fmt: skip
 #: Known units per quantity: unit -> (offset, factor) with ``normalised = (value + offset) *
 #: factor`` (DABLib: P / 4 MPa, T1 / 200 degC, F / 40 t/h, CV and X / 100 %).
@@ -111,7 +113,7 @@ def parse_units(units: str | Mapping[str, str]) -> dict[str, str]:
     out = {}
     for name in CHANNELS:
         unit = UNIT_ALIASES.get(str(units[name]), str(units[name]))
-        known = UNITS[_QUANTITY[name]]
+        known = UNITS[QUANTITIES[name]]
         if unit not in known:
             raise ValueError(
                 f"unit {units[name]!r} of {name} is not known; use one of {sorted(known)} "
@@ -123,14 +125,14 @@ def parse_units(units: str | Mapping[str, str]) -> dict[str, str]:
 
 def normalise(values: Any, channel: str, unit: str) -> Any:
     """``values`` of ``channel`` in ``unit`` divided by DABLib's range (see the module doc)."""
-    offset, factor = UNITS[_QUANTITY[channel]][UNIT_ALIASES.get(unit, unit)]
+    offset, factor = UNITS[QUANTITIES[channel]][UNIT_ALIASES.get(unit, unit)]
     return (values + offset) * factor if offset else values * factor
 
 
 def to_physical(values: Any, channel: str, unit: str | None = None) -> Any:
     """Normalised ``values`` of ``channel`` back in ``unit`` (default :data:`PHYSICAL_UNITS`)."""
     unit = PHYSICAL_UNITS[channel] if unit is None else unit
-    offset, factor = UNITS[_QUANTITY[channel]][UNIT_ALIASES.get(unit, unit)]
+    offset, factor = UNITS[QUANTITIES[channel]][UNIT_ALIASES.get(unit, unit)]
     return values / factor - offset
 
 
@@ -149,7 +151,7 @@ def _statistics(values: np.ndarray) -> tuple[float, float, float] | None:
 
 
 def _plausible(channel: str, stats: tuple[float, float, float]) -> bool:
-    low, high = PLAUSIBLE_RANGES[_QUANTITY[channel]]
+    low, high = PLAUSIBLE_RANGES[QUANTITIES[channel]]
     floor_ok = channel != "P1" or stats[2] == 0.0 or stats[2] >= P1_FLOOR
     return low <= stats[0] and stats[1] <= high and floor_ok
 
@@ -159,7 +161,7 @@ def _in_unit(stats: tuple[float, float, float], channel: str, declared: str, uni
     low, high = (float(normalise(to_physical(v, channel, declared), channel, unit))
                  for v in stats[:2])  # fmt: skip
     # the median magnitude serves P1's floor only: pressures have no offset, a plain rescaling
-    scale = UNITS[_QUANTITY[channel]][unit][1] / UNITS[_QUANTITY[channel]][declared][1]
+    scale = UNITS[QUANTITIES[channel]][unit][1] / UNITS[QUANTITIES[channel]][declared][1]
     return low, high, stats[2] * scale
 
 
@@ -194,7 +196,7 @@ def likely_units(ds: Any, units: str | Mapping[str, str]) -> dict[str, list[str]
             out[channel] = [declared[channel]]
             continue
         fits = []
-        for unit in UNITS[_QUANTITY[channel]]:
+        for unit in UNITS[QUANTITIES[channel]]:
             candidate = _in_unit(stats, channel, declared[channel], unit)
             if _plausible(channel, candidate):
                 top = max(abs(candidate[0]), abs(candidate[1]))
@@ -256,7 +258,7 @@ def check_plausible_units(
         low, high, _ = _statistics(np.asarray(ds[channel].values, dtype=np.float64).ravel())
         raw = [float(to_physical(v, channel, declared[channel])) for v in (low, high)]
         fit = likely[channel]
-        known = ", ".join(repr(u) for u in UNITS[_QUANTITY[channel]])
+        known = ", ".join(repr(u) for u in UNITS[QUANTITIES[channel]])
         parts.append(
             f"{channel} from {raw[0]:.4g} to {raw[1]:.4g} (1st to 99th percentile) in "
             f"{declared[channel]!r} is {low:.3g} to {high:.3g} x DABLib's range: "
@@ -274,5 +276,6 @@ def check_plausible_units(
     raise ValueError(
         f"{source}: values implausible in their declared units ('1' = normalised): "
         + "; ".join(parts)
-        + f". {hint}, or pass check_units=False to read the values as they are"
+        + f". {hint}, or pass check_units=False (command line: --no-unit-check) to read the "
+        "values as they are"
     )

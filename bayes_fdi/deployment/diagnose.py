@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 import warnings
 from collections.abc import Mapping, Sequence
@@ -83,6 +84,8 @@ def _diagnose_job(job: _Job) -> RecordingResult:
         healthy, recording = split_healthy(recording, job.commission_seconds, job.name)
         done, info, attachments = commission_in_place(healthy, progress=job.progress)
         diagnoser = done.diagnoser
+    elif job.reading.get("check_units", True):
+        _check_ranges(diagnoser, recording, job.reading.get("units") or "normalised", job.name)
     return diagnose_recording(
         diagnoser,
         recording,
@@ -94,6 +97,27 @@ def _diagnose_job(job: _Job) -> RecordingResult:
         model_info=info,
         attachments=attachments,
     )
+
+
+def _check_ranges(diagnoser: Any, recording: xr.Dataset, units: Any, name: str) -> None:
+    """Refuse a recording that looks declared in the wrong units for this model; say where it
+    lies far outside the model's training data in every unit (`check_known_ranges`)."""
+    from bayes_fdi.datasets.known_ranges import check_known_ranges
+
+    ranges = getattr(diagnoser, "training_ranges_", None)
+    if not ranges:
+        return  # a model file written before the ranges were recorded
+    try:
+        notes = check_known_ranges(recording, ranges, units, source=name)
+    except ValueError as exc:
+        known = getattr(diagnoser, "training_units_", None)
+        if not known:
+            raise
+        pairs = ",".join(f"{c}={u}" for c, u in known.items())
+        hint = f"the model was fitted on recordings declared as {pairs}"
+        raise ValueError(f"{exc} ({hint})") from None
+    for note in notes:
+        print(f"note: {note}: expect 'mismatch' (commission this valve)", file=sys.stderr)
 
 
 def diagnose_example(out: str | os.PathLike, **options: Any) -> list[RecordingResult]:

@@ -218,28 +218,39 @@ def fit_from_recordings(
     faults: Sequence[tuple[str, float, xr.Dataset]] = (),
     *,
     estimator: Any = None,
+    progress: bool = False,
 ) -> Any:
     """Fit an online diagnoser on the user's recordings.
 
     Parameters
     ----------
     normal
-        Fault-free recordings (normal models).
+        Fault-free recordings (normal models), checked by
+        `bayes_fdi.commissioning.check_healthy`: data that cannot identify the normal models
+        (too short, a channel that does not move) are refused.
     faults
         ``(state, onset, recording)`` for recordings of known faults (onset in the recording's
         own time; 0 or earlier: faulty throughout).
     estimator
         The unfitted diagnoser (default `new_online_diagnoser`), cloned.
+    progress
+        Say on stderr that the fit is running (after the checks).
     """
     from sklearn.base import clone
 
-    normal_runs = recordings_as_runs(normal, ["fn"] * len(normal), [0.0] * len(normal))
+    from bayes_fdi.commissioning import check_healthy
+    from bayes_fdi.progress import busy
+
+    normal_runs = check_healthy(
+        recordings_as_runs(normal, ["fn"] * len(normal), [0.0] * len(normal))
+    )
     fault_runs = None
     if faults:
         states, onsets, recs = zip(*faults, strict=True)
         fault_runs = recordings_as_runs(list(recs), list(states), list(onsets))
     model = new_online_diagnoser() if estimator is None else clone(estimator)
-    return model.fit(normal_runs, fault_runs)
+    with busy("fitting the normal models, detector and isolation", enabled=progress):
+        return model.fit(normal_runs, fault_runs)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -307,6 +318,13 @@ def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
         default=3,
         help="actuator of a Lublin day file DDMM2001.txt (default 3)",
     )
+    group.add_argument(
+        "--no-unit-check",
+        dest="check_units",
+        action="store_false",
+        help="read values as they are, even where they look declared in the wrong units "
+        "(implausible by orders of magnitude, or far outside the model's training data)",
+    )
 
 
 def reading_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -325,6 +343,8 @@ def reading_options(args: argparse.Namespace) -> dict[str, Any]:
         raise UsageError(str(exc)) from None
     options = {"units": args.units, "columns": columns, "resample": args.resample,
                "rate": args.rate, "actuator": args.actuator}  # fmt: skip
+    if not args.check_units:
+        options["check_units"] = False
     return options
 
 
@@ -411,7 +431,7 @@ def run_from_cli(args: argparse.Namespace) -> int:
         options = reading_options(args)
         normal = [read_for_fitting(p, options) for p in args.normal]
         faults = [(s, onset, read_for_fitting(p, options)) for s, onset, p in args.fault]
-        model = fit_from_recordings(normal, faults)
+        model = fit_from_recordings(normal, faults, progress=progress)
         what = f"{len(normal)} fault-free and {len(faults)} fault recording(s)"
     model_files.save(model, args.out)
     size = os.path.getsize(args.out)
@@ -419,4 +439,23 @@ def run_from_cli(args: argparse.Namespace) -> int:
         f"wrote {args.out}: {type(model).__name__} fitted on {what} "
         f"({size / 1e6:.1f} MB) in {time.perf_counter() - t0:.1f} s"
     )
+    ranges = getattr(model, "training_ranges_", None)
+    if ranges:
+        print("  fitted on (1st to 99th percentile): " + covered_ranges(ranges))
+    if getattr(model, "isolator_", True) is None:
+        print(
+            "  detection only: no fault recordings, so every alarm is an 'unknown' fault; "
+            "`bayes-fdi commission` builds a fault library from the healthy recordings"
+        )
     return 0
+
+
+def covered_ranges(ranges: Mapping[str, Sequence[float]]) -> str:
+    """A model's training ranges (`training_ranges_`) in physical units, in one line."""
+    from bayes_fdi.datasets.units import PHYSICAL_UNITS, to_physical
+
+    parts = []
+    for channel, (low, _, high) in ranges.items():
+        a, b = (float(to_physical(v, channel)) for v in (low, high))
+        parts.append(f"{channel} {a:.4g} to {b:.4g} {PHYSICAL_UNITS[channel]}")
+    return ", ".join(parts)

@@ -383,9 +383,9 @@ class FaultDiagnoser(BaseEstimator):
         Returns
         -------
         list of SevaRecord
-            Convert with `bayes_fdi.diagnosis.seva.windows.to_frame`,
-            `~bayes_fdi.diagnosis.seva.windows.to_xarray` or
-            `~bayes_fdi.diagnosis.seva.windows.to_json`.
+            Convert with :func:`~bayes_fdi.diagnosis.seva.to_frame`,
+            :func:`~bayes_fdi.diagnosis.seva.to_xarray` or
+            :func:`~bayes_fdi.diagnosis.seva.to_json`.
         """
         self._check_fitted()
         return seva_records(self, runs, **kwargs)

@@ -325,6 +325,9 @@ class ModelDecoder:
             raise self._fail(f"object {node['__object__']} has no state")
         decoded = {str(k): self.decode(v) for k, v in state.items()}
         value.__dict__.update(self._upgraded(cls, decoded))
+        check = getattr(cls, "check_model_file", None)
+        if check is not None:  # the class refuses fitted values that cannot be right
+            check(value)
         return value
 
 

@@ -18,18 +18,18 @@ For each dataset (``paper-simulated``: the DAMADICS actuator driven by sine inpu
 Everything is written to ``--out DIR``: ``report.md`` (and the PNG figures it links) and
 ``results.json``. Same seed, same numbers.
 
-This module holds the job (`reproduce`) and its command line; the steps live in
+This module holds the job (`reproduce`; its command line is
+`bayes_fdi.commands.reproduce`); the steps live in
 `bayes_fdi.campaigns.cache` (datasets and their cache),
 `bayes_fdi.paper.setup` (states, widths, node classifiers),
 `bayes_fdi.paper.pipeline` (`evaluate_dataset`),
 `bayes_fdi.paper.scores`, `bayes_fdi.paper.separability` and
 `bayes_fdi.paper.calibration_headlines`, and the report in
-`bayes_fdi.paper.report`. Their public names are importable from here too.
+`bayes_fdi.paper.report`.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -40,20 +40,18 @@ from typing import Any
 import xarray as xr
 
 from bayes_fdi.atomic import write_text
-from bayes_fdi.campaigns.cache import campaign_file, load_or_simulate
-from bayes_fdi.cli_arguments import UsageError
+from bayes_fdi.campaigns.cache import load_or_simulate
 from bayes_fdi.datasets import validate_dataset
 from bayes_fdi.paper.calibration_headlines import calibration_headlines
 from bayes_fdi.paper.pipeline import evaluate_dataset
 from bayes_fdi.paper.setup import (
-    ALL_STATES,
     DATASETS,
     DYNAMIC_LAGS,
     N_TRAIN,
     PAPER_STATES,
 )
 
-__all__ = ["configure_parser", "reproduce", "run_from_cli"]
+__all__ = ["reproduce"]
 
 
 class _Progress:
@@ -255,80 +253,3 @@ def _figures(key: str, res: dict[str, Any], art: dict[str, Any], out: Path) -> d
             title=f"{key}: training-run features of every state",
         ).name
     return figs
-
-
-def configure_parser(parser: argparse.ArgumentParser) -> None:
-    """Add the ``reproduce`` command's options to ``parser``."""
-    parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    parser.add_argument("--seed", type=int, default=0, help="simulation and model seed")
-    parser.add_argument(
-        "--cache-dir",
-        default=".cache/datasets",
-        metavar="DIR",
-        help="folder of cached simulated datasets (default: .cache/datasets)",
-    )
-    parser.add_argument(
-        "--small",
-        action="store_true",
-        help="a small, fast version (fewer runs per state) for tests and CI",
-    )
-    parser.add_argument(
-        "--campaign",
-        action="append",
-        metavar="TOML",
-        help="campaign file or shipped name to run instead of the paper's two "
-        "(repeatable; default: paper-simulated and paper-lublin)",
-    )
-    parser.add_argument(
-        "--states",
-        default=",".join(PAPER_STATES),
-        help="comma-separated states of the paper protocol (default: the paper's ten)",
-    )
-    parser.add_argument(
-        "--dynamic-lags",
-        default=",".join(f"{v:g}" for v in DYNAMIC_LAGS),
-        metavar="SECONDS",
-        help="comma-separated lags (s) of CV for the beyond-the-paper dynamic normal models "
-        "(default: %(default)s; empty string: skip that part)",
-    )
-    parser.add_argument(
-        "--quiet",
-        "--no-progress",
-        dest="no_progress",
-        action="store_true",
-        help="no progress messages",
-    )
-
-
-def run_from_cli(args: argparse.Namespace) -> int:
-    """Run :func:`reproduce` from parsed arguments; print where the report is."""
-    states = [s.strip() for s in args.states.split(",") if s.strip()]
-    unknown = sorted(set(states) - set(ALL_STATES))
-    if unknown:
-        raise UsageError(f"--states: unknown state(s) {unknown}; use fn, f1..f19")
-    try:
-        lags = tuple(float(v) for v in args.dynamic_lags.split(",") if v.strip())
-    except ValueError:
-        raise UsageError(
-            f"--dynamic-lags must be comma-separated seconds, got {args.dynamic_lags!r}"
-        ) from None
-    for name in args.campaign or ():
-        try:  # every campaign is found before any work starts
-            campaign_file(name)
-        except ValueError as exc:
-            raise UsageError(f"--campaign: {exc}") from None
-    results = reproduce(
-        args.out,
-        dynamic_lags=lags,
-        seed=args.seed,
-        cache_dir=args.cache_dir,
-        small=args.small,
-        states=states,
-        progress=not args.no_progress,
-        datasets=tuple(args.campaign) if args.campaign else DATASETS,
-    )
-    print(f"report: {Path(args.out) / 'report.md'}")
-    for name, ds in results["datasets"].items():
-        acc = ", ".join(f"{m.upper()} {100 * ds[m]['accuracy']:.2f} %" for m in ("rvm", "svm"))
-        print(f"{name}: {acc}")
-    return 0

@@ -37,12 +37,7 @@ Choices made where the benchmark's documents are silent (each is tested):
   PID edge, which for a detectable fault follows the DD edge because PID implies DD) to the end
   of the zone; ``-1`` without permanent isolation or without the ``indicated`` stream.
 
->>> import numpy as np
->>> t = np.arange(0, 1500.0)
->>> dd = t >= 905                     # alarm 5 s after the fault, kept to the end
->>> out = picalc(t, dd, dd, np.zeros_like(t), t_on=300, t_from=900, t_hor=1500)
->>> out["t_dt"], out["r_fd"], round(out["r_td"], 4)
-(5.0, 0.0, 0.9917)
+The docstring of `picalc` has an example.
 """
 
 from __future__ import annotations
@@ -187,7 +182,26 @@ def picalc(
         - ``r_td`` / ``r_ti``: share of ``[t_from, t_hor)`` with DD / PID high;
         - ``r_mi``: ``sum(CID) / (t_hor - t_on)`` over the zone (can exceed 1);
         - ``fs_d`` / ``fs_i``: the strength at the credited edge;
-        - ``dacc``: ``1 / L``, see the module's docstring.
+        - ``dacc``: ``1 / L``, ``L`` the number of faults in the groups indicated from the
+          credited PID edge to the end of the zone.
+
+    Notes
+    -----
+    The conventions copied from PICalc and the choices made where the benchmark's documents
+    are silent (a gap counts as low, a persisting false alarm is credited at ``t_from``, ...)
+    are explained in the documentation's "DAMADICS benchmark (online)" page, "Performance
+    indices (PICalc)".
+
+    Examples
+    --------
+    An alarm raised 5 s after the fault and kept to the end of the zone:
+
+    >>> import numpy as np
+    >>> t = np.arange(0, 1500.0)
+    >>> dd = t >= 905
+    >>> out = picalc(t, dd, dd, np.zeros_like(t), t_on=300, t_from=900, t_hor=1500)
+    >>> out["t_dt"], out["r_fd"], round(out["r_td"], 4)
+    (5.0, 0.0, 0.9917)
     """
     on, start, hor = _zone_bounds(t_on, t_from, t_hor)
     t = np.asarray(time, dtype=np.float64)

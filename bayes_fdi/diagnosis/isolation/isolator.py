@@ -143,7 +143,8 @@ class FaultIsolator:
     calibrator
         Unfitted recalibrator of the group probabilities (``fit(proba, y)``,
         ``transform(proba)``; e.g. ``bayes_fdi.calibration.TemperatureScaler()``), cloned and
-        fitted on the calibration set. None: no recalibration.
+        fitted on the calibration set. None: no recalibration. Not fitted when every known
+        fault falls into one group (its probability is 1).
     group_threshold
         Pairwise held-out confusion from which two faults share a group (default 0.15, the
         threshold of the paper pipeline's 20-state analysis).
@@ -231,7 +232,9 @@ class FaultIsolator:
             for f in g:
                 self.membership_[faults.index(f), j] = 1.0
         self.calibrator_ = None
-        if self.calibrator is not None and calibration is not None:
+        # one group (every known fault confused with every other) has probability 1: nothing
+        # to calibrate
+        if self.calibrator is not None and calibration is not None and len(self.groups_) > 1:
             Xc, yc = np.asarray(calibration[0], float), np.asarray(calibration[1]).astype(str)
             known = np.isin(yc, faults)
             gp = self.fault_proba(Xc[known]) @ self.membership_

@@ -1,13 +1,11 @@
 """The online self-validating diagnoser: every second, detect, isolate and say how far to trust
 X and F.
 
-`OnlineDiagnoser` fits its online components (normal models, whiteners, detector, detection
-decision, signature window, input envelope, isolator) and runs them second by second
-(`bayes_fdi.diagnosis.online.step`): ``run(recording)`` returns the whole 1 Hz decision stream
-(its variables are listed in `OnlineDiagnoser.run`), ``update(sample)`` processes one second and
-returns its `~bayes_fdi.diagnosis.seva.record.SevaRecord` in O(1) time and memory. Both go
-through the same compiled kernels with the same state (`bayes_fdi.diagnosis.online.state`), so
-feeding a run second by second gives exactly the stream of ``run`` (tested).
+`OnlineDiagnoser` fits its online components (normal models, whiteners, detector, decision,
+signature window, input envelope, isolator) and runs them second by second (``online.step``):
+``run(recording)`` gives the 1 Hz decision stream, ``update(sample)`` one second's
+`~bayes_fdi.diagnosis.seva.record.SevaRecord` in O(1) time and memory, through the same
+compiled kernels and state (``online.state``): second by second equals ``run`` exactly (tested).
 """
 
 from __future__ import annotations
@@ -24,9 +22,12 @@ from sklearn.base import BaseEstimator, clone
 
 from bayes_fdi import model_files
 from bayes_fdi.datasets import CHANNELS, validate_dataset
+from bayes_fdi.datasets.known_ranges import channel_ranges, units_of
 from bayes_fdi.diagnosis.detection.detectors import CUSUM, sequential_test
 from bayes_fdi.diagnosis.isolation.signatures import SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
+from bayes_fdi.diagnosis.online.checks import check_fitted_values, check_settings
+from bayes_fdi.diagnosis.online.clock import check_next_time, check_time_axis
 from bayes_fdi.diagnosis.online.envelope import InputEnvelope
 from bayes_fdi.diagnosis.online.legacy import upgrade_diagnoser
 from bayes_fdi.diagnosis.online.records import last_values, second_record, status_reasons
@@ -127,6 +128,9 @@ class OnlineDiagnoser(BaseEstimator):
         The isolation signatures' window.
     envelope_ : InputEnvelope
         The input envelope (``input_low_``, ``input_high_``: its bounds of CV, P1, P2, T1).
+    training_ranges_, training_units_ : dict
+        Channel -> 1st, 50th, 99th percentile of the fault-free data (normalised), and -> the
+        unit its recordings were declared in, if known (`bayes_fdi.datasets.known_ranges`).
     isolator_ : FaultIsolator or None
         None when fitted without fault runs (detection only).
     groups_ : tuple of tuple of str
@@ -236,6 +240,8 @@ class OnlineDiagnoser(BaseEstimator):
         if not math.isfinite(self.threshold_):
             raise ValueError("the detector threshold could not be calibrated (no finite ARL fit)")
         self.envelope_ = InputEnvelope(margin=self.input_margin).fit(normal_runs)
+        self.training_ranges_ = channel_ranges(normal_runs)
+        self.training_units_ = units_of(normal_runs)
         self.signature_ = SignatureWindow()
         seconds["detection"] = time.perf_counter() - t0
         self.isolator_ = None
@@ -270,20 +276,12 @@ class OnlineDiagnoser(BaseEstimator):
 
     def _check_params(self) -> None:
         self._detector_prototype()
-        checks = {
-            "false_alarm_hours": self.false_alarm_hours > 0,
-            "cusum_k": self.cusum_k >= 0,
-            "glr_window": isinstance(self.glr_window, int) and self.glr_window >= 1,
-            "p_fault": 0 <= self.p_fault <= 1,
-            "novelty_ratio": self.novelty_ratio > 0,
-            "coverage": 0 < self.coverage < 1,
-            "detect_rate": 0 <= self.detect_rate <= 1,
-            "input_margin": self.input_margin >= 0,
-            "max_signatures_per_fault": self.max_signatures_per_fault >= 2,
-        }
-        for name, ok in checks.items():
-            if not ok:
-                raise ValueError(f"{name} is out of range: {getattr(self, name)!r}")
+        check_settings(self.get_params())
+
+    def check_model_file(self) -> None:
+        """Called by the model-file loader: refuse fitted values that cannot be right
+        (`bayes_fdi.diagnosis.online.checks.check_fitted_values`)."""
+        check_fitted_values(vars(self))
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "normal_models_"):
@@ -307,8 +305,7 @@ class OnlineDiagnoser(BaseEstimator):
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike[str]) -> str:
-        """Write the fitted diagnoser to ``path`` (`bayes_fdi.model_files.format`: a
-        versioned ``.npz`` of JSON and arrays, no pickle; written atomically).
+        """Write the fitted diagnoser to ``path`` (a versioned ``.npz``, no pickle, atomically).
 
         Everything fitted is saved (normal models, whitening filters, detector, isolator,
         groups), and the `update` stream's state, so a loaded diagnoser gives exactly the same
@@ -319,15 +316,13 @@ class OnlineDiagnoser(BaseEstimator):
 
     @classmethod
     def load(cls, path: str | os.PathLike[str], **kwargs: Any) -> OnlineDiagnoser:
-        """Read a diagnoser written by `save` (``kwargs``: those of
-        `bayes_fdi.model_files.format.load`); a ``ValueError`` names a corrupt, foreign or
-        newer file, or one that holds another class."""
+        """Read a diagnoser written by `save` (``kwargs``: those of `model_files.format.load`);
+        a ``ValueError`` names a corrupt, foreign or newer file, or another class in it."""
         return model_files.load(path, expected=cls, **kwargs)
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
-        """A saved diagnoser's attributes in today's layout
-        (`bayes_fdi.diagnosis.online.legacy.upgrade_diagnoser`)."""
+        """A saved diagnoser's attributes in today's layout (``online.legacy``)."""
         return upgrade_diagnoser(data)
 
     # ------------------------------------------------------------------ the per-second core
@@ -365,6 +360,7 @@ class OnlineDiagnoser(BaseEstimator):
             `update` continues that stream exactly. None: a fresh stream.
         """
         self._check_fitted()
+        self._last_time = None  # the first sample may carry any time
         if state is None:
             self._stream = init_run_state(self._components())
         else:
@@ -386,7 +382,8 @@ class OnlineDiagnoser(BaseEstimator):
         ----------
         sample
             Mapping with ``CV, P1, P2, T1, X, F`` (normalised; NaN = missing) and optionally
-            ``time`` (s; default the number of seconds since `reset`).
+            ``time`` (s; default the number of seconds since `reset`), which must follow the
+            previous sample's by 1 s (`bayes_fdi.diagnosis.online.clock.check_next_time`).
 
         Returns
         -------
@@ -403,6 +400,8 @@ class OnlineDiagnoser(BaseEstimator):
             raise ValueError(f"sample lacks channel(s) {missing}")
         arrays = {c: np.array([float(sample[c])], dtype=np.float64) for c in CHANNELS}
         t = float(sample.get("time", self._stream.seconds))
+        check_next_time(getattr(self, "_last_time", None), t)
+        self._last_time = t
         out, self._stream = step(self._components(), arrays, self._stream)
         dec = self._decide(arrays, out)
         self.last_ = last_values(out, dec, t)
@@ -427,7 +426,8 @@ class OnlineDiagnoser(BaseEstimator):
         Parameters
         ----------
         recording
-            Channels CV, P1, P2, T1, X, F (normalised; NaN = missing).
+            Channels CV, P1, P2, T1, X, F (normalised; NaN = missing); its ``time``, if any,
+            a 1 Hz grid (`bayes_fdi.diagnosis.online.clock.check_time_axis`).
         state
             The `StreamState` returned by an earlier call with ``return_state=True`` on the
             preceding part of the same runs (same number of runs): the stream continues
@@ -476,6 +476,8 @@ class OnlineDiagnoser(BaseEstimator):
             ds = ds.drop_vars([c for c in ds.coords if ds[c].ndim == 0]).expand_dims("run")
         channels = ds[[c for c in CHANNELS if c in ds.data_vars]].reset_coords(drop=True)
         validate_dataset(channels, require=CHANNELS, allow_nan=True)
+        if "time" in ds.coords:
+            check_time_axis(ds["time"].values)
         n_runs, n_t = ds.sizes["run"], ds.sizes["time"]
         if n_runs == 0:
             raise ValueError("the recording has no runs")

@@ -5,8 +5,8 @@ the number of relevance vectors, the RMSE against the noise-free function, the e
 noise level, the log evidence, the coverage of the 95 % predictive interval and the
 fit time.
 
-Imports the estimators (:class:`~bayes_fdi.rvm.RVR`) and the command-line helpers of the
-foundation only.
+Imports the command-line helpers of the foundation only; the estimator
+(:class:`~bayes_fdi.rvm.RVR`) is imported when the command runs.
 """
 
 from __future__ import annotations

@@ -1,0 +1,65 @@
+"""Checks of an online diagnoser's settings and of its fitted values.
+
+`check_settings` refuses settings out of range before a fit; `check_fitted_values` refuses a
+fitted diagnoser whose values cannot be right (a threshold that is NaN or not positive, a
+clear level above it, bounds that are not finite), so that a damaged or tampered model file
+fails when it is loaded, naming the value, rather than when it diagnoses.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+__all__ = ["check_fitted_values", "check_settings"]
+
+
+def check_settings(params: Mapping[str, Any]) -> None:
+    """Refuse out-of-range settings (``get_params()`` of an `OnlineDiagnoser`)."""
+    checks = {
+        "false_alarm_hours": params["false_alarm_hours"] > 0,
+        "cusum_k": params["cusum_k"] >= 0,
+        "glr_window": isinstance(params["glr_window"], int) and params["glr_window"] >= 1,
+        "p_fault": 0 <= params["p_fault"] <= 1,
+        "novelty_ratio": params["novelty_ratio"] > 0,
+        "coverage": 0 < params["coverage"] < 1,
+        "detect_rate": 0 <= params["detect_rate"] <= 1,
+        "input_margin": params["input_margin"] >= 0,
+        "max_signatures_per_fault": params["max_signatures_per_fault"] >= 2,
+    }
+    for name, ok in checks.items():
+        if not ok:
+            raise ValueError(f"{name} is out of range: {params[name]!r}")
+
+
+def _finite(value: Any) -> bool:
+    try:
+        return bool(np.all(np.isfinite(np.asarray(value, dtype=np.float64))))
+    except (TypeError, ValueError):
+        return False
+
+
+def check_fitted_values(values: Mapping[str, Any]) -> None:
+    """Refuse fitted values that cannot be right (``vars()`` of a fitted `OnlineDiagnoser`)."""
+    threshold = values.get("threshold_")
+    if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and threshold > 0):
+        raise ValueError(f"the detection threshold threshold_ must be finite and > 0: {threshold}")
+    detector_threshold = getattr(values.get("detector_"), "threshold", threshold)
+    if not (_finite(detector_threshold) and np.all(np.asarray(detector_threshold) > 0)):
+        raise ValueError(f"the detector's threshold must be finite and > 0: {detector_threshold!r}")
+    clear = values.get("clear_level_")
+    if not (isinstance(clear, (int, float)) and math.isfinite(clear) and 0 <= clear < threshold):
+        raise ValueError(
+            f"the clear level clear_level_ must be finite, >= 0 and below the threshold "
+            f"{threshold!r}: {clear!r}"
+        )
+    envelope = values.get("envelope_")
+    low, high = getattr(envelope, "low_", None), getattr(envelope, "high_", None)
+    if low is not None and not (_finite(low) and _finite(high) and np.all(low < high)):
+        raise ValueError(f"the input envelope's bounds must be finite and ordered: {low}, {high}")
+    for channel, known in (values.get("training_ranges_") or {}).items():
+        if len(known) != 3 or not (known[0] <= known[1] <= known[2]):
+            raise ValueError(f"training_ranges_[{channel!r}] must be 3 ordered values: {known!r}")
