@@ -430,8 +430,8 @@ class OnlineDiagnoser(BaseEstimator):
             a 1 Hz grid (`bayes_fdi.diagnosis.online.clock.check_time_axis`).
         state
             The `StreamState` returned by an earlier call with ``return_state=True`` on the
-            preceding part of the same runs (same number of runs): the stream continues
-            exactly, so ``run(a ++ b)`` equals ``run(a)`` followed by ``run(b, state=...)``.
+            preceding part of the same runs (same number of runs): the stream continues exactly, so
+            ``run(a ++ b)`` equals ``run(a)`` followed by ``run(b, state=...)``.
         return_state
             Also return the state after the last second.
 
@@ -466,9 +466,8 @@ class OnlineDiagnoser(BaseEstimator):
               test statistics (NaN in a gap).
 
             Attributes: ``groups`` (JSON: label -> members), ``undetectable`` (JSON list, DGN0),
-            ``detector``, ``threshold``, ``clear_level``, ``coverage`` and ``features`` (the
-            signature's features). Without a ``run`` dimension in ``recording`` the stream
-            has none either.
+            ``detector``, ``threshold``, ``clear_level``, ``coverage``, ``features`` (the
+            signature's features). A ``recording`` without a ``run`` dimension gives none either.
         """
         self._check_fitted()
         ds, single = recording, "run" not in recording.dims
@@ -482,10 +481,9 @@ class OnlineDiagnoser(BaseEstimator):
         if n_runs == 0:
             raise ValueError("the recording has no runs")
         components = self._components()
-        if state is None:
-            state = StreamState.of_runs([init_run_state(components)] * n_runs)
-        else:
+        if state is not None:
             check_stream_state(components, state, n_runs)
+        state = state or StreamState.of_runs([init_run_state(components)] * n_runs)
         data = {c: channels[c].transpose("run", "time").values.astype(np.float64) for c in CHANNELS}
         out, end = step_runs(components, data, state)  # every run at once
 
