@@ -21,29 +21,26 @@ from bayes_fdi.diagnosis.detection.whitening import ARWhitener, levinson_durbin
 
 
 def _hand_cusum(e, k, cap):
-    """Page's two-sided recursion written out, NaN samples skipped (state kept)."""
+    """Page's two-sided recursion written out; a NaN sample counts as an innovation of 0 (the
+    sums decay by k) and shows as NaN."""
     sp = sn = 0.0
     out = []
     for v in e:
-        if math.isnan(v):
-            out.append(math.nan)
-            continue
-        sp = min(cap, max(0.0, sp + v - k))
-        sn = min(cap, max(0.0, sn - v - k))
-        out.append(max(sp, sn))
+        x = 0.0 if math.isnan(v) else v
+        sp = min(cap, max(0.0, sp + x - k))
+        sn = min(cap, max(0.0, sn - x - k))
+        out.append(math.nan if math.isnan(v) else max(sp, sn))
     return np.array(out)
 
 
 def _hand_glr(e, window):
-    """max over the last L <= window finite samples of (sum)^2 / (2 L), by brute force."""
+    """max over the last L <= window samples of (sum)^2 / (2 L), by brute force."""
     seen, out = [], []
     for v in e:
-        if math.isnan(v):
-            out.append(math.nan)
-            continue
-        seen.append(v)
+        seen.append(0.0 if math.isnan(v) else v)  # a missing sample: an innovation of 0
         last = seen[-window:]
-        out.append(max(sum(last[-n:]) ** 2 / (2 * n) for n in range(1, len(last) + 1)))
+        best = max(sum(last[-n:]) ** 2 / (2 * n) for n in range(1, len(last) + 1))
+        out.append(math.nan if math.isnan(v) else best)
     return np.array(out)
 
 
@@ -244,3 +241,18 @@ def test_bad_parameters_are_named():
         GLR(window=0).run([0.0])
     with pytest.raises(ValueError, match="not fitted"):
         ARWhitener().run([0.0])
+
+
+def test_a_gap_decays_the_cusum_as_in_control_seconds_do():
+    """Through a gap the sums fall by k a second (no evidence of a fault comes in), so a
+    statistic high before a long outage does not carry an alarm across it."""
+    det = CUSUM(k=0.5, threshold=20.0)
+    e = np.r_[np.full(10, 2.0), np.full(30, np.nan), np.zeros(3)]
+    out, state = det.run(e)
+    assert tuple(state.sums) == (0.0, 0.0)  # the state carries the decayed sums
+    assert out.statistic[9] == 15.0  # ten seconds of 2 - 0.5
+    assert np.isnan(out.statistic[10:40]).all()
+    # 30 missing seconds take 15 down to 0; the next zeros keep it there
+    np.testing.assert_array_equal(out.statistic[40:], [0.0, 0.0, 0.0])
+    short = det.run(np.r_[np.full(10, 2.0), np.full(4, np.nan), [0.0]])[0].statistic
+    assert short[-1] == 15.0 - 5 * 0.5  # four missing seconds and one zero

@@ -22,7 +22,8 @@ checks (``check_state``) and carries, ``update(e, state)`` for one sample (O(1) 
 ``run(e, state)`` over a sequence and ``run_stacked`` over the sequences of many runs at once,
 all through the same compiled kernel, so ``run`` equals ``update`` sample by sample exactly.
 They return the statistics (`DetectorOutput`) and the new state; the state passed in is never
-changed. A NaN innovation (a gap) leaves the state unchanged and gives a NaN statistic.
+changed. A NaN innovation (a gap) counts as an in-control one, an innovation of 0 (its expected
+value without a fault): the statistic decays through a gap as on fault-free data, and is NaN there.
 
 The detection decision DD with hysteresis is `bayes_fdi.diagnosis.detection.decision`; the
 thresholds for a false-alarm budget are `bayes_fdi.diagnosis.detection.thresholds`, and each
@@ -92,10 +93,9 @@ def _cusum_kernel(e, k, cap, state, stat, since):  # pragma: no cover - compiled
     lengths = state.lengths
     for t in range(e.size):
         v = e[t]
-        if not np.isfinite(v):
-            stat[t] = np.nan
-            since[t] = -1
-            continue
+        missing = not np.isfinite(v)
+        if missing:  # an in-control second: innovation 0, its expectation without a fault
+            v = 0.0
         sp = sums[0] + v - k
         sn = sums[1] - v - k
         if sp > 0.0:
@@ -114,7 +114,10 @@ def _cusum_kernel(e, k, cap, state, stat, since):  # pragma: no cover - compiled
             sn = cap
         sums[0] = sp
         sums[1] = sn
-        if sp >= sn:
+        if missing:
+            stat[t] = np.nan
+            since[t] = -1
+        elif sp >= sn:
             stat[t] = sp
             since[t] = lengths[0]
         else:
@@ -129,10 +132,9 @@ def _glr_kernel(e, state, stat, since):  # pragma: no cover - compiled
     w = buf.size
     for t in range(e.size):
         v = e[t]
-        if not np.isfinite(v):
-            stat[t] = np.nan
-            since[t] = -1
-            continue
+        missing = not np.isfinite(v)
+        if missing:  # an in-control second: innovation 0, its expectation without a fault
+            v = 0.0
         slot = state.slot[0]
         buf[slot] = v
         state.slot[0] = (slot + 1) % w
@@ -148,8 +150,12 @@ def _glr_kernel(e, state, stat, since):  # pragma: no cover - compiled
             if g > best:
                 best = g
                 best_len = length
-        stat[t] = best
-        since[t] = best_len
+        if missing:
+            stat[t] = np.nan
+            since[t] = -1
+        else:
+            stat[t] = best
+            since[t] = best_len
 
 
 @njit(cache=True, error_model="numpy")
