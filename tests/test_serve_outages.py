@@ -2,8 +2,8 @@
 ``serve`` and the plant are real subprocesses on 127.0.0.1, 2x real time): the log has every
 second; the BLIND seconds are exactly those of the outages; on this (seeded) plant, whose
 uninterrupted recording diagnosed in one batch ``run`` has no detection, none comes from the
-outages either (the detector's statistic is held through a gap, so a valve whose statistic
-stood near the threshold can alarm sooner after an outage: ``docs/plant.md``); the records note
+outages either (a missing second counts as an in-control one, so the detector's statistic
+decays through a gap as on fault-free data: ``docs/plant.md``); the records note
 the lost and the regained connection; and every record equals the batch ``run`` of the logged
 samples."""
 
