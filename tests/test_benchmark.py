@@ -225,3 +225,19 @@ def test_timeline_axes_use_the_recordings_own_ranges(double):
     factor, unit = ACTUATOR_RANGES[1]["F"]
     assert fig1.axes[1].get_ylabel() == f"F [{unit.replace('m3/h', 'm³/h')}]"
     np.testing.assert_allclose(fig1.axes[1].get_lines()[0].get_ydata(), rec["F"].values[0] * factor)
+
+
+def test_the_report_opens_with_its_targets_in_short_a_glossary_and_the_fault_names(tiny_run):
+    out, _ = tiny_run
+    report = (out / "benchmark.md").read_text()
+    head = report[: report.index("## Targets")]
+    targets = report[report.index("## Targets") : report.index("## Indices per scenario")]
+    judged = [line for line in targets.splitlines() if line.endswith(("| yes |", "| **no** |"))]
+    met = sum(line.endswith("| yes |") for line in judged)
+    assert f"{met} of {len(judged)} targets met." in head
+    for index in ("t_dt", "r_fd", "r_td", "fs_d", "t_it", "r_fi", "r_ti", "r_mi", "fs_i", "dacc"):
+        assert f"- **{index}**: " in head  # every index the tables print is defined
+    from bayes_fdi.actuator import FAULT_TABLE
+
+    for fault in ("f1", "f14"):  # the scenarios' faults, by code and description
+        assert f"- {fault} {FAULT_TABLE[fault].description}" in head

@@ -33,21 +33,13 @@ from bayes_fdi.benchmark.commissioning_summary import (
 from bayes_fdi.benchmark.report import DETECTABLE_DEFLECTION
 from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import markdown_table, to_jsonable
+from bayes_fdi.scoring.picalc import INDEX_MEANINGS
 
 __all__ = ["GLOSSARY", "render_commissioning_report", "write_commissioning_report"]
 
 #: The indices and terms of the report, in plain words.
 GLOSSARY: tuple[tuple[str, str], ...] = (
-    ("t_dt", "detection time: seconds from the fault's start to the (last, permanent) alarm"),
-    ("r_fd", "false detection rate: share of the fault-free part with the alarm on"),
-    ("r_td", "true detection rate: share of the faulty part with the alarm on"),
-    ("fs_d", "fault strength when it was detected (0-1)"),
-    ("t_it", "isolation time: seconds from the fault's start to naming its group for good"),
-    ("r_fi", "false isolation rate: share of the fault-free part naming the fault's group"),
-    ("r_ti", "true isolation rate: share of the faulty part naming the fault's group"),
-    ("r_mi", "misleading isolations: other groups named, per second of the zone (can exceed 1)"),
-    ("fs_i", "fault strength when it was isolated (0-1)"),
-    ("dacc", "diagnosis accuracy: 1 / the number of faults in the groups named after isolation"),
+    *INDEX_MEANINGS,
     ("group", "faults the sensors cannot tell apart on this valve, named together (f4|f11)"),
     ("DGN0", "faults the commissioned diagnoser declares it cannot detect on this valve"),
     (

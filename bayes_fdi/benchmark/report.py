@@ -23,8 +23,9 @@ import numpy as np
 
 from bayes_fdi.actuator import FAULT_TABLE, NOISE_STD
 from bayes_fdi.atomic import write_text
+from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import format_number, markdown_table, to_jsonable
-from bayes_fdi.scoring.picalc import PICALC_KEYS
+from bayes_fdi.scoring.picalc import INDEX_MEANINGS, PICALC_KEYS
 
 __all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "render_report", "summarise", "write_report"]
 
@@ -374,9 +375,21 @@ def _num(v: Any, fmt: str = ".3f") -> str:
     return format_number(v, fmt)
 
 
+def _in_short(targets: list[list[str]]) -> list[str]:
+    """The targets met, and the measurements of those missed, in a few lines."""
+    judged = [row for row in targets if row[2] != "–"]
+    missed = [row for row in judged if row[2] != "yes"]
+    lines = ["## In short", "", f"{len(judged) - len(missed)} of {len(judged)} targets met."]
+    if missed:
+        lines.append("Not met: " + "; ".join(f"{t} (measured: {m})" for t, m, _ in missed) + ".")
+    return [*lines, ""]
+
+
 def render_report(results: Mapping[str, Any]) -> str:
     """The Markdown report of a benchmark run."""
     summary = summarise(results)
+    targets = _targets(results, summary)
+    used = {r["fault"] for r in results["scenarios"]}
     s, timing = results["settings"], results["timing"]
     lines = ["# DAMADICS benchmark (Step I) of the online diagnoser", ""]
     if not s.get("full_benchmark"):
@@ -393,9 +406,20 @@ def render_report(results: Mapping[str, Any]) -> str:
         f"{timing['run_samples']:,} samples"
         + (f"; training took {s['fit_wall_s']:.0f} s wall." if "fit_wall_s" in s else "."),
         "",
+        *_in_short(targets),
+        "## Glossary",
+        "",
+        *(f"- **{name}**: {meaning}" for name, meaning in INDEX_MEANINGS),
+        "- **big / medium / small**: fault strengths of the scenarios; **abrupt / incipient**: "
+        "the fault appears at once or grows linearly",
+        "",
+        "## Fault codes",
+        "",
+        *(f"- {describe_state(f)}" for f in FAULT_TABLE if f in used),
+        "",
         "## Targets",
         "",
-        markdown_table(["target", "measured", "met"], _targets(results, summary)),
+        markdown_table(["target", "measured", "met"], targets),
         "## Indices per scenario",
         "",
         "Median over the seeds where the index is determinable, [min, max] when they differ, "

@@ -4,7 +4,8 @@ Every function here is pure (no fitting, no simulation): it takes plain results 
 dictionaries :func:`bayes_fdi.paper.reproduce.reproduce` builds — and renders them. The
 parts live in `bayes_fdi.paper.report_tables` (tables laid out like the paper's),
 `bayes_fdi.paper.report_figures` (residual and feature figures),
-`bayes_fdi.paper.report_sections` (calibration headlines, dynamic normal models) and
+`bayes_fdi.paper.report_sections` (calibration headlines, dynamic normal models),
+`bayes_fdi.paper.report_summary` (the summary, glossary and state codes that open it) and
 `bayes_fdi.reporting` (Markdown tables, ``results.json``).
 """
 
@@ -21,6 +22,11 @@ from bayes_fdi.paper.report_sections import (
     dynamic_section,
     normal_models_text,
     why_below,
+)
+from bayes_fdi.paper.report_summary import (
+    fault_codes_section,
+    glossary_section,
+    summary_section,
 )
 from bayes_fdi.paper.report_tables import (
     PAPER_ACCURACY,
@@ -54,6 +60,9 @@ def render_report(results: Mapping[str, Any]) -> str:
     figures = results.get("figures", {})
     md = [
         *_header(results),
+        *summary_section(results),
+        *glossary_section(),
+        *fault_codes_section(results),
         *_overall_section(datasets),
         *_calibration_section(datasets),
         *dynamic_section(results),

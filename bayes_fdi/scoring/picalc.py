@@ -47,7 +47,21 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PICALC_KEYS", "UNDETERMINED", "picalc"]
+__all__ = ["INDEX_MEANINGS", "PICALC_KEYS", "UNDETERMINED", "picalc"]
+
+#: What each PICalc index means, in plain words (for reports' glossaries).
+INDEX_MEANINGS: tuple[tuple[str, str], ...] = (
+    ("t_dt", "detection time: seconds from the fault's start to the (last, permanent) alarm"),
+    ("r_fd", "false detection rate: share of the fault-free part with the alarm on"),
+    ("r_td", "true detection rate: share of the faulty part with the alarm on"),
+    ("fs_d", "fault strength when it was detected (0-1)"),
+    ("t_it", "isolation time: seconds from the fault's start to naming its group for good"),
+    ("r_fi", "false isolation rate: share of the fault-free part naming the fault's group"),
+    ("r_ti", "true isolation rate: share of the faulty part naming the fault's group"),
+    ("r_mi", "misleading isolations: other groups named, per second of the zone (can exceed 1)"),
+    ("fs_i", "fault strength when it was isolated (0-1)"),
+    ("dacc", "diagnosis accuracy: 1 / the number of faults in the groups named after isolation"),
+)
 
 #: Keys of :func:`picalc`'s result, in the order of the benchmark's report form S1-FF.
 PICALC_KEYS: tuple[str, ...] = (
