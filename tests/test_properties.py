@@ -5,7 +5,8 @@ long, seeded one under the ``fuzz`` marker (``pytest -m fuzz``; also marked ``sl
 default run leaves it out), together more than 10 000 examples.
 
 Covered: RVR and RVC fit/predict on any finite data (magnitudes 1e-150 .. 1e150, duplicate rows,
-constant columns, the reported failures as explicit examples), exact scale equivariance of the
+constant columns; the reported failures as explicit examples, those of the linear and
+polynomial kernels among them), exact scale equivariance of the
 fits, save/load round trips, `simulate`, the calibration metrics, the netCDF dataset round trip
 and the Lublin day-file reader.
 """
@@ -112,13 +113,29 @@ def classification_problems(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, st
 
 # ------------------------------------------------------------------------------- RVR / RVC
 @with_examples(
-    {"problem": (np.zeros((2, 1)), np.array([0.0, 3.7e-130]), "fast")},  # reported: not PD
-    {"problem": (np.arange(4.0)[:, None], np.array([1e154, -2e154, 0.0, 3e300]), "fast")},
-    {"problem": (np.arange(3.0)[:, None] * 1e-150, np.array([1e-150, 0.0, 2e-150]), "em")},
-)
-def rvr_fits_any_finite_data(problem: tuple) -> None:
+    {"problem": (np.zeros((2, 1)), np.array([0.0, 3.7e-130]), "fast"), "kernel": "rbf"},
+    {"problem": (np.arange(4.0)[:, None], np.array([1e154, -2e154, 0.0, 3e300]), "fast"),
+     "kernel": "rbf"},
+    {"problem": (np.arange(3.0)[:, None] * 1e-150, np.array([1e-150, 0.0, 2e-150]), "em"),
+     "kernel": "rbf"},
+    # reported at extreme scales: Cholesky with a linear kernel, a polynomial kernel's
+    # predictions, a fit refused as degenerate for inputs of 1e-98 .. 1e-300
+    {"problem": (np.array([[0.0], [1.34e154]]), np.array([0.0, 1.0]), "fast"), "kernel": "linear"},
+    {"problem": (np.array([[0.0], [7e51], [1.0]]), np.array([1.0, 0.0, 2.0]), "fast"),
+     "kernel": "poly"},
+    {"problem": (np.r_[np.linspace(0, 1, 7), 1e-98, 1e-200, 1e-300][:, None],
+                 np.linspace(0, 1, 10), "fast"), "kernel": "rbf"},
+)  # fmt: skip
+def rvr_fits_any_finite_data(problem: tuple, kernel: str) -> None:
     X, y, method = problem
-    model = RVR(width=2.0, method=method, max_iter=100).fit(X, y)
+    if kernel == "poly":
+        with np.errstate(over="ignore"):  # the kernel's diagonal (|x|^2 + 1)^3, by numpy
+            overflows = not np.isfinite(((X * X).sum(1) + 1.0) ** 3).all()
+        if overflows:  # no float64 model exists: refused, naming the cause
+            with pytest.raises(ValueError, match="kernel overflows float64 on these inputs"):
+                RVR(kernel=kernel, width=2.0, method=method, max_iter=100).fit(X, y)
+            return
+    model = RVR(kernel=kernel, width=2.0, method=method, max_iter=100).fit(X, y)
     mean, std = model.predict(X, return_std=True)
     assert np.all(np.isfinite(mean)) and np.all(np.isfinite(std))
     assert np.all(std > 0)
@@ -130,7 +147,7 @@ def rvr_fits_any_finite_data(problem: tuple) -> None:
 
 
 test_rvr_fits_any_finite_data, test_rvr_fits_any_finite_data_fuzz = twice(
-    25, 1500, problem=regression_problems()
+    25, 1500, problem=regression_problems(), kernel=st.just("rbf")
 )(rvr_fits_any_finite_data)
 
 
@@ -388,3 +405,11 @@ def test_day_file_reader_reads_what_was_written(tmp_path_factory):
 @pytest.mark.slow
 def test_day_file_reader_reads_what_was_written_fuzz(tmp_path_factory):
     _day_fuzz(tmp_path_factory=tmp_path_factory)
+
+
+def test_polynomial_kernel_refuses_inputs_it_would_overflow():
+    """A query of 7e51 makes (x z + 1)^3 overflow float64: a clear error, not NaN predictions."""
+    model = RVR(kernel="poly", max_iter=100).fit(np.arange(5.0)[:, None], np.arange(5.0))
+    assert np.isfinite(model.predict(np.array([[1e20]]))).all()  # (1e40 * 16)^3 still finite
+    with pytest.raises(ValueError, match=r"kernel overflows float64 .*largest \|x\| 7e\+51"):
+        model.predict(np.array([[7e51]]))

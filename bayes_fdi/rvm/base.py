@@ -65,6 +65,25 @@ def power_of_two_scale(values: Tensor) -> float:
     return math.ldexp(1.0, exponent)
 
 
+def _check_kernel_range(kern: Kernel, X: Tensor) -> None:
+    """Refuse inputs whose linear or polynomial kernel values overflow the float type: its
+    largest values lie on the diagonal (Cauchy-Schwarz), ``offset + |x|^2`` or
+    ``(gamma |x|^2 + coef0)^degree``. (The RBF kernel is bounded by 1 and its fits rescale
+    exactly.)"""
+    if not isinstance(kern, (Linear, Polynomial)):
+        return
+    sq = (X * X).sum(dim=1)
+    diag = sq + kern.offset if isinstance(kern, Linear) else (kern.gamma * sq + kern.coef0)
+    if isinstance(kern, Polynomial):
+        diag = diag**kern.degree
+    if not bool(torch.isfinite(diag).all()):
+        top, dtype = float(X.abs().max()), str(X.dtype).removeprefix("torch.")
+        raise ValueError(
+            f"the {kern!r} kernel overflows {dtype} on these inputs (largest |x| {top:.3g}): "
+            "standardise the inputs, or use the RBF kernel, whose fits are scale-invariant"
+        )
+
+
 def is_torch(X: Any) -> bool:
     """Whether ``X`` is a torch tensor (the estimators then answer in tensors, else in numpy)."""
     return isinstance(X, Tensor)
@@ -299,6 +318,7 @@ class RVMBase(BaseEstimator):
         kern = self._resolve_kernel(width)
         if kern is None:
             return Design(matrix=X, bias=self.bias), None
+        _check_kernel_range(kern, X)
         design = Design(kernel=kern, X=X, bias=self.bias, max_bytes=self.max_kernel_bytes, rhs=rhs)
         return design, kern
 
@@ -383,6 +403,7 @@ class RVMBase(BaseEstimator):
             if self._kernel_ is None:
                 parts.append(X[:, self._feat_.to(X.device)])
             else:
+                _check_kernel_range(self._kernel_, X)
                 parts.append(self._kernel_(X, self._rv_))
         if not parts:
             return torch.zeros(X.shape[0], 0, dtype=X.dtype, device=X.device)
