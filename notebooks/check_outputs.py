@@ -55,7 +55,7 @@ def problems(path: Path, paths: list[str]) -> list[str]:
     for index, text in output_texts(json.loads(path.read_text(encoding="utf-8"))):
         hits = [m.start() for p in paths for m in re.finditer(re.escape(p), text)]
         hits += [m.start() for m in NUMPY_REPR.finditer(text)]
-        for start in sorted(hits):
+        for start in sorted(set(hits)):  # nested folders (a venv in the checkout) once
             excerpt = text[max(0, start - 40) : start + 60].replace("\n", " ")
             found.append(f"{path.name}, cell {index}: ...{excerpt}...")
     return found
