@@ -28,6 +28,7 @@ __all__ = [
     "check_state",
     "one_sequence",
     "stack_states",
+    "stacked_sequences",
     "state_of_run",
     "working_state",
     "writable_copy",
@@ -83,6 +84,17 @@ def check_stacked_state(state: Any, fresh: tuple, n_runs: int, what: str) -> Non
                 f"{what}.{name} must be a {want.dtype} array of shape {shape} ({n_runs} "
                 f"run(s)), got {got.dtype} {got.shape}"
             )
+
+
+def stacked_sequences(values: Any, state: State, fresh: tuple, what: str) -> tuple[Any, State]:
+    """The start of a component's ``run_stacked``: ``values`` as a contiguous float64
+    ``(runs, n)`` array (a `ValueError` for another shape), and a writable copy of ``state``
+    once it is checked to stack one state laid out like ``fresh`` per run."""
+    x = np.ascontiguousarray(np.asarray(values, dtype=np.float64))
+    if x.ndim != 2:
+        raise ValueError(f"expected (runs, n) sequences, got shape {x.shape}")
+    check_stacked_state(state, fresh, x.shape[0], what)
+    return x, writable_copy(state)
 
 
 def writable_copy(state: State) -> State:

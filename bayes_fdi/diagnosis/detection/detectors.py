@@ -41,11 +41,10 @@ import numpy as np
 from numba import njit
 
 from bayes_fdi.diagnosis.component_state import (
-    check_stacked_state,
     check_state,
     one_sequence,
+    stacked_sequences,
     working_state,
-    writable_copy,
 )
 from bayes_fdi.diagnosis.detection.thresholds import calibrate_threshold, cusum_threshold
 
@@ -229,11 +228,7 @@ class _SequentialTest:
         along a leading run axis (`~bayes_fdi.diagnosis.component_state.stack_states`); returns
         ``(runs, n)`` outputs and the stacked states after them (each run's equal to `run`'s)."""
         self._check_params()
-        x = np.ascontiguousarray(np.asarray(e, dtype=np.float64))
-        if x.ndim != 2:
-            raise ValueError(f"expected (runs, n) sequences, got shape {x.shape}")
-        check_stacked_state(state, self.init_state(), x.shape[0], "detector state")
-        state = writable_copy(state)
+        x, state = stacked_sequences(e, state, self.init_state(), "detector state")
         stat = np.empty_like(x)
         since = np.empty(x.shape, dtype=np.float64)
         self._kernel_stacked(x, state, stat, since)

@@ -24,11 +24,10 @@ import numpy as np
 from numba import njit
 
 from bayes_fdi.diagnosis.component_state import (
-    check_stacked_state,
     check_state,
     one_sequence,
+    stacked_sequences,
     working_state,
-    writable_copy,
 )
 
 __all__ = ["ARWhitener", "WhitenState", "levinson_durbin"]
@@ -229,11 +228,7 @@ class ARWhitener:
         ``(runs, n)`` innovations and the stacked states after them (each run's equal to
         `run`'s)."""
         self._check()
-        x = np.ascontiguousarray(np.asarray(z, dtype=np.float64))
-        if x.ndim != 2:
-            raise ValueError(f"expected (runs, n) sequences, got shape {x.shape}")
-        check_stacked_state(state, self.init_state(), x.shape[0], "whitener state")
-        state = writable_copy(state)
+        x, state = stacked_sequences(z, state, self.init_state(), "whitener state")
         out = np.empty_like(x)
         _whiten_runs(x, self.mean_, self.predictors_, self.innovation_std_, state, out)
         return out, state
