@@ -4,11 +4,13 @@
 out (identification ratios against the paper's, the paired comparison, the states read as
 others most often, how many misread runs fall inside the groups no classifier can split, the
 dynamic normal models); `glossary_section` defines every index
-the report prints; `fault_codes_section` names every state code the report uses.
+the report prints; `fault_codes_section` names every state code the rest of the report uses
+(found in its text, so none is left out).
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -19,6 +21,9 @@ from bayes_fdi.paper.report_tables import PAPER_ACCURACY
 from bayes_fdi.reporting import format_percent
 
 __all__ = ["GLOSSARY", "fault_codes_section", "glossary_section", "summary_section"]
+
+#: A state code as the report writes it: a fault (f1 .. f19) or the fault-free state (fn).
+_STATE_CODE = re.compile(r"\b(fn|f\d{1,2})\b")
 
 #: The indices and words of the report, in plain words.
 GLOSSARY: dict[str, str] = {
@@ -92,9 +97,11 @@ def _dataset_sentences(name: str, d: Mapping[str, Any]) -> list[str]:
     ]
     pair = d.get("paired")
     if pair:
+        differ = pair["a_only"] + pair["b_only"]
+        same = "The two name the same runs right"
         sentences.append(
-            f"The two differ on {pair['a_only'] + pair['b_only']} of the same runs "
-            f"(McNemar p = {pair['p_value']:.2g})."
+            (f"The two differ on {differ} of the same runs" if differ else same)
+            + f" (McNemar p = {pair['p_value']:.2g})."
         )
     sentences.append(_limit_sentence(rvm, d.get("all_states")))
     dynamic = d.get("dynamic")
@@ -161,12 +168,9 @@ def glossary_section() -> list[str]:
     return ["## Glossary", "", *(f"- **{k}**: {v}" for k, v in GLOSSARY.items()), ""]
 
 
-def fault_codes_section(results: Mapping[str, Any]) -> list[str]:
-    """Every state code the report uses, with what it means."""
-    codes: set[str] = set()
-    for d in results["datasets"].values():
-        codes |= set(d["rvm"]["confusion"]["classes"])
-        codes |= set((d.get("all_states") or {}).get("states", []))
+def fault_codes_section(text: str) -> list[str]:
+    """Every state code ``text`` (the rest of the report) uses, with what it means."""
+    codes = set(_STATE_CODE.findall(text))
     order = sorted(codes, key=lambda c: (c != "fn", int(c[1:]) if c[1:].isdigit() else 99, c))
     named = [f"- {'fn fault-free' if c == 'fn' else describe_state(c)}" for c in order]
     return ["## State codes", "", *named, ""]
