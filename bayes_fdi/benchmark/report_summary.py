@@ -29,7 +29,8 @@ GLOSSARY: tuple[tuple[str, str], ...] = (
     (
         "DD, PID, CID",
         "the benchmark's decision signals, one per second: DD the detection decision (alarm "
-        "on), PID the fault's group is named, CID how many other groups are named",
+        "on), PID the primary isolation decision (the fault's group is named), CID the "
+        "complementary isolation decision (how many other groups are named)",
     ),
     (
         "t_on, t_from, t_hor",
