@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 from tiny_campaign import CAMPAIGN, STATES
 
+from bayes_fdi.actuator import FAULT_TABLE
 from bayes_fdi.cli import main
 from bayes_fdi.paper.report_tables import confusion_table
 
@@ -151,3 +153,52 @@ def test_cli_same_seed_same_numbers_from_the_cache(tmp_path, capsys, run):
     assert "unknown state" in capsys.readouterr().err
     assert main([*argv[:-2], "--states", ",".join(STATES), "--dynamic-lags", "1,two"]) == 2
     assert "--dynamic-lags" in capsys.readouterr().err
+
+
+def test_the_report_opens_in_words_with_the_results_figures(run):
+    tmp, _, results, _ = run
+    report = (tmp / "out1" / "report.md").read_text()
+    d = results["datasets"]["tiny"]
+    short = report[report.index("## In short") : report.index("## Glossary")]
+    (line,) = [x for x in short.splitlines() if x.startswith("- **tiny**")]
+    rvm = np.array(d["rvm"]["confusion"]["matrix"])
+    svm = np.array(d["svm"]["confusion"]["matrix"])
+    # the ratios from the confusions' counts, formatted by hand (two decimals, percent)
+    assert f"of {rvm.sum()} test runs, the RVM tree names the state of " in line
+    assert f"{100 * np.trace(rvm) / rvm.sum():.2f}% right, " in line  # no paper figure: tiny
+    assert f"the SVM tree {100 * np.trace(svm) / svm.sum():.2f}%." in line
+    dyn = np.array(d["dynamic"]["rvm"]["confusion"]["matrix"])
+    assert f"the RVM tree names {100 * np.trace(dyn) / dyn.sum():.2f}%" in line
+    # the most frequent confusion: the largest off-diagonal count of the RVM's confusion
+    classes = d["rvm"]["confusion"]["classes"]
+    off = [(rvm[i, j], i, j) for i in range(len(classes)) for j in range(len(classes)) if i != j]
+    if max(off)[0]:
+        a, b, n, m = re.search(r"(f\d+|fn) read as (f\d+|fn) in (\d+) of (\d+) runs", line).groups()
+        i, j = classes.index(a), classes.index(b)
+        assert (int(n), int(m)) == (rvm[i, j], rvm[i].sum()) and int(n) == max(off)[0]
+    # the glossary defines the indices and terms the tables and sentences print
+    body = report[report.index("## Overall identification ratio") :]
+    glossary = report[report.index("## Glossary") : report.index("## State codes")]
+    always = (
+        ("identification ratio", "Identification ratio"),
+        ("log loss", "Log loss"),
+        ("Brier score", "Brier"),
+        ("ECE", "ECE"),
+        ("McNemar p", "McNemar p"),
+        ("relevance / support vectors", "Vectors per node"),
+        ("noise floor", "noise floor"),
+        ("coverage", "coverage"),
+        ("fault strength", "Strength"),
+    )
+    for term, printed in always:
+        assert f"- **{term}**: " in glossary and printed in body, term
+    # printed only when the all-states analysis finds groups
+    for term in ("pairwise k-NN error", "group level, P(true group)"):
+        assert f"- **{term}**: " in glossary, term
+    # every state code the report mentions is named once, with the actuator table's description
+    codes = set(re.findall(r"\b(f\d{1,2}|fn)\b", report))
+    named = report[report.index("## State codes") : report.index("## Overall")]
+    assert codes >= set(STATES)
+    for code in codes:
+        meaning = "fault-free" if code == "fn" else FAULT_TABLE[code].description
+        assert named.count(f"- {code} {meaning}\n") == 1, code

@@ -31,6 +31,7 @@ from bayes_fdi.benchmark.commissioning_summary import (
     per_case,
 )
 from bayes_fdi.benchmark.report import DETECTABLE_DEFLECTION
+from bayes_fdi.benchmark.report_summary import DECISION_TERMS
 from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import markdown_table, to_jsonable
 from bayes_fdi.scoring.picalc import INDEX_MEANINGS
@@ -48,8 +49,7 @@ GLOSSARY: tuple[tuple[str, str], ...] = (
         f"standard deviations summed over the faulty part; below {DETECTABLE_DEFLECTION:g} no "
         "detector built on these normal models can find it",
     ),
-    ("confident wrong", "a second whose most probable group is above 0.9 and is not the fault's"),
-    ("CLEAR", "the SEVA status of a second with no fault detected"),
+    *DECISION_TERMS,
     ("mismatch", "a detection that began outside the normal models' envelope (commission it)"),
     ("unknown", "a detection unlike every fault the diagnoser knows"),
 )

@@ -58,18 +58,12 @@ def render_report(results: Mapping[str, Any]) -> str:
     """
     datasets = results["datasets"]
     figures = results.get("figures", {})
-    md = [
-        *_header(results),
-        *summary_section(results),
-        *glossary_section(),
-        *fault_codes_section(results),
-        *_overall_section(datasets),
-        *_calibration_section(datasets),
-        *dynamic_section(results),
-    ]
+    opening = [*_header(results), *summary_section(results), *glossary_section()]
+    md = [*_overall_section(datasets), *_calibration_section(datasets), *dynamic_section(results)]
     for name, d in datasets.items():
         md += _dataset_section(name, d, figures.get(name, {}))
-    return "\n".join(md).rstrip() + "\n"
+    codes = fault_codes_section("\n".join([*opening, *md]))
+    return "\n".join([*opening, *codes, *md]).rstrip() + "\n"
 
 
 def _header(results: Mapping[str, Any]) -> list[str]:

@@ -54,12 +54,16 @@ INDEX_MEANINGS: tuple[tuple[str, str], ...] = (
     ("t_dt", "detection time: seconds from the fault's start to the (last, permanent) alarm"),
     ("r_fd", "false detection rate: share of the fault-free part with the alarm on"),
     ("r_td", "true detection rate: share of the faulty part with the alarm on"),
-    ("fs_d", "fault strength when it was detected (0-1)"),
+    ("fs_d", "fault detection sensitivity: the fault's strength when it was detected (0-1)"),
     ("t_it", "isolation time: seconds from the fault's start to naming its group for good"),
     ("r_fi", "false isolation rate: share of the fault-free part naming the fault's group"),
     ("r_ti", "true isolation rate: share of the faulty part naming the fault's group"),
-    ("r_mi", "misleading isolations: other groups named, per second of the zone (can exceed 1)"),
-    ("fs_i", "fault strength when it was isolated (0-1)"),
+    (
+        "r_mi",
+        "mismatch isolation rate: other groups named, per second of the zone on average (can "
+        "exceed 1)",
+    ),
+    ("fs_i", "fault isolation sensitivity: the fault's strength when it was isolated (0-1)"),
     ("dacc", "diagnosis accuracy: 1 / the number of faults in the groups named after isolation"),
 )
 
