@@ -48,8 +48,11 @@ from bayes_fdi.rvm.sbl.rounding import rounding_gamma, thin_matmul
 from bayes_fdi.rvm.sbl.screening import gaussian_screened_Q, screened_factors
 from bayes_fdi.rvm.sbl.tracked_kernels import reestimate_rows
 
-__all__ = ["TrackedFactors"]
+__all__ = ["COMPILED_UPDATE", "TrackedFactors"]
 
+#: Run the re-estimation update compiled (:mod:`~bayes_fdi.rvm.sbl.tracked_kernels`) on CPU
+#: float64; tests clear it to compare with the torch update.
+COMPILED_UPDATE = True
 #: the carried bounds are used while the stored Gram matrix's error inflates them by at most
 #: this factor (``psd``, see :mod:`bayes_fdi.rvm.sbl.posterior_bounds`); beyond it the solver
 #: screens directly
@@ -83,7 +86,9 @@ class TrackedFactors:
         self.stale: set[int] = set()
         self._u = torch.finfo(self.dtype).eps / 2.0
         # CPU float64: the re-estimation update runs compiled (tracked_kernels)
-        self._compiled = unit.device.type == "cpu" and self.dtype == torch.float64
+        self._compiled = (
+            COMPILED_UPDATE and unit.device.type == "cpu" and self.dtype == torch.float64
+        )
 
     # ----------------------------------------------------------------------- fresh values
     def refresh(self, post: Posterior, Z: Tensor, rows: Tensor | None = None) -> None:

@@ -49,6 +49,7 @@ from bayes_fdi.rvm.sbl.decisions import (
 )
 
 __all__ = [
+    "COMPILED_RULES",
     "SHORTLIST_MAX",
     "exact_near_threshold",
     "lazy_verified_action",
@@ -61,6 +62,9 @@ __all__ = [
 
 #: At most this many addition candidates are recomputed exactly per round of verification.
 SHORTLIST_MAX = 64
+#: Decide with the compiled rules (:mod:`~bayes_fdi.rvm.sbl.action_kernels`) on CPU float64
+#: factors; tests clear it to compare with the torch rules.
+COMPILED_RULES = True
 #: relative slack on the bounds for the rounding of their own evaluation
 _SLACK = 1e-12
 
@@ -356,7 +360,9 @@ def _round_candidates(
 def _cpu_arrays(*tensors: Tensor) -> tuple | None:
     """NumPy views of the decision's tensors (sharing memory) when the compiled rules apply:
     CPU, float64 factors; None otherwise (torch rules, any device or dtype)."""
-    if any(t.device.type != "cpu" for t in tensors) or tensors[0].dtype != torch.float64:
+    if not COMPILED_RULES or tensors[0].dtype != torch.float64:
+        return None
+    if any(t.device.type != "cpu" for t in tensors):
         return None
     if tensors[5].dtype != torch.float64:
         return None
