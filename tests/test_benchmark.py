@@ -166,6 +166,17 @@ def test_timeline_from_a_stream_alone(double, tmp_path):
         stream, rec, truth={"fault": "f1", "onset": 100.0}, path=tmp_path / "t.png"
     )
     assert path.exists() and not list(tmp_path.glob(".*tmp*"))
+    # faults by code and name: the title, and each group of the probability panel's legend
+    fig = plot_timeline(stream, rec, truth={"fault": "f18"})
+    assert fig._suptitle.get_text() == f"f18 {FAULT_TABLE['f18'].description}"
+    legend = fig.axes[6].get_legend()
+    assert legend is not None and legend.get_texts()
+    for text in (t.get_text() for t in legend.get_texts()):
+        codes = text.split(":")[0].split()[0].split("|")
+        for code in codes:
+            assert code in FAULT_TABLE or code in ("fn", "unknown")
+            if code in FAULT_TABLE:
+                assert FAULT_TABLE[code].description in text
     with pytest.raises(ValueError, match="one run"):
         two = simulate(benchmark_inputs(n_runs=2, duration=300), seed=3)
         plot_timeline(double.run(two), two)
