@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from bayes_fdi import model_files
+from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis.detection import (
     ARWhitener,
     CUSUMState,
@@ -27,8 +28,8 @@ from bayes_fdi.scoring.picalc import first_detection, picalc
 NAN = np.nan
 #: Two channels, threshold 10, clear level 0 (columns X, F).
 STATS = np.array(
-    [[0, 0], [11, 0], [0, 0], [0, 0], [0, 1], [0, 0], [NAN, 0], [0, 0], [0, 12], [NAN, NAN],
-     [0, 0], [0, 0], [0, 0], [5, 0]],
+    [[0, 0], [11, 0], [0, 0], [0, 12], [0, 0], [NAN, 0], [0, 3], [0, 0], [0, 12], [NAN, NAN],
+     [0, 0], [0, 0], [5, 0], [0, 0]],
     dtype=float,
 )  # fmt: skip
 
@@ -38,15 +39,17 @@ def _edges(dd):
 
 
 def test_hold_against_a_hand_computed_sequence():
-    # hold 2: on at 11 (t=1); quiet seconds t=2, 3 count 1, 2; F = 1 at t=4 starts the count
-    # again; t=5, 6 (X held at 0 through its NaN) count 1, 2; t=7 completes 3 > 2: off. On at
-    # t=8 (F = 12), held through the gap t=9; t=10, 11 count 1, 2; off at t=12; 5 < 10 stays off
+    # hold 2: on at 11 (t=1); both at 0 at t=2, 1 s after the exceedance: kept; F = 12 at t=3
+    # exceeds again; t=4, 5 (X held at 0 through its NaN) are 1, 2 s after it: kept; t=6 is 3 s
+    # after, but F = 3 is above the clear level: kept; t=7: 4 s after, both at 0: off. On at
+    # t=8 (F = 12), held through the gap t=9 (1 s); t=10 is 2 s after: kept; t=11: off; 5 < 10
+    # does not switch it on again
     held = detection_decision(STATS, threshold=10.0, clear=0.0, hold=2)
     T, F = True, False
-    assert held.tolist() == [F, T, T, T, T, T, T, F, T, T, T, T, F, F]
+    assert held.tolist() == [F, T, T, T, T, T, T, F, T, T, T, F, F, F]
     # hold 0 is plain hysteresis: off at the first second with both channels at 0
     plain = detection_decision(STATS, threshold=10.0, clear=0.0)
-    assert plain.tolist() == [F, T, F, F, F, F, F, F, T, T, F, F, F, F]
+    assert plain.tolist() == [F, T, F, T, F, F, F, F, T, T, F, F, F, F]
     assert detection_decision(STATS, 10.0, 0.0, hold=0).tolist() == plain.tolist()
     for bad in (-1, 1.5, True):
         with pytest.raises(ValueError, match="hold must be an integer >= 0"):
@@ -183,3 +186,43 @@ def test_first_detection_against_hand_computed_values():
     assert first_detection(t, never, **zone) == {"t_dt_first": -1.0, "dd_permanent": -1.0}
     with pytest.raises(ValueError, match="faulty part"):
         first_detection(t[:1000], kept[:1000], **zone)
+
+
+def test_training_signatures_are_those_of_plain_hysteresis():
+    """The isolator learns from windows that start at a detection after the onset: the
+    training stream decides without the hold, so a hold changes neither the signatures nor
+    which training runs count as detected."""
+    from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+    from bayes_fdi.diagnosis.online.step import Components, init_run_state, step
+    from bayes_fdi.diagnosis.online.training import training_signatures
+
+    models = DynamicNormalModels(
+        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
+        calibration_folds=2, random_state=0,
+    )  # fmt: skip
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    diag = OnlineDiagnoser(models).fit(normal)
+    assert diag.decision_.hold == 100
+    specs = [Fault(f, s, 100.0) for f in ("f1", "f18") for s in (0.3, 0.6, 1.0)]
+    faults = simulate(benchmark_inputs(len(specs), 400, seed=2, vary=True), specs, seed=2)
+    parts = (diag.normal_models_, PerOutput(diag.whiteners_["X"], diag.whiteners_["F"]))
+    rest = (diag.detector_, diag.decision_, diag.signature_, diag.envelope_, None)
+    held = training_signatures(Components(*parts, *rest), faults)
+    plain_decision = DetectionDecision(diag.threshold_, diag.clear_level_, 2, hold=0)
+    rest = (diag.detector_, plain_decision, diag.signature_, diag.envelope_, None)
+    plain = training_signatures(Components(*parts, *rest), faults)
+    assert held.detected == plain.detected and held.rows.shape[0] > 0
+    # while the streams' DD differ on these runs: the hold keeps alarms on longer
+    longer = 0
+    for r in range(faults.sizes["run"]):
+        arrays = {c: faults[c].values[r].astype(np.float64) for c in CHANNELS}
+        dd = {}
+        for name, decision in (("held", diag.decision_), ("plain", plain_decision)):
+            components = Components(*parts, diag.detector_, decision, *rest[2:])
+            dd[name] = step(components, arrays, init_run_state(components))[0]["DD"]
+        assert np.all(dd["held"] >= dd["plain"])
+        longer += int(np.sum(dd["held"] & ~dd["plain"]))
+    assert longer > 0
+    np.testing.assert_array_equal(held.rows, plain.rows)
+    np.testing.assert_array_equal(held.ages, plain.ages)

@@ -2,16 +2,19 @@
 
 `DetectionDecision` turns the per-channel statistics of the sequential tests
 (`bayes_fdi.diagnosis.detection.detectors`) into the detection decision DD: on when a statistic
-exceeds the threshold; once on, off only on sustained in-control evidence, when every channel's
-statistic has stayed at or below the clear level for more than ``hold`` consecutive seconds. A
-persistent fault whose residual returns into its band for a while (a saturated channel, a
-residual passing through zero within a period of the excitation) therefore keeps DD on; the price
-is that every alarm, false ones included, lasts ``hold`` seconds longer. ``hold = 0`` is plain
-hysteresis (off at the first second with every statistic at or below the clear level). A NaN
-statistic (a gap) brings no new evidence: the channel keeps its last value, which cannot switch
-DD on and counts for the hold as it stands. Like every online component it owns its state
-(`DecisionState`), with ``update`` for one second and ``run`` over a chunk through the same
-compiled kernel; `detection_decision` is ``run`` from a fresh state.
+exceeds the threshold; once on, off only on sustained in-control evidence: no statistic has
+exceeded the threshold for more than ``hold`` seconds *and* every channel's statistic is back at
+or below the clear level (an off-delay, as alarm management calls it). A persistent fault whose
+residual returns into its band for a while (a saturated channel, a residual passing through zero
+within a period of the excitation) but exceeds the threshold again within ``hold`` seconds
+therefore keeps DD on; the price is that every alarm, false ones included, lasts at least
+``hold`` seconds after its last exceedance, and alarms closer than that merge into one (a hold
+never adds an alarm). ``hold = 0`` is plain hysteresis (off at the first second with every
+statistic at or below the clear level). A NaN statistic (a gap) brings no new evidence: the
+channel keeps its last value, which cannot switch DD on; the seconds of a gap count for the hold.
+Like every online component it owns its state (`DecisionState`), with ``update`` for one second
+and ``run`` over a chunk through the same compiled kernel; `detection_decision` is ``run`` from a
+fresh state.
 
 Written by hand: a few lines of hysteresis that must run compiled, one sample at a time.
 """
@@ -32,10 +35,10 @@ from bayes_fdi.diagnosis.component_state import (
 
 __all__ = ["CLEAR_HOLD", "DecisionState", "DetectionDecision", "detection_decision"]
 
-#: Seconds of in-control evidence the online diagnoser's DD needs before it clears: one period
-#: of the slowest excitation of its training campaigns and of the benchmark (the control
-#: value's 0.01 Hz sine of the DAMADICS test generator). A fault that shows at some phase of
-#: every excitation cycle keeps DD on; see ``docs/online.md`` ("Detection").
+#: Seconds without a statistic above the threshold before the online diagnoser's DD may clear:
+#: one period of the slowest excitation of its training campaigns and of the benchmark (the
+#: control value's 0.01 Hz sine of the DAMADICS test generator), so a fault that exceeds the
+#: threshold at some phase of every excitation cycle keeps DD on; see ``docs/online.md``.
 CLEAR_HOLD = 100
 
 
@@ -44,13 +47,14 @@ class DecisionState(NamedTuple):
 
     on: np.ndarray  #: ``(1,)`` bool: DD after the last second
     held: np.ndarray  #: ``(n_channels,)`` the last finite statistic of each channel
-    quiet: np.ndarray  #: ``(1,)`` int64: seconds in a row, while on, with every channel clear
+    #: ``(1,)`` int64: seconds, while on, since a statistic last exceeded the threshold
+    quiet: np.ndarray
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
         """A saved state's fields in today's layout: a state saved before the hold (format
-        version 3 and older) had no ``quiet`` count; it is 0 (DD was on with a statistic above
-        the clear level, or off)."""
+        version 3 and older) had no ``quiet`` count; it is 0, as if a statistic had exceeded
+        the threshold in its last second (which hold 0, that of such files, never reads)."""
         return with_quiet_count(data)
 
 
@@ -72,23 +76,22 @@ def _decision_kernel(stats, threshold, clear, hold, state, dd):  # pragma: no co
         for j in range(c):
             if np.isfinite(stats[t, j]):
                 held[j] = stats[t, j]
+        exceeded = False
+        for j in range(c):
+            if np.isfinite(stats[t, j]) and stats[t, j] > threshold:
+                exceeded = True
         on = state.on[0]
         if on:
-            cleared = True
+            state.quiet[0] = 0 if exceeded else state.quiet[0] + 1
+            cleared = state.quiet[0] > hold
             for j in range(c):
                 if held[j] > clear:
                     cleared = False
             if cleared:
-                state.quiet[0] += 1
-                if state.quiet[0] > hold:
-                    on = False
-                    state.quiet[0] = 0
-            else:
-                state.quiet[0] = 0
-        else:
-            for j in range(c):
-                if np.isfinite(stats[t, j]) and stats[t, j] > threshold:
-                    on = True
+                on = False
+        elif exceeded:
+            on = True
+            state.quiet[0] = 0
         state.on[0] = on
         dd[t] = on
 
@@ -105,10 +108,10 @@ class DetectionDecision:
     """The detection decision DD with hysteresis and a hold from per-channel statistics.
 
     DD turns on at the first second where a channel's statistic exceeds ``threshold``. Once on,
-    it turns off at the first second that completes ``hold + 1`` consecutive seconds in which
-    every channel's last finite statistic is at or below ``clear``; a second with a statistic
-    above ``clear`` starts the count again. With ``hold = 0`` DD turns off at the first second
-    with every statistic at or below ``clear``.
+    it turns off at the first second at least ``hold + 1`` seconds after the last second with a
+    statistic above ``threshold`` where every channel's last finite statistic is at or below
+    ``clear``. With ``hold = 0`` DD turns off at the first second with every statistic at or
+    below ``clear``.
 
     Parameters
     ----------
@@ -119,9 +122,9 @@ class DetectionDecision:
     n_channels
         Number of statistics per second (default 2: X and F).
     hold
-        Seconds (a whole number >= 0) every statistic must have stayed at or below ``clear``
-        before DD turns off (default 0; the online diagnoser uses `CLEAR_HOLD`). Every alarm
-        lasts at least this much longer than with ``hold = 0``.
+        Seconds (a whole number >= 0) without a statistic above ``threshold`` before DD may
+        turn off (default 0; the online diagnoser uses `CLEAR_HOLD`). Every alarm lasts at
+        least this long after its last exceedance; alarms closer than that merge.
     """
 
     def __init__(

@@ -240,7 +240,10 @@ def training_signatures(components: Components, runs: Runs) -> Signatures:
 
     Every run but a fault-free one (``state`` ``"fn"``) goes through the stream of
     ``components`` from a fresh state; its signatures at `SIGNATURE_AGES` after each detection
-    that follows the fault's onset are kept (`detection_signatures`).
+    that follows the fault's onset are kept (`detection_signatures`). The stream's decision
+    here is plain hysteresis (the decision without its hold): with the hold, an alarm raised
+    before the onset could last into the fault and swallow its own detection, and the run
+    would count as undetected.
 
     Parameters
     ----------
@@ -251,7 +254,9 @@ def training_signatures(components: Components, runs: Runs) -> Signatures:
     """
     rows, labels, ages = [], [], []
     detected: dict[str, list[bool]] = {}
-    components = components._replace(isolator=None)
+    plain = components.decision
+    plain = DetectionDecision(plain.threshold, plain.clear, plain.n_channels, hold=0)
+    components = components._replace(isolator=None, decision=plain)
     for part in runs_as_list(runs):
         validate_dataset(part, require=CHANNELS, allow_nan=True)
         if "state" not in part.coords:
