@@ -1,4 +1,4 @@
-"""The detection decision DD: hysteresis over the sequential tests' statistics.
+"""The detection decision DD: hysteresis with a hold over the sequential tests' statistics.
 
 `DetectionDecision` turns the per-channel statistics of the sequential tests
 (`bayes_fdi.diagnosis.detection.detectors`) into the detection decision DD: on when a statistic
@@ -55,10 +55,10 @@ class DecisionState(NamedTuple):
         """A saved state's fields in today's layout: a state saved before the hold (format
         version 3 and older) had no ``quiet`` count; it is 0, as if a statistic had exceeded
         the threshold in its last second (which hold 0, that of such files, never reads)."""
-        return with_quiet_count(data)
+        return _with_quiet_count(data)
 
 
-def with_quiet_count(fields: dict) -> dict:
+def _with_quiet_count(fields: dict) -> dict:
     """A decision state's fields (by name, arrays with or without a leading run axis) with the
     ``quiet`` count 0 added where they lack it (states saved before the hold)."""
     if "quiet" in fields:
