@@ -23,7 +23,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.datasets import CHANNELS, state_order, validate_dataset
-from bayes_fdi.diagnosis.detection.decision import DetectionDecision
+from bayes_fdi.diagnosis.detection.decision import CLEAR_HOLD, DetectionDecision
 from bayes_fdi.diagnosis.detection.thresholds import fit_threshold
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener
 from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
@@ -77,7 +77,7 @@ class DetectionFit(NamedTuple):
     threshold: float
     clear_level: float
     threshold_report: dict[str, Any]  #: `fit_threshold`'s report
-    decision: DetectionDecision  #: DD with the threshold and the clear level
+    decision: DetectionDecision  #: DD with the threshold, the clear level and the hold
 
 
 class IsolationFit(NamedTuple):
@@ -199,6 +199,7 @@ def fit_detection(
     clear_level: float,
     false_alarm_hours: float,
     random_state: int | None,
+    clear_hold: int = CLEAR_HOLD,
 ) -> DetectionFit:
     """The detection components of `OnlineDiagnoser` (whose parameters the keywords are).
 
@@ -206,7 +207,10 @@ def fit_detection(
     ``(runs, time, 2)`` of the fault-free runs, and the threshold of ``detector`` (a CUSUM or
     GLR; its own threshold is not used) that meets the false-alarm budget on their innovations
     (`~bayes_fdi.diagnosis.detection.thresholds.fit_threshold`); the clear level is at most the
-    threshold.
+    threshold. The decision DD clears only after ``clear_hold`` seconds of in-control evidence
+    (`~bayes_fdi.diagnosis.detection.decision.CLEAR_HOLD` by default). The threshold is measured
+    with plain hysteresis: the hold lengthens alarms and merges those closer than it, never adds
+    one, so the budget holds with it too.
     """
     whiteners = {}
     innovations = [np.empty((oof_z.shape[1], 2)) for _ in range(oof_z.shape[0])]
@@ -227,7 +231,7 @@ def fit_detection(
         threshold,
         clear,
         report,
-        DetectionDecision(threshold, clear, n_channels=2),
+        DetectionDecision(threshold, clear, n_channels=2, hold=int(clear_hold)),
     )
 
 
@@ -236,7 +240,10 @@ def training_signatures(components: Components, runs: Runs) -> Signatures:
 
     Every run but a fault-free one (``state`` ``"fn"``) goes through the stream of
     ``components`` from a fresh state; its signatures at `SIGNATURE_AGES` after each detection
-    that follows the fault's onset are kept (`detection_signatures`).
+    that follows the fault's onset are kept (`detection_signatures`). The stream's decision
+    here is plain hysteresis (the decision without its hold): with the hold, an alarm raised
+    before the onset could last into the fault and swallow its own detection, and the run
+    would count as undetected.
 
     Parameters
     ----------
@@ -247,7 +254,9 @@ def training_signatures(components: Components, runs: Runs) -> Signatures:
     """
     rows, labels, ages = [], [], []
     detected: dict[str, list[bool]] = {}
-    components = components._replace(isolator=None)
+    plain = components.decision
+    plain = DetectionDecision(plain.threshold, plain.clear, plain.n_channels, hold=0)
+    components = components._replace(isolator=None, decision=plain)
     for part in runs_as_list(runs):
         validate_dataset(part, require=CHANNELS, allow_nan=True)
         if "state" not in part.coords:
