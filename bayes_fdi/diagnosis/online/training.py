@@ -278,10 +278,10 @@ def training_signatures(
     Every run but a fault-free one (``state`` ``"fn"``) goes through the stream of
     ``components`` from a fresh state; its signatures at `SIGNATURE_AGES` after each detection
     that follows the fault's onset are kept (`detection_signatures`), or with ``per_second``
-    those of its detected seconds after the onset (`detected_seconds`). The stream's decision
-    here is plain hysteresis (the decision without its hold): with the hold, an alarm raised
-    before the onset could last into the fault and swallow its own detection, and the run
-    would count as undetected.
+    those of its detected seconds after the onset (`detected_seconds`: the seconds the
+    diagnoser reports, under its decision with the hold). For the ages the decision is plain
+    hysteresis (without its hold): with the hold, an alarm raised before the onset could last
+    into the fault and swallow its own detection, and the run would count as undetected.
 
     Parameters
     ----------
@@ -295,9 +295,10 @@ def training_signatures(
     pick = detected_seconds if per_second else detection_signatures
     rows, labels, ages = [], [], []
     detected: dict[str, list[bool]] = {}
-    plain = components.decision
-    plain = DetectionDecision(plain.threshold, plain.clear, plain.n_channels, hold=0)
-    components = components._replace(isolator=None, decision=plain)
+    decision = components.decision
+    if not per_second:  # signatures at ages after each detection: plain hysteresis
+        decision = DetectionDecision(decision.threshold, decision.clear, decision.n_channels)
+    components = components._replace(isolator=None, decision=decision)
     for part in runs_as_list(runs):
         validate_dataset(part, require=CHANNELS, allow_nan=True)
         if "state" not in part.coords:
