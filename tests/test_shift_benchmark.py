@@ -115,6 +115,11 @@ def test_shift_run_writes_a_report_per_family_and_a_summary(double, tmp_path):
         r_fd = np.median([r["indices"]["r_fd"] for r in one["scenarios"]])
         assert entry["figures"]["r_fd_median"] == pytest.approx(r_fd)
         assert entry["figures"]["alarms"] == one["fault_free"]["alarms"]
+        always = np.mean([r["indices"]["r_fd"] == 1.0 for r in one["scenarios"]])
+        assert entry["figures"]["alarmed_before"] == pytest.approx(always)
+        assert entry["figures"]["dd_share"] == one["fault_free"]["r_fd"]
+        if always > 0:
+            assert f"{family.name} ({100 * always:.0f} %)" in summary
         assert entry["figures"] == pytest.approx(family_figures(one))
     # the indices are the double's on the family's runs, replayed independently
     inputs = ShiftInputs(families[0], [10_000], 1500)
