@@ -159,8 +159,6 @@ def chirp_inputs(
     m_lo, m_hi = _band(cv_mean, "cv_mean", who, 0.0, 1.0)
     a_lo, a_hi = _band(cv_amplitude, "cv_amplitude", who, 0.0, 0.5)
     p_lo, p_hi = _band(p1_amplitude, "p1_amplitude", who, 0.0, 1e6)
-    if f_lo <= 0.0:
-        raise ValueError(f"{who}: frequencies must be positive")
     if not (math.isfinite(p1_frequency) and 0.0 <= p1_frequency <= 0.5):
         raise ValueError(f"{who}: p1_frequency must lie in [0, 0.5] Hz, got {p1_frequency!r}")
     t = np.arange(duration, dtype=np.float64)
