@@ -119,7 +119,7 @@ def test_the_actuator_model_runs_on_every_family():
     [
         (lambda: telegraph_inputs(0, 10), "n_runs"),
         (lambda: telegraph_inputs(1, 10, cv_mean=(0.9, 0.95)), "cv_mean ± cv_amplitude"),
-        (lambda: chirp_inputs(1, 10, frequencies=(0.0, 0.1)), "frequencies must satisfy 1e-05 <= low"),
+        (lambda: chirp_inputs(1, 10, frequencies=(0.0, 0.1)), "frequencies must satisfy"),
         (lambda: chirp_inputs(1, 10, p1_frequency=0.7), "p1_frequency"),
         (lambda: flow_loop_inputs(1, 10, ti=(0.5, 2.0)), "ti must satisfy"),
         (lambda: flow_loop_inputs(1, 10, flow_noise=-1.0), "flow_noise"),
