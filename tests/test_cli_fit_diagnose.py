@@ -293,7 +293,8 @@ def test_fit_from_a_shipped_campaign(tmp_path, monkeypatch, capsys):
     assert model_files.load(out).n_fault_runs_ == 2
     assert main(["fit", "--campaign", "no-such-campaign", "--out", str(out)]) == 2
     shipped = ("shipped: damadics-benchmark, online-faults-abrupt, online-faults-incipient, "
-               "online-normal, paper-lublin, paper-simulated")  # fmt: skip
+               "online-normal, paper-lublin, paper-simulated, shift-chirp, shift-flow-loop, "
+               "shift-telegraph")  # fmt: skip
     assert shipped in capsys.readouterr().err
 
 

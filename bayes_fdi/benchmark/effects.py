@@ -6,10 +6,11 @@ effect stays below the noise cannot be detected by any method, which the report 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+import xarray as xr
 
 from bayes_fdi.actuator import NOISE_STD, benchmark_inputs, simulate
 from bayes_fdi.benchmark.scenarios import BenchmarkScenario
@@ -20,7 +21,10 @@ __all__ = ["MEASURED", "fault_effects"]
 MEASURED = ("X", "F", "P1", "P2", "T1")
 
 
-def fault_effects(scenarios: Sequence[BenchmarkScenario]) -> list[dict[str, Any]]:
+def fault_effects(
+    scenarios: Sequence[BenchmarkScenario],
+    inputs: Callable[[int], xr.Dataset] | None = None,
+) -> list[dict[str, Any]]:
     """The effect of each scenario's fault on the measured signals, against the sensor noise.
 
     Noise-free simulations with and without the fault (same inputs; clipped to the sensors'
@@ -31,6 +35,9 @@ def fault_effects(scenarios: Sequence[BenchmarkScenario]) -> list[dict[str, Any]
     noise-free signal with and without the fault (a matched filter) would see against white
     noise, an upper bound for any method using these signals; ``oracle_time`` is the first
     second after ``t_from`` at which its running value reaches 5 (``None`` if never).
+
+    ``inputs(duration)`` gives the one run of inputs (CV, P1, P2, T1) the faults are compared
+    under; default DGen's sines without variation (the benchmark's).
     """
     out: list[dict[str, Any]] = []
     by_horizon: dict[float, list[BenchmarkScenario]] = {}
@@ -38,8 +45,13 @@ def fault_effects(scenarios: Sequence[BenchmarkScenario]) -> list[dict[str, Any]
         by_horizon.setdefault(s.t_hor, []).append(s)
     for t_hor, group in by_horizon.items():
         duration = round(t_hor)
-        inputs = benchmark_inputs(n_runs=len(group) + 1, duration=duration, vary=False)
-        clean = simulate(inputs, [None] + [s.fault_spec() for s in group], noise=False)
+        if inputs is None:
+            drive = benchmark_inputs(n_runs=len(group) + 1, duration=duration, vary=False)
+        else:
+            one = inputs(duration)[["CV", "P1", "P2", "T1"]].isel(run=[0])
+            drive = xr.concat([one] * (len(group) + 1), dim="run")
+            drive = drive.assign_coords(run=np.arange(len(group) + 1))
+        clean = simulate(drive, [None] + [s.fault_spec() for s in group], noise=False)
         for r, s in enumerate(group, start=1):
             faulty = np.arange(duration) >= s.t_from
             e = (

@@ -26,7 +26,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -80,17 +80,27 @@ def _batches(scenarios, seeds, max_samples):
             yield list(grouped.values())
 
 
+#: Simulates one scenario with the given noise seeds (one run per seed, ``run`` = the seed).
+ScenarioSimulator = Callable[[BenchmarkScenario, Sequence[int]], xr.Dataset]
+
+
 class _Simulations:
     """Each scenario simulated once with all its seeds, kept until its last run is taken."""
 
-    def __init__(self, scenarios: Sequence[BenchmarkScenario], seeds: Sequence[int]) -> None:
+    def __init__(
+        self,
+        scenarios: Sequence[BenchmarkScenario],
+        seeds: Sequence[int],
+        simulator: ScenarioSimulator = simulate_scenario,
+    ) -> None:
+        self.simulator = simulator
         self.seeds = list(seeds)
         self.left = {s.name: len(self.seeds) for s in scenarios}
         self.cache: dict[str, xr.Dataset] = {}
 
     def take(self, scenario: BenchmarkScenario, seeds: Sequence[int]) -> xr.Dataset:
         if scenario.name not in self.cache:
-            self.cache[scenario.name] = simulate_scenario(scenario, self.seeds)
+            self.cache[scenario.name] = self.simulator(scenario, self.seeds)
         runs = self.cache[scenario.name].sel(run=list(seeds))
         self.left[scenario.name] -= len(seeds)
         if self.left[scenario.name] == 0:
@@ -98,8 +108,8 @@ class _Simulations:
         return runs
 
 
-def _fault_free(diagnoser: Any, hours: float) -> dict[str, Any]:
-    ds = fault_free_hours(hours)
+def _fault_free(diagnoser: Any, hours: float, simulate_hours: Callable) -> dict[str, Any]:
+    ds = simulate_hours(hours)
     stream = diagnoser.run(_strip_truth(ds)).isel(run=0)
     counted = stream["time"].values >= ds.attrs["warmup"]
     dd = decision_high(stream["DD"].values)[counted]
@@ -150,6 +160,9 @@ def run_benchmark(
     max_batch_samples: int = MAX_BATCH_SAMPLES,
     progress: bool = True,
     settings: Mapping[str, Any] | None = None,
+    simulator: ScenarioSimulator = simulate_scenario,
+    fault_free: Callable[[float], xr.Dataset] = fault_free_hours,
+    effects_inputs: Callable[[int], xr.Dataset] | None = None,
 ) -> dict[str, Any]:
     """Run the benchmark with a fitted online diagnoser and write the results into ``out``.
 
@@ -179,6 +192,14 @@ def run_benchmark(
         Progress bar on stderr.
     settings
         Extra provenance stored under ``"settings"`` (e.g. how the diagnoser was trained).
+    simulator, fault_free, effects_inputs
+        Where the runs come from: ``simulator(scenario, seeds)`` simulates a scenario (default
+        :func:`~bayes_fdi.benchmark.scenarios.simulate_scenario`, DGen's inputs),
+        ``fault_free(hours)`` the fault-free run with its ``warmup`` and ``hours`` attributes
+        (default :func:`~bayes_fdi.benchmark.scenarios.fault_free_hours`) and
+        ``effects_inputs(duration)`` one run of the inputs the fault effects are measured under
+        (default DGen's); the shift benchmark (`bayes_fdi.benchmark.shift`) passes its
+        excitation families'.
 
     Returns
     -------
@@ -198,14 +219,15 @@ def run_benchmark(
     out = Path(out)
     (out / "timelines").mkdir(parents=True, exist_ok=True)
     col = RunCollector(seed=0)
+    simulations = _Simulations(scenarios, seeds, simulator)
     runs = _run_scenarios(
-        diagnoser, scenarios, seeds, col, out, figures, max_batch_samples, progress
+        diagnoser, simulations, scenarios, seeds, col, out, figures, max_batch_samples, progress
     )
     c0 = time.process_time()
     results: dict[str, Any] = {
         "scenarios": col.rows,
         "real_hour": _real_hour(diagnoser) if real_hour else None,
-        "fault_free": _fault_free(diagnoser, hours),
+        "fault_free": _fault_free(diagnoser, hours, fault_free),
     }
     extra_cpu = time.process_time() - c0
     results["calibration"] = group_calibration(
@@ -217,7 +239,7 @@ def run_benchmark(
         "share": col.confident_wrong / max(col.faulty_seconds, 1),
     }
     results["model_std"] = {c: float(np.median(v)) if v else None for c, v in col.model_std.items()}
-    results["effects"] = fault_effects(scenarios)
+    results["effects"] = fault_effects(scenarios, inputs=effects_inputs)
     results["scenario_table"] = [_scenario_row(s) for s in scenarios]
     results["figures"] = runs.figures
     results["groups"] = json.loads(col.attrs.get("groups") or "{}")
@@ -257,6 +279,7 @@ class _ScenarioRuns(NamedTuple):
 
 def _run_scenarios(
     diagnoser: Any,
+    simulations: _Simulations,
     scenarios: Sequence[BenchmarkScenario],
     seeds: Sequence[int],
     col: RunCollector,
@@ -276,7 +299,6 @@ def _run_scenarios(
 
         bar = progress_bar(len(scenarios) * len(seeds), "benchmark", unit="run")
     figures_written: dict[str, str] = {}
-    simulations = _Simulations(scenarios, seeds)
     try:
         for batch in batches:
             c0 = time.process_time()
@@ -348,17 +370,23 @@ def run_from_cli(args: argparse.Namespace) -> int:
 
     Fit the online diagnoser on its training campaigns, run the benchmark, write the report
     (with ``--commissioning``: the commissioning benchmark,
-    `bayes_fdi.benchmark.commissioning.run_from_cli`)."""
+    `bayes_fdi.benchmark.commissioning.run_from_cli`; with ``--shift``: the shift benchmark,
+    `bayes_fdi.benchmark.shift.run_from_cli`)."""
+    from bayes_fdi.cli_arguments import UsageError
     from bayes_fdi.default_diagnoser import fit_online_diagnoser
 
+    if args.commissioning and getattr(args, "shift", False):
+        raise UsageError("--shift and --commissioning are two benchmarks: run one at a time")
     if args.commissioning:
         from bayes_fdi.benchmark import commissioning
 
         return commissioning.run_from_cli(args)
     if args.plants is not None:
-        from bayes_fdi.cli_arguments import UsageError
-
         raise UsageError("--plants belongs to --commissioning")
+    if getattr(args, "shift", False):
+        from bayes_fdi.benchmark import shift
+
+        return shift.run_from_cli(args)
 
     n_seeds = args.seeds if args.seeds is not None else (2 if args.small else 10)
     t0 = time.perf_counter()

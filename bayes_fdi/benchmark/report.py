@@ -31,7 +31,8 @@ from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import format_number, markdown_table, to_jsonable
 from bayes_fdi.scoring.picalc import PICALC_KEYS
 
-__all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "render_report", "summarise", "write_report"]
+__all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "render_report", "summarise", "target_rows",
+           "write_report"]  # fmt: skip
 
 #: Matched-filter separation (in noise standard deviations) below which no method can detect a
 #: fault: an ideal detector that knows the exact noise-free signals with and without the fault
@@ -169,7 +170,8 @@ def _detected_all(entry: Mapping[str, Any]) -> bool:
     return entry["t_dt"]["determined"] == entry["n"]
 
 
-def _targets(results: Mapping[str, Any], summary: Mapping[str, Any]) -> list[list[str]]:
+def target_rows(results: Mapping[str, Any], summary: Mapping[str, Any]) -> list[list[str]]:
+    """The targets table: rows (target, measured, met: "yes", "**no**" or "–" not judged)."""
     rows: list[list[str]] = []
 
     def add(target: str, measured: str, met: bool | None) -> None:
@@ -391,12 +393,15 @@ def _num(v: Any, fmt: str = ".3f") -> str:
 def render_report(results: Mapping[str, Any]) -> str:
     """The Markdown report of a benchmark run."""
     summary = summarise(results)
-    targets = _targets(results, summary)
+    targets = target_rows(results, summary)
     blind = [
         e["scenario"] for e in results.get("effects", []) if e["deflection"] < DETECTABLE_DEFLECTION
     ]
     s, timing = results["settings"], results["timing"]
     lines = ["# DAMADICS benchmark (Step I) of the online diagnoser", ""]
+    if s.get("excitation"):  # a shift family's run (bayes_fdi.benchmark.shift)
+        lines += [f"> Inputs: shift family **{s['excitation']['name']}**, not DGen's sines: "
+                  f"{s['excitation']['description']}", ""]  # fmt: skip
     if not s.get("full_benchmark"):
         lines += [
             "> **Not the benchmark's numbers**: a reduced run (fewer scenarios or horizons "

@@ -1,7 +1,9 @@
-"""``bayes-fdi benchmark``: options of the DAMADICS benchmark and of the commissioning benchmark.
+"""``bayes-fdi benchmark``: options of the DAMADICS benchmark, of the commissioning benchmark and
+of the shift benchmark.
 
-The work is `bayes_fdi.benchmark.harness.run_from_cli` (and, with ``--commissioning``,
-`bayes_fdi.benchmark.commissioning.run_from_cli`); it is imported when the command runs.
+The work is `bayes_fdi.benchmark.harness.run_from_cli` (with ``--commissioning``,
+`bayes_fdi.benchmark.commissioning.run_from_cli`; with ``--shift``,
+`bayes_fdi.benchmark.shift.run_from_cli`); it is imported when the command runs.
 """
 
 from __future__ import annotations
@@ -39,6 +41,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="the commissioning benchmark instead: the real hour (commissioned on its first "
         "half, faults transplanted onto the second) and perturbed plants (commissioned on 1 h, "
         "then the 44 scenarios), the default model beside",
+    )
+    parser.add_argument(
+        "--shift",
+        action="store_true",
+        help="the shift benchmark instead: the 44 scenarios and the fault-free hours under each "
+        "excitation family of sim/shift-*.toml (inputs no training campaign uses), one report "
+        "per family and a summary",
     )
     parser.add_argument(
         "--plants",
