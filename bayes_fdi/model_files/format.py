@@ -109,9 +109,10 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
+#: 4: the online diagnoser's input envelope checks the inputs' rates (its state holds them);
 #: 3: the online diagnoser's components own their states; 2: classes named by their stable
 #: registered names; 1 (bayes_fdi 0.1.0): classes named by ``module:QualName``.
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.
