@@ -2,7 +2,8 @@
 
 :func:`load_campaign` reads a campaign file and :func:`parse_campaign` validates the parsed
 table, one function per table of the file (``[campaign]``, ``[inputs]``, ``[faults]``,
-``[[scenarios]]``), into the immutable `~bayes_fdi.campaigns.spec.Campaign`.
+``[[scenarios]]``; ``[excitation]`` in `bayes_fdi.campaigns.excitation`), into the immutable
+`~bayes_fdi.campaigns.spec.Campaign`.
 
 The schema (also in ``docs/data.md``):
 
@@ -13,6 +14,7 @@ description = "..."            # optional free text
 seed = 2026                    # required int >= 0; ``simulate_campaign(seed=)`` overrides it
 duration = 350                 # required int > 0: seconds per run (1 Hz samples)
 source = "benchmark-inputs"    # "benchmark-inputs" (DGen sines) | "lublin-example" (real hour)
+                               # | "excitation" (an excitation family: [excitation] below)
 runs_per_state = 190           # int > 0 (state mode; omit when [[scenarios]] are given)
 states = "all"                 # "all" (fn, f1..f19) or a list such as ["fn", "f1", "f17"]
 batch_size = 64                # runs simulated together (memory/speed only; the result does
@@ -22,6 +24,10 @@ batch_size = 64                # runs simulated together (memory/speed only; the
 vary = true                    # benchmark-inputs: per-run sine phases U[0, 2 pi) and
                                # amplitude factors U[0.8, 1.2] (actuator.benchmark_inputs)
 window = "random"              # lublin-example: "random" | "even" offsets of 350 s windows
+
+[excitation]                   # source = "excitation" only: the family and its parameters
+family = "step-ramp"           # (bayes_fdi.campaigns.excitation; docs/data.md lists them)
+hold_seconds = [20.0, 300.0]
 
 [faults]                       # defaults for every fault (state mode)
 strength = [0.5, 1.0]          # magnitude range, drawn uniformly per run; 0 < low <= high <= 1
@@ -187,13 +193,14 @@ def parse_campaign(table: Mapping[str, Any], *, path: str | None = None) -> Camp
         (a ``ValueError``) naming the offending key.
     """
     table = _table(table, "campaign file")
-    _unknown(table, {"campaign", "inputs", "faults", "scenarios"}, "")
+    _unknown(table, {"campaign", "inputs", "faults", "scenarios", "excitation"}, "")
     if "campaign" not in table:
         raise _fail("campaign", "is missing (a [campaign] table is required)")
     c = _table(table["campaign"], "campaign")
     header = _campaign_header(c)
     duration, source = header["duration"], header["source"]
     inputs = _inputs(table.get("inputs", {}), source)
+    excitation = _excitation(table, source)
     faults = _faults(table.get("faults", {}), duration)
     scenarios = _scenarios(table.get("scenarios", []), duration)
     states, runs_per_state = _states(c, scenarios)
@@ -209,6 +216,7 @@ def parse_campaign(table: Mapping[str, Any], *, path: str | None = None) -> Camp
         faults=MappingProxyType(faults),
         scenarios=tuple(scenarios),
         description=header["description"],
+        excitation=_freeze(excitation),
         raw=_freeze(table),
         path=path,
     )
@@ -256,6 +264,11 @@ def _campaign_header(c: dict) -> dict[str, Any]:
 def _inputs(value: Any, source: str) -> dict:
     """The ``[inputs]`` table of ``source``, validated, with its defaults filled in."""
     inputs = _table(value, "inputs")
+    if source == "excitation":
+        if inputs:
+            raise _fail(f"inputs.{sorted(inputs)[0]}", "is not used with source 'excitation' "
+                        "(the [excitation] table sets the inputs)")  # fmt: skip
+        return inputs
     _unknown(inputs, _INPUT_KEYS[source], "inputs")
     if source == "benchmark-inputs":
         vary = inputs.setdefault("vary", True)
@@ -266,6 +279,19 @@ def _inputs(value: Any, source: str) -> dict:
         if window not in WINDOWS:
             raise _fail("inputs.window", f"must be 'random' or 'even', got {window!r}")
     return inputs
+
+
+def _excitation(table: Mapping[str, Any], source: str) -> dict[str, Any]:
+    """The ``[excitation]`` table: required with ``source = "excitation"``, refused otherwise."""
+    if source != "excitation":
+        if "excitation" in table:
+            raise _fail("excitation", "is only for campaign.source = 'excitation'")
+        return {}
+    if "excitation" not in table:
+        raise _fail("excitation", "is missing (source 'excitation' needs an [excitation] table)")
+    from bayes_fdi.campaigns.excitation import parse_excitation
+
+    return parse_excitation(table["excitation"])
 
 
 def _faults(value: Any, duration: int) -> dict[str, FaultSpec]:

@@ -103,7 +103,7 @@ def _simulate_batch(task: tuple) -> Any:
     from bayes_fdi.actuator import inject_faults, simulate
 
     source, batch, faults, noise_seed = task
-    if source == "benchmark-inputs":
+    if source in ("benchmark-inputs", "excitation"):
         return simulate(batch, faults, seed=noise_seed)
     return inject_faults(batch, faults, seed=noise_seed)
 
@@ -123,9 +123,9 @@ def simulate_campaign(
     campaign
         A :class:`Campaign` or the path of a campaign TOML file.
     seed
-        Overrides the campaign's seed. Fault strengths, input variation, measurement noise and
-        Lublin windows are drawn from independent streams of this seed, per run, so the result
-        does not depend on ``batch_size``.
+        Overrides the campaign's seed. Fault strengths, input variation (or the excitation's
+        draws), measurement noise and Lublin windows are drawn from independent streams of this
+        seed, per run, so the result does not depend on ``batch_size``.
     progress
         Show a progress bar (on stderr).
     workers, scheduler
@@ -156,9 +156,15 @@ def simulate_campaign(
     n, duration = campaign.n_runs, campaign.duration
     labels = {"state": specs.state, "strength": specs.strength, "onset": specs.onset,
               "profile": specs.profile, "ramp": specs.ramp}  # fmt: skip
+    extra_coords: dict[str, Any] = {}
     if campaign.source == "benchmark-inputs":
         drive = benchmark_inputs(n, duration, seed=inputs_seed, vary=bool(campaign.inputs["vary"]))
-        extra_coords = {}
+    elif campaign.source == "excitation":
+        from bayes_fdi.campaigns.excitation import excitation_inputs
+
+        drive = excitation_inputs(campaign.excitation, n, duration, seed=inputs_seed)
+        # a loop's own signals (the tank level of level-loop) are not channels of the actuator
+        drive = drive.drop_vars([c for c in drive.coords if drive[c].dims == ("run", "time")])
     else:
         from bayes_fdi.datasets.lublin import load_lublin_example
 

@@ -34,7 +34,7 @@ __all__ = [
 
 STATES: tuple[str, ...] = ("fn", *(f"f{i}" for i in range(1, 20)))
 FAULTS: tuple[str, ...] = STATES[1:]
-SOURCES: tuple[str, ...] = ("benchmark-inputs", "lublin-example")
+SOURCES: tuple[str, ...] = ("benchmark-inputs", "lublin-example", "excitation")
 PROFILES: tuple[str, ...] = ("abrupt", "incipient")
 WINDOWS: tuple[str, ...] = ("random", "even")
 #: Faults whose strength may be negative in the benchmark (fault vector in [-1, 1]).
@@ -89,7 +89,8 @@ class Campaign:
 
     Attributes mirror the TOML schema of `bayes_fdi.campaigns.parsing`. ``faults`` maps every
     fault ``f1..f19`` to its resolved :class:`FaultSpec` (defaults merged with overrides);
-    ``scenarios`` is empty in state mode. ``raw`` is the validated TOML table (for provenance and
+    ``scenarios`` is empty in state mode; ``excitation`` is empty unless ``source``
+    is ``"excitation"``. ``raw`` is the validated TOML table (for provenance and
     :meth:`replace`); ``path`` the file it came from, if any.
     """
 
@@ -104,6 +105,9 @@ class Campaign:
     faults: Mapping[str, FaultSpec]
     scenarios: tuple[Scenario, ...]
     description: str = ""
+    #: ``source = "excitation"``: the parsed ``[excitation]`` table
+    #: (`bayes_fdi.campaigns.excitation.parse_excitation`); empty otherwise
+    excitation: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     raw: Mapping[str, Any] = dataclasses.field(default_factory=dict, repr=False, compare=False)
     path: str | None = None
 
