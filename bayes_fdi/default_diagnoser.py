@@ -1,12 +1,17 @@
 """The training campaigns of the online diagnoser and `fit_online_diagnoser`.
 
 The online diagnoser (`bayes_fdi.diagnosis.OnlineDiagnoser`) is fitted on simulated campaigns
-declared in ``sim/``:
+declared in ``sim/``, each set spanning excitation families and operating points so that the
+normal models learn the valve rather than one excitation:
 
-- ``online-normal.toml``: fault-free runs (normal models, whitening, detector threshold);
-- ``online-faults-abrupt.toml`` and ``online-faults-incipient.toml``: every fault at
-  magnitudes from 0.1 to 1.0, abrupt and ramping, each simulated with three seeds for the
-  training, validation (isolability groups) and calibration (group probabilities) sets.
+- ``online-normal*.toml``: fault-free runs (normal models, whitening, detector threshold, input
+  envelope) under the DGen sines and under three excitation families of
+  `bayes_fdi.actuator.excitation` (sums of sines, steps and ramps, a PI level loop) over the
+  DABLib operating ranges of P1, P2, T1;
+- ``online-faults-abrupt*.toml`` and ``online-faults-incipient*.toml``: every fault at
+  magnitudes from 0.1 to 1.0, abrupt and ramping, under the same excitations, each simulated
+  with three seeds for the training, validation (isolability groups) and calibration (group
+  probabilities) sets.
 
 Every seed is below 1000, apart from the benchmark's evaluation seeds (>= 10 000, see
 ``bayes_fdi.benchmark.scenarios``). The group probabilities are recalibrated with a
@@ -29,60 +34,71 @@ from bayes_fdi.campaigns.spec import Campaign
 
 __all__ = [
     "CAMPAIGNS",
-    "SEED_OFFSETS",
+    "SET_SEED_OFFSETS",
     "fit_online_diagnoser",
     "online_campaigns",
     "simulate_online_campaigns",
 ]
 
-#: The campaign files (names in ``sim/``).
-CAMPAIGNS: dict[str, str] = {
-    "normal": "online-normal",
-    "abrupt": "online-faults-abrupt",
-    "incipient": "online-faults-incipient",
-}
-#: Campaign seed of each set (plus the ``seed`` argument): all below 1000.
-SEED_OFFSETS: dict[str, dict[str, int]] = {
-    "normal": {"normal": 101},
-    "abrupt": {"train": 201, "validation": 301, "calibration": 401},
-    "incipient": {"train": 251, "validation": 351, "calibration": 451},
-}
-#: Overrides of the quick version (``small=True``).
+#: The campaign files (names in ``sim/``) of each training set: the DGen sines first, then the
+#: excitation families.
+CAMPAIGNS: dict[str, tuple[str, ...]] = {
+    "normal": ("online-normal", "online-normal-sine-sum", "online-normal-step-ramp",
+               "online-normal-level-loop"),
+    "abrupt": ("online-faults-abrupt", "online-faults-abrupt-sine-sum",
+               "online-faults-abrupt-step-ramp", "online-faults-abrupt-level-loop"),
+    "incipient": ("online-faults-incipient", "online-faults-incipient-sine-sum",
+                  "online-faults-incipient-level-loop"),
+}  # fmt: skip
+#: The parts each fault campaign is simulated for, and what they add to the file's seed (plus
+#: the ``seed`` argument): every seed stays below 1000.
+SET_SEED_OFFSETS: dict[str, int] = {"train": 0, "validation": 100, "calibration": 200}
+#: Overrides of the quick version (``small=True``), per set, applied to each of its files.
 SMALL: dict[str, dict[str, Any]] = {
-    "normal": {"runs_per_state": 8, "duration": 600},
-    "abrupt": {"runs_per_state": 3, "duration": 400, "faults.onset": 100.0},
+    "normal": {"runs_per_state": 2, "duration": 600},
+    "abrupt": {"runs_per_state": 1, "duration": 400, "faults.onset": 100.0},
     "incipient": {"runs_per_state": 1, "duration": 600, "faults.onset": 100.0,
                   "faults.ramp": 300.0},
 }  # fmt: skip
-#: Largest ``seed``: keeps every campaign seed below 1000.
-MAX_SEED = 1000 - max(v for d in SEED_OFFSETS.values() for v in d.values())
+#: Largest campaign seed of a file in ``sim/`` plus the largest set offset is below this.
+_SEED_CEILING = 1000
 
 
-def online_campaigns(*, small: bool = False) -> dict[str, Campaign]:
-    """The three campaigns (``small``: the quick version)."""
+def online_campaigns(*, small: bool = False) -> dict[str, tuple[Campaign, ...]]:
+    """The campaigns of each set (``small``: the quick version)."""
     from bayes_fdi.campaigns.cache import campaign_file
 
     out = {}
-    for key, name in CAMPAIGNS.items():
+    for key, names in CAMPAIGNS.items():
         overrides = SMALL[key] if small else {}
-        out[key] = load_campaign(campaign_file(name), **overrides)
+        out[key] = tuple(load_campaign(campaign_file(name), **overrides) for name in names)
     return out
+
+
+def _max_seed(campaigns: dict[str, tuple[Campaign, ...]]) -> int:
+    """The largest ``seed`` argument that keeps every campaign seed below 1000."""
+    top = max(c.seed for cs in campaigns.values() for c in cs) + max(SET_SEED_OFFSETS.values())
+    return _SEED_CEILING - top
 
 
 def simulate_online_campaigns(
     *, seed: int = 0, small: bool = False, progress: bool = True
 ) -> dict[str, list[xr.Dataset]]:
     """Simulate the training data: ``{"normal": [...], "train": [...], "validation": [...],
-    "calibration": [...]}`` (lists of datasets, one per campaign)."""
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < MAX_SEED:
-        raise ValueError(f"seed must be an integer in [0, {MAX_SEED}), got {seed!r}")
+    "calibration": [...]}`` (lists of datasets, one per campaign file)."""
     campaigns = online_campaigns(small=small)
+    max_seed = _max_seed(campaigns)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < max_seed:
+        raise ValueError(f"seed must be an integer in [0, {max_seed}), got {seed!r}")
     out: dict[str, list[xr.Dataset]] = {"normal": [], "train": [], "validation": [],
                                         "calibration": []}  # fmt: skip
-    for key, campaign in campaigns.items():
-        for part, offset in SEED_OFFSETS[key].items():
-            ds = simulate_campaign(campaign, seed=offset + seed, progress=progress)
-            out[part].append(ds)
+    for key, files in campaigns.items():
+        parts = {"normal": 0} if key == "normal" else SET_SEED_OFFSETS
+        for campaign in files:
+            for part, offset in parts.items():
+                ds = simulate_campaign(campaign, seed=campaign.seed + offset + seed,
+                                       progress=progress)  # fmt: skip
+                out[part].append(ds)
     return out
 
 
@@ -94,7 +110,8 @@ def fit_online_diagnoser(
     Parameters
     ----------
     seed
-        Added to every campaign seed (all stay below 1000).
+        Added to every campaign seed (all must stay below 1000: a ``ValueError`` says the
+        largest allowed).
     small
         The quick version (tests, notebooks, ``make demo``).
     progress
@@ -126,7 +143,7 @@ def fit_online_diagnoser(
             DynamicNormalModels(max_train_samples=800, calibration_folds=3, random_state=seed),
         )
     diag = OnlineDiagnoser(**params).fit(
-        data["normal"][0] if len(data["normal"]) == 1 else xr.concat(data["normal"], "run"),
+        data["normal"],
         data["train"],
         validation_runs=data["validation"],
         calibration_runs=data["calibration"],
