@@ -1,8 +1,8 @@
 """The default diagnoser's training campaigns (`sim/online-*.toml`, `bayes_fdi.default_diagnoser`).
 
-Each training set spans the DGen sines and the three training excitation families over the
-DABLib operating ranges, never a family of the shift benchmark, with seeds below 1000 that no two
-simulations share.
+The default training is the DGen sines; the training "excitation-mix" spans the DGen sines and
+the three training excitation families over the DABLib operating ranges, never a family of the
+shift benchmark. Seeds are below 1000 and no two simulations share one.
 """
 
 from __future__ import annotations
@@ -14,9 +14,12 @@ from bayes_fdi.campaigns.simulation import simulate_campaign
 from bayes_fdi.default_diagnoser import (
     CAMPAIGNS,
     SET_SEED_OFFSETS,
+    TRAININGS,
     online_campaigns,
     simulate_online_campaigns,
 )
+
+MIX = "excitation-mix"
 
 TRAINING_FAMILIES = {"sine-sum", "step-ramp", "level-loop"}
 SHIFT_FAMILIES = {"telegraph", "chirp", "flow-loop"}
@@ -27,8 +30,8 @@ def _family(campaign) -> str:
 
 
 @pytest.mark.parametrize("small", [False, True])
-def test_every_set_spans_dgen_and_the_training_families(small):
-    campaigns = online_campaigns(small=small)
+def test_every_set_of_the_mix_spans_dgen_and_the_training_families(small):
+    campaigns = online_campaigns(small=small, training=MIX)
     assert set(campaigns) == {"normal", "abrupt", "incipient"}
     for key, files in campaigns.items():
         families = [_family(c) for c in files]
@@ -51,8 +54,19 @@ def test_every_set_spans_dgen_and_the_training_families(small):
         assert 0.3 < dgen / (48 * 900) < 0.5
 
 
-def test_the_seeds_are_below_1000_and_distinct():
+def test_the_default_training_is_the_dgen_sines_as_declared():
     campaigns = online_campaigns()
+    assert {k: tuple(c.name for c in v) for k, v in campaigns.items()} == CAMPAIGNS
+    assert [(c.n_runs, c.duration) for cs in campaigns.values() for c in cs] == [
+        (48, 900),
+        (190, 600),
+        (76, 900),
+    ]
+    assert all(c.source == "benchmark-inputs" for cs in campaigns.values() for c in cs)
+
+
+def test_the_seeds_are_below_1000_and_distinct():
+    campaigns = online_campaigns(training=MIX)
     seeds = []
     for key, files in campaigns.items():
         offsets = [0] if key == "normal" else SET_SEED_OFFSETS.values()
@@ -60,14 +74,15 @@ def test_the_seeds_are_below_1000_and_distinct():
     assert len(set(seeds)) == len(seeds) == 4 + 3 * (4 + 3)
     assert max(seeds) < 1000 and min(seeds) >= 0
     assert [c.name for cs in campaigns.values() for c in cs] == [
-        n for names in CAMPAIGNS.values() for n in names
+        name for files in TRAININGS[MIX].values() for name, _ in files
     ]
 
 
 def test_a_training_family_campaign_simulates_its_generator_inputs():
     from bayes_fdi.actuator.excitation import step_ramp_inputs
 
-    (campaign,) = [c for c in online_campaigns(small=True)["normal"] if _family(c) == "step-ramp"]
+    normal = online_campaigns(small=True, training=MIX)["normal"]
+    (campaign,) = [c for c in normal if _family(c) == "step-ramp"]
     ds = simulate_campaign(campaign, seed=campaign.seed, progress=False)
     seed = ds.attrs["inputs_seed"]
     inputs = step_ramp_inputs(campaign.n_runs, campaign.duration, seed=seed)
@@ -75,6 +90,10 @@ def test_a_training_family_campaign_simulates_its_generator_inputs():
     assert (ds["P1"].values > ds["P2"].values).all()
 
 
-def test_a_seed_beyond_the_last_allowed_is_refused_by_name():
+def test_a_seed_beyond_the_last_allowed_or_an_unknown_training_is_refused_by_name():
     with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 529\)"):
-        simulate_online_campaigns(seed=529, small=True, progress=False)
+        simulate_online_campaigns(seed=529, small=True, progress=False, training=MIX)
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 549\)"):
+        simulate_online_campaigns(seed=549, small=True, progress=False)
+    with pytest.raises(ValueError, match="training must be one of dgen, excitation-mix"):
+        online_campaigns(training="chirp")

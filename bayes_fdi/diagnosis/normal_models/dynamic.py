@@ -25,8 +25,8 @@ better):
 Both are RBF `~bayes_fdi.rvm.RVR` models whose widths maximise the evidence over a grid;
 the predictions are clipped to the sensors' range [0, 1]. The predictive standard deviations
 are calibrated by cross-fitting (fault-free runs split by run, or by time block when there are
-fewer runs than folds): per bin of the command speed ``|CV(t) - CV(t-1)|`` (causal), a factor
-that makes the 90 % interval cover 90 % of the out-of-fold residuals (``std_coverage``).
+fewer runs than folds): one factor per bin of the command speed ``|CV(t) - CV(t-1)|`` (causal),
+by maximum likelihood or by coverage of the out-of-fold residuals (``std_coverage``).
 
 **Rails.** The sensors clip at 0 and 1, and F' sits at its upper rail for much of a benchmark
 run. A measurement at a rail whose prediction is at the same rail carries no information about a
@@ -121,9 +121,9 @@ class DynamicNormalModels(BaseEstimator):
     calibration_bins
         Bins of the command speed ``|CV(t) - CV(t-1)|`` with their own std factor.
     std_coverage
-        Each bin's std factor makes the central interval of level ``q`` (default 0.9) cover a
-        share ``q`` of the out-of-fold ``z`` (robust to their heavy tail, e.g. after a command
-        step); None: maximum likelihood, ``sqrt(mean(z^2))``.
+        None (default): each bin's std factor by maximum likelihood, ``sqrt(mean(z^2))`` of the
+        out-of-fold ``z``; a level ``q``: the central interval of level ``q`` covers a share ``q``
+        of them (robust to a heavy tail, e.g. the seconds after command steps).
     random_state
         Seed of the subsets and folds.
 
@@ -160,7 +160,7 @@ class DynamicNormalModels(BaseEstimator):
         max_train_samples: int = 2000,
         calibration_folds: int = 4,
         calibration_bins: int = 5,
-        std_coverage: float | None = 0.9,
+        std_coverage: float | None = None,
         random_state: int | None = 0,
     ) -> None:
         self.n_differences = n_differences
