@@ -70,6 +70,7 @@ __all__ = [
     "format_table",
     "main",
     "make_data",
+    "measure_floor",
     "rbf_kernel_sigma",
     "render_saved",
     "replace_marked_block",
@@ -511,8 +512,10 @@ def add_ratios(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     test RMSE / the lowest test RMSE among successful peers; ``rmse_f_ratio`` likewise for the
     RMSE against the noise-free function; ``evidence_gap`` = log evidence - the largest peer
     log evidence (exact or reported, see :func:`_best_evidence`). ``best_peer_time`` and
-    ``best_peer_rmse`` name the peers. Ratios are ``None`` where the row or every peer at that
-    N failed.
+    ``best_peer_rmse`` name the peers. ``fastrvm_ratio`` = fit CPU seconds / fastrvm's at the
+    same N (same run); ``floor_ratio`` = fit CPU seconds / the row's ``floor_s``, the float64
+    floor of ``benchmarks/rvm_floor.py`` (``--floor``), where measured. Ratios are ``None``
+    where the row or every peer at that N failed.
     """
     out = [dict(r) for r in rows]
     for r in out:
@@ -525,9 +528,14 @@ def add_ratios(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
             and METHODS[p["method"]].env == "peers"
         ]
         r["time_ratio"] = r["rmse_ratio"] = r["rmse_f_ratio"] = r["evidence_gap"] = None
-        r["best_peer_time"] = r["best_peer_rmse"] = None
+        r["best_peer_time"] = r["best_peer_rmse"] = r["fastrvm_ratio"] = r["floor_ratio"] = None
+        if r.get("status") == "ok" and r.get("floor_s"):
+            r["floor_ratio"] = r["fit_cpu_s"] / r["floor_s"]
         if not peers or r.get("status") != "ok":
             continue
+        fastrvm = [p for p in peers if p["method"] == "fastrvm"]
+        if fastrvm:
+            r["fastrvm_ratio"] = r["fit_cpu_s"] / fastrvm[0]["fit_cpu_s"]
         evidences = [_best_evidence(p) for p in peers if _best_evidence(p) is not None]
         if evidences and r.get("log_evidence") is not None:
             r["evidence_gap"] = r["log_evidence"] - max(evidences)
@@ -638,27 +646,30 @@ def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
 
     Columns: N, method, fit CPU s, fit wall s, peak MB, n RV, test RMSE, RMSE vs f (noise-free),
     log evidence (exact, of the returned hyperparameters; with the method's own value where it
-    differs), time ratio and RMSE ratio to the best peer. Failed or skipped fits show their
+    differs), time ratio and RMSE ratio to the best peer, time ratio to fastrvm and to the
+    float64 floor (``--floor``). Failed or skipped fits show their
     status.
     """
     order = {name: i for i, name in enumerate(METHODS)}
     head = (
         "| N | method | fit s (CPU) | fit s (wall) | peak MB | n RV | test RMSE | RMSE vs f "
-        "| log evidence | time / fastest peer | RMSE / best peer |"
+        "| log evidence | time / fastest peer | RMSE / best peer | time / fastrvm "
+        "| time / float64 floor |"
     )
-    lines = [head, "|---:|:---|" + "---:|" * 9]
+    lines = [head, "|---:|:---|" + "---:|" * 11]
     for r in sorted(rows, key=lambda r: (r["n"], order.get(r["method"], 99))):
         name = r["method"]
         if r.get("status") != "ok":
             status = r.get("status", "?")
             detail = f" ({r['detail']})" if r.get("detail") else ""
-            lines.append(f"| {r['n']} | {name} | {status}{detail} |  |  |  |  |  |  |  |  |")
+            lines.append(f"| {r['n']} | {name} | {status}{detail} |" + "  |" * 10)
             continue
         lines.append(
             f"| {r['n']} | {name} | {r['fit_cpu_s']:.2f} | {r['fit_s']:.2f} "
             f"| {r['peak_rss_mb']:.0f} | {r['n_rv']} | {r['rmse']:.4f} | {r['rmse_f']:.4f} "
             f"| {_fmt_evidence(r)} "
-            f"| {_fmt(r.get('time_ratio'), '.3f')} | {_fmt(r.get('rmse_ratio'), '.3f')} |"
+            f"| {_fmt(r.get('time_ratio'), '.3f')} | {_fmt(r.get('rmse_ratio'), '.3f')} "
+            f"| {_fmt(r.get('fastrvm_ratio'), '.3f')} | {_fmt(r.get('floor_ratio'), '.2f')} |"
         )
     return "\n".join(lines)
 
@@ -789,6 +800,25 @@ def _source_description(root: Path) -> str:
     return f"git {rev}" + (" + uncommitted changes in bayes_fdi/" if dirty else "")
 
 
+def measure_floor(problem: str, n: int, ours_root: Path) -> dict[str, float]:
+    """``floor_s`` (float64) and ``floor_streaming_s`` of ``benchmarks/rvm_floor.py`` for one
+    problem and size, measured in a fresh single-threaded process (one more fit, on
+    ``make_data(n)``: the floor counts that fit's products and iterations)."""
+    env = {**os.environ, **THREAD_ENV, "PYTHONPATH": str(ours_root)}
+    cmd = [sys.executable, str(HERE / "rvm_floor.py"), "--problems", problem]
+    proc = subprocess.run(
+        [*cmd, "--sizes", str(n), "--json"], env=env, capture_output=True, text=True, check=True
+    )
+    result = json.loads(proc.stdout.splitlines()[-1])[0]
+    print(
+        f"[rvm_fit] {problem} N={n:>6} float64 floor {result['floor_s']:.2f} s "
+        f"(streaming {result['floor_streaming_s']:.2f} s)",
+        file=sys.stderr,
+        flush=True,
+    )
+    return {k: result[k] for k in ("floor_s", "floor_streaming_s")}
+
+
 def _parse_sizes(text: str) -> tuple[int, ...]:
     sizes = tuple(int(s) for s in text.split(",") if s.strip())
     if not sizes or min(sizes) < 10:
@@ -827,6 +857,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument(
         "--ours-commit",
         help="benchmark bayes_fdi as of this git revision (extracted under --out), not the tree",
+    )
+    ap.add_argument(
+        "--floor",
+        action="store_true",
+        help="also measure bayes_fdi's float64 floor (benchmarks/rvm_floor.py) at each N",
     )
     ap.add_argument(
         "--update-docs",
@@ -942,6 +977,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     file=sys.stderr,
                     flush=True,
                 )
+            ours = [r for r in done if r["n"] == n and r["method"] == OURS]
+            if args.floor and ours and ours[0].get("status") == "ok":
+                ours[0].update(measure_floor(name, n, args.ours_root.resolve()))
         rows += done
     meta["load_end"] = f"{os.getloadavg()[0]:.1f}"
     meta["total_s"] = round(time.monotonic() - t_start, 1)

@@ -35,6 +35,7 @@ force on the decisions.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from collections.abc import Sequence
@@ -167,7 +168,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problems", default="sinc,smooth")
     ap.add_argument("--sizes", default="5000")
+    ap.add_argument("--json", action="store_true", help="one JSON list of the measurements")
     args = ap.parse_args(argv)
+    if args.json:
+        runs = [(p, int(s)) for p in args.problems.split(",") for s in args.sizes.split(",")]
+        print(json.dumps([{"problem": p, "n": n, **measure(p, n)} for p, n in runs]))
+        return 0
     print(
         "| problem | N | fit CPU s | iterations | mean M | RVs | products x ms (MB read) | "
         "floor as made: products + updates = s | streaming floor s | float32 floor s | target s |"

@@ -15,7 +15,7 @@ from bayes_fdi.benchmark.scenarios import SCENARIOS, simulate_scenario
 from bayes_fdi.diagnosis.online.timeline import plot_timeline
 from bayes_fdi.scoring import picalc
 from bayes_fdi.scoring.decision_signals import decision_signals, rising_edges
-from bayes_fdi.scoring.picalc import PICALC_KEYS
+from bayes_fdi.scoring.picalc import PICALC_KEYS, first_detection
 
 BY_NAME = {s.name: s for s in SCENARIOS}
 
@@ -137,6 +137,10 @@ def test_runner_indices_equal_picalc_on_the_diagnosers_own_stream(tiny_run, doub
     )
     assert results["scenarios"][0]["indices"] == want
     assert want["t_dt"] != -1  # f1 big clogs the valve: the double sees it
+    first = first_detection(t, dd, t_on=300, t_from=900, t_hor=1500)
+    assert results["scenarios"][0]["first_detection"] == first
+    assert first["dd_permanent"] in (0.0, 1.0)
+    assert (first["t_dt_first"] == want["t_dt"]) == (first["dd_permanent"] == 1.0)
 
 
 def test_dgn0_scenario_indices_obey_pid_equals_not_dd(tiny_run):
@@ -166,6 +170,17 @@ def test_timeline_from_a_stream_alone(double, tmp_path):
         stream, rec, truth={"fault": "f1", "onset": 100.0}, path=tmp_path / "t.png"
     )
     assert path.exists() and not list(tmp_path.glob(".*tmp*"))
+    # faults by code and name: the title, and each group of the probability panel's legend
+    fig = plot_timeline(stream, rec, truth={"fault": "f18"})
+    assert fig._suptitle.get_text() == f"f18 {FAULT_TABLE['f18'].description}"
+    legend = fig.axes[6].get_legend()
+    assert legend is not None and legend.get_texts()
+    for text in (t.get_text() for t in legend.get_texts()):
+        codes = text.split(":")[0].split()[0].split("|")
+        for code in codes:
+            assert code in FAULT_TABLE or code in ("fn", "unknown")
+            if code in FAULT_TABLE:
+                assert FAULT_TABLE[code].description in text
     with pytest.raises(ValueError, match="one run"):
         two = simulate(benchmark_inputs(n_runs=2, duration=300), seed=3)
         plot_timeline(double.run(two), two)
@@ -257,13 +272,16 @@ def test_the_report_opens_with_its_targets_in_short_a_glossary_and_the_fault_nam
     table = report[report.index("| scenario | t_dt") :].splitlines()[0]
     columns = [c.strip() for c in table.strip("|").split("|")][1:-1]
     assert columns == list(PICALC_KEYS)
+    first = report[report.index("## First detection and permanence") :]
+    assert "| scenario | t_dt [s] | t_dt_first [s] | kept on |" in first
     glossary = head[head.index("## Glossary") :]
     defined = {line[4 : line.index("**:")] for line in glossary.splitlines() if "**:" in line}
     terms = {t.strip() for entry in defined for t in entry.replace("/", ",").split(",")}
     printed = ("DD", "PID", "t_from", "DGN", "dacc_t", "dacc_tm", "σ", "ECE", "MCE")
-    for term in (*PICALC_KEYS, *printed, "deflection", "oracle time", "CLEAR"):
+    for term in (*PICALC_KEYS, *printed, "deflection", "oracle time", "CLEAR", "t_dt_first"):
         assert term in terms, term
         assert term in report[report.index("## Targets") :] or term in PICALC_KEYS, term
+    assert "kept on" in terms
     # every fault code the report mentions is named, with the actuator table's description
     codes = set(re.findall(r"\bf(\d{1,2})\b", report))
     assert codes >= {"1", "14"}

@@ -5,10 +5,10 @@ long, seeded one under the ``fuzz`` marker (``pytest -m fuzz``; also marked ``sl
 default run leaves it out), together more than 10 000 examples.
 
 Covered: RVR and RVC fit/predict on any finite data (magnitudes 1e-150 .. 1e150, duplicate rows,
-constant columns; the reported failures as explicit examples, those of the linear and
-polynomial kernels among them), exact scale equivariance of the
-fits, save/load round trips, `simulate`, the calibration metrics, the netCDF dataset round trip
-and the Lublin day-file reader.
+constant columns; RBF, linear and polynomial kernels; the reported failures as explicit
+examples), exact scale equivariance of the fits (RBF and linear kernels) and exactness of the
+polynomial kernel's rescaling, save/load round trips (every kernel), `simulate`, the calibration
+metrics, the netCDF dataset round trip and the Lublin day-file reader.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from bayes_fdi.calibration import intervals, metrics
 from bayes_fdi.datasets import CHANNELS, load_dataset, make_dataset, save_dataset
 from bayes_fdi.datasets.lublin import DAY_COLUMNS, load_lublin_day
 from bayes_fdi.rvm import RVC, RVR, load
+from bayes_fdi.rvm.kernels import Polynomial
 
 HEALTH = [HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much,
           HealthCheck.function_scoped_fixture]  # fmt: skip
@@ -125,16 +126,25 @@ def classification_problems(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, st
      "kernel": "poly"},
     {"problem": (np.r_[np.linspace(0, 1, 7), 1e-98, 1e-200, 1e-300][:, None],
                  np.linspace(0, 1, 10), "fast"), "kernel": "rbf"},
+    # found by the fuzz profile over every kernel: targets of all zeros (precisions near
+    # 1e300, overflowing in the caller's basis), linear-kernel columns of norm 1e240 or 1e-158,
+    # polynomial columns of norm 1e240 and inputs of 1e-119
+    {"problem": (np.array([[0.0], [0.0], [1000.0]]), np.zeros(3), "em"), "kernel": "linear"},
+    {"problem": (np.array([[4.3e120], [3.5e120], [-5.5e120]]), np.array([4.5e35, -3e34, 6e35]),
+                 "em"), "kernel": "linear"},
+    {"problem": (np.array([[-5e-79], [0.0], [0.0], [-6e-79]]), np.array([989.0, 454.0, 660.0,
+                 -310.0]), "fast"), "kernel": "linear"},
+    {"problem": (np.array([[5e39], [-1e40], [-9e39], [9e39]]), np.array([-2.8e-21, -6e-21, 6e-21,
+                 1e-22]), "em"), "kernel": "poly"},
+    {"problem": (np.array([[6e-119], [-1e-118], [-4e-119]]), np.array([5.6e18, 8.6e18, 7.5e18]),
+                 "em"), "kernel": "poly"},
+    {"problem": (np.array([[0.0], [7e51], [1.0]]), np.array([1.0, 0.0, 2.0]), "em"),
+     "kernel": "poly"},
 )  # fmt: skip
 def rvr_fits_any_finite_data(problem: tuple, kernel: str) -> None:
     X, y, method = problem
-    if kernel == "poly":
-        with np.errstate(over="ignore"):  # the kernel's diagonal (|x|^2 + 1)^3, by numpy
-            overflows = not np.isfinite(((X * X).sum(1) + 1.0) ** 3).all()
-        if overflows:  # no float64 model exists: refused, naming the cause
-            with pytest.raises(ValueError, match="kernel overflows float64 on these inputs"):
-                RVR(kernel=kernel, width=2.0, method=method, max_iter=100).fit(X, y)
-            return
+    # every kernel fits every finite data set: the linear and polynomial kernels on inputs
+    # rescaled by a power of two, exactly (their values would overflow float64 beyond ~1e51)
     model = RVR(kernel=kernel, width=2.0, method=method, max_iter=100).fit(X, y)
     mean, std = model.predict(X, return_std=True)
     assert np.all(np.isfinite(mean)) and np.all(np.isfinite(std))
@@ -147,7 +157,7 @@ def rvr_fits_any_finite_data(problem: tuple, kernel: str) -> None:
 
 
 test_rvr_fits_any_finite_data, test_rvr_fits_any_finite_data_fuzz = twice(
-    25, 1500, problem=regression_problems(), kernel=st.just("rbf")
+    25, 3000, problem=regression_problems(), kernel=st.sampled_from(["rbf", "linear", "poly"])
 )(rvr_fits_any_finite_data)
 
 
@@ -172,25 +182,28 @@ test_rvc_probabilities_any_finite_data, test_rvc_probabilities_any_finite_data_f
 )(rvc_probabilities_any_finite_data)
 
 
-def rvr_is_scale_equivariant(problem: tuple, kx: int, ky: int) -> None:
+def rvr_is_scale_equivariant(problem: tuple, kx: int, ky: int, kernel: str) -> None:
     """Exact: data rescaled by powers of two far from 1 are fitted in the same internal units.
 
     ``X * 2^kx`` and ``X * 2^-kx`` (likewise y) both lie outside the unscaled window
     ``[2^-32, 2^32]`` for |k| >= 40 and unit-scale data, so both are divided by their power-of-two
     scale to the same numbers: the predictions must agree exactly after the factor ``2^(2 ky)``.
+    (RBF and linear kernels; a polynomial kernel's offset makes it depend on the inputs' scale,
+    see `rvr_polynomial_rescaling_is_exact`.)
     """
     X, y, method = problem
-    assume(np.abs(y).max() > 0)  # y = 0 has no scale: its noise floor is absolute (1e-300)
+    assume(np.abs(y).max() > 0)  # y = 0 has no scale: it is given that of a unit target
     # on a grid of 2^-20 (0 or >= 2^-20 in magnitude), so that 2^-400 times them stays a
     # normal float and every rescaling below is exact
     X = np.round(X / np.abs(X).max() * 2**20) / 2**20 if np.abs(X).max() > 0 else X
     y = np.round(y / np.abs(y).max() * 2**20) / 2**20 if np.abs(y).max() > 0 else y
-    up = RVR(width=math.ldexp(0.5, kx), method=method, max_iter=100)
+    kx_down = -kx
+    up = RVR(kernel=kernel, width=math.ldexp(0.5, kx), method=method, max_iter=100)
     up.fit(np.ldexp(X, kx), np.ldexp(y, ky))
-    down = RVR(width=math.ldexp(0.5, -kx), method=method, max_iter=100)
-    down.fit(np.ldexp(X, -kx), np.ldexp(y, -ky))
+    down = RVR(kernel=kernel, width=math.ldexp(0.5, kx_down), method=method, max_iter=100)
+    down.fit(np.ldexp(X, kx_down), np.ldexp(y, -ky))
     m_up, s_up = up.predict(np.ldexp(X, kx), return_std=True)
-    m_dn, s_dn = down.predict(np.ldexp(X, -kx), return_std=True)
+    m_dn, s_dn = down.predict(np.ldexp(X, kx_down), return_std=True)
     np.testing.assert_array_equal(m_up, np.ldexp(m_dn, 2 * ky))
     np.testing.assert_array_equal(s_up, np.ldexp(s_dn, 2 * ky))
     assert up.log_evidence_ == pytest.approx(
@@ -204,16 +217,45 @@ test_rvr_is_scale_equivariant, test_rvr_is_scale_equivariant_fuzz = twice(
     problem=regression_problems(),
     kx=st.integers(40, 400),
     ky=st.integers(40, 400),
+    kernel=st.sampled_from(["rbf", "linear"]),
 )(rvr_is_scale_equivariant)
 
 
-def model_files_round_trip(problem: tuple, classify: bool, tmp_path_factory: Any) -> None:
+def rvr_polynomial_rescaling_is_exact(problem: tuple, k: int) -> None:
+    """A polynomial kernel ``(x.z + c)^3`` on inputs ``X * 2^k`` beyond ``2^32`` is fitted on
+    ``X`` with the offset ``c / 2^(2k)``: its kernel values differ by the power of two
+    ``2^(6k)`` only, so the fit and its predictions are exactly those of that kernel on ``X``.
+    """
+    X, y, method = problem
+    top = np.abs(X).max()
+    assume(top > 0)
+    X = np.ldexp(X, -int(np.floor(np.log2(top))))  # max |x| in [1, 2): not rescaled
+    X = np.round(X * 2**20) / 2**20  # a grid that 2^k times keeps exact
+    assume(np.abs(X).max() >= 1.0)
+    big = RVR(kernel="poly", coef0=1.0, method=method, max_iter=100).fit(np.ldexp(X, k), y)
+    same = Polynomial(3, 1.0, math.ldexp(1.0, -2 * k))
+    ref = RVR(kernel=same, method=method, max_iter=100).fit(X, y)
+    m_big, s_big = big.predict(np.ldexp(X, k), return_std=True)
+    m_ref, s_ref = ref.predict(X, return_std=True)
+    np.testing.assert_array_equal(m_big, m_ref)
+    np.testing.assert_array_equal(s_big, s_ref)
+    np.testing.assert_array_equal(big.relevance_indices_, ref.relevance_indices_)
+
+
+test_rvr_polynomial_rescaling_is_exact, test_rvr_polynomial_rescaling_is_exact_fuzz = twice(
+    10, 300, problem=regression_problems(), k=st.integers(40, 160)
+)(rvr_polynomial_rescaling_is_exact)
+
+
+def model_files_round_trip(
+    problem: tuple, classify: bool, kernel: str, tmp_path_factory: Any
+) -> None:
     X, y, method = problem
     if classify:
         y = (np.arange(y.size) % 2).astype(int)
-        model = RVC(width=2.0, method=method, max_iter=200).fit(X, y)
+        model = RVC(kernel=kernel, width=2.0, method=method, max_iter=200).fit(X, y)
     else:
-        model = RVR(width=2.0, method=method, max_iter=200).fit(X, y)
+        model = RVR(kernel=kernel, width=2.0, method=method, max_iter=200).fit(X, y)
     path = tmp_path_factory.mktemp("model") / "m.npz"
     model.save(path)
     back = load(path)
@@ -228,7 +270,11 @@ def model_files_round_trip(problem: tuple, classify: bool, tmp_path_factory: Any
 
 
 _round_trip, _round_trip_fuzz = twice(
-    10, 300, problem=regression_problems(), classify=st.booleans()
+    10,
+    300,
+    problem=regression_problems(),
+    classify=st.booleans(),
+    kernel=st.sampled_from(["rbf", "linear", "poly"]),
 )(model_files_round_trip)
 
 
@@ -413,3 +459,26 @@ def test_polynomial_kernel_refuses_inputs_it_would_overflow():
     assert np.isfinite(model.predict(np.array([[1e20]]))).all()  # (1e40 * 16)^3 still finite
     with pytest.raises(ValueError, match=r"kernel overflows float64 .*largest \|x\| 7e\+51"):
         model.predict(np.array([[7e51]]))
+
+
+@pytest.mark.parametrize("kernel", ["rbf", "linear", "poly"])
+@pytest.mark.parametrize("k", [0, 40, -40])
+def test_public_weights_are_in_the_callers_kernel_units(kernel, k):
+    """Inputs rescaled inside the estimator leave the public basis the caller's: the design
+    matrix of the caller's kernel (computed here by numpy) times ``mean_`` is the prediction, and
+    ``alpha_`` scales as the inverse square of the weights' units."""
+    rng = np.random.default_rng(5)
+    X = np.ldexp(rng.uniform(-1, 1, (12, 2)), k)
+    y = np.sin(3 * X[:, 0] / 2.0**k) + 0.05 * rng.standard_normal(12)
+    model = RVR(kernel=kernel, width=math.ldexp(1.0, k), max_iter=200).fit(X, y)
+    rv = model.relevance_vectors_
+    if kernel == "linear":
+        K = X @ rv.T
+    elif kernel == "poly":
+        K = (X @ rv.T + 1.0) ** 3
+    else:
+        K = np.exp(-((X[:, None, :] - rv[None]) ** 2).sum(-1) / (2 * math.ldexp(1.0, k) ** 2))
+    Phi = np.column_stack([np.ones(len(X)), K]) if model.intercept_ != 0.0 else K
+    np.testing.assert_allclose(model.design_matrix(X).numpy(), Phi, rtol=1e-12, atol=0)
+    # rounding of a <= 13-term sum of products of unit-scale numbers: 1e-12 relative
+    np.testing.assert_allclose(Phi @ model.mean_, model.predict(X), rtol=1e-9, atol=1e-12)

@@ -167,7 +167,7 @@ def test_format_table_rows_columns_and_statuses():
     rows = bench.add_ratios(
         [
             _row("fastrvm", 2000, 0.5, 0.105),
-            _row("bayes_fdi", 2000, 0.25, 0.1071),
+            {**_row("bayes_fdi", 2000, 0.25, 0.1071), "floor_s": 0.1},
             {"method": "sklearn-rvm", "n": 2000, "status": "skipped", "detail": "timeout at N=500"},
             _row("bayes_fdi", 500, 0.1, 0.11),
         ]
@@ -175,7 +175,7 @@ def test_format_table_rows_columns_and_statuses():
     lines = bench.format_table(rows).splitlines()
     n_cols = lines[0].count("|")
     assert all(line.count("|") == n_cols for line in lines)
-    assert n_cols - 1 == 11
+    assert n_cols - 1 == 13
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines[2:]]
     # ordered by N, then method order (bayes_fdi, fastrvm, sklearn-rvm, ...)
     assert [(c[0], c[1]) for c in cells] == [
@@ -187,7 +187,8 @@ def test_format_table_rows_columns_and_statuses():
     ours = cells[1]
     assert ours[2] == "0.25" and ours[6] == "0.1071"
     assert ours[9] == "0.500" and ours[10] == f"{0.1071 / 0.105:.3f}"
-    assert cells[0][9] == "–"  # no peer at N=500
+    assert ours[11] == "0.500" and ours[12] == "2.50"  # against fastrvm, against the floor
+    assert cells[0][9] == "–" and cells[0][11] == "–" and cells[0][12] == "–"  # no peer, floor
     assert cells[3][2] == "skipped (timeout at N=500)"
     report = bench.format_report(rows, {"sigma": 0.5, "gamma": 2.0, "n_test": 10})
     assert "| 2000 | test RMSE / best peer | 1.02 | 1.020 | PASS |" in report

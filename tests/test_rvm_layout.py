@@ -24,6 +24,8 @@ FACE = "bayes_fdi.rvm.sbl"
 #: Layer of each module of the family: a module imports only from lower layers.
 LAYERS: dict[str, int] = {
     "screening_copy": 0,
+    "action_kernels": 0,
+    "tracked_kernels": 0,
     "design": 1,
     "precision_factor": 0,
     "rounding": 0,

@@ -2,9 +2,10 @@
 
 `RunCollector` scores each run's 1 Hz decision stream against its scenario (the decision
 signals of `bayes_fdi.scoring.decision_signals`, PICalc's indices of
-`bayes_fdi.scoring.picalc`), counts confident wrong isolations, keeps the normal models'
-spread and a sample of detected faulty seconds; `group_calibration` turns that sample into the
-top-label ECE of the group probabilities with a run-level bootstrap interval.
+`bayes_fdi.scoring.picalc` and the first detection beside them), counts confident wrong
+isolations, keeps the normal models' spread and a sample of detected faulty seconds;
+`group_calibration` turns that sample into the top-label ECE of the group probabilities with a
+run-level bootstrap interval.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import xarray as xr
 
 from bayes_fdi.benchmark.scenarios import BenchmarkScenario
 from bayes_fdi.scoring.decision_signals import decision_signals
-from bayes_fdi.scoring.picalc import picalc
+from bayes_fdi.scoring.picalc import first_detection, picalc
 
 __all__ = ["CALIBRATION_SECONDS_PER_RUN", "CONFIDENT", "RunCollector", "group_calibration"]
 
@@ -34,7 +35,9 @@ class RunCollector:
     """Accumulates per-run indices, calibration samples and counts over the batches.
 
     `add` scores one run's decision stream; the attributes hold what the benchmark reports:
-    ``rows`` (one per run: fault, mode, size, seed, PICalc indices), ``faulty_seconds`` and
+    ``rows`` (one per run: fault, mode, size, seed, PICalc indices, ``first_detection``:
+    `bayes_fdi.scoring.picalc.first_detection`'s ``t_dt_first`` and ``dd_permanent``),
+    ``faulty_seconds`` and
     ``confident_wrong`` (seconds of a fault with a wrong group above `CONFIDENT`),
     ``model_std`` (median predictive std of X and F before each fault) and the calibration
     sample (``proba``, ``true``, ``cluster``: at most `CALIBRATION_SECONDS_PER_RUN` detected
@@ -69,12 +72,16 @@ class RunCollector:
             indicated=sig.indicated,
             group_sizes=sig.group_sizes,
         )
+        first = first_detection(
+            t, sig.dd, t_on=scenario.t_on, t_from=scenario.t_from, t_hor=scenario.t_hor
+        )
         row = {
             "fault": scenario.fault,
             "mode": scenario.mode,
             "size": scenario.size,
             "seed": int(seed),
             "indices": indices,
+            "first_detection": first,
         }
         self.rows.append(row)
         labels = [str(g) for g in one["group"].values]

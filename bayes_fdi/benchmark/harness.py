@@ -33,6 +33,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.actuator import FAULT_TABLE
 from bayes_fdi.benchmark.collection import RunCollector, group_calibration
 from bayes_fdi.benchmark.effects import fault_effects
 from bayes_fdi.benchmark.scenarios import (
@@ -311,7 +312,7 @@ def _timeline(scenario: BenchmarkScenario, one: xr.Dataset, run: xr.Dataset, out
     truth = {
         "fault": scenario.fault,
         "onset": scenario.t_from,
-        "label": scenario.name,
+        "label": f"{scenario.name}: {FAULT_TABLE[scenario.fault].description}",
         "strength": scenario.strength_at(one["time"].values),
     }
     path = out / "timelines" / f"{scenario.slug}.png"

@@ -25,6 +25,7 @@ import numpy as np
 
 from bayes_fdi.actuator import FAULT_TABLE, NOISE_STD
 from bayes_fdi.atomic import write_text
+from bayes_fdi.benchmark.report_detection import first_detection_section, permanence_target
 from bayes_fdi.benchmark.report_summary import GLOSSARY, in_short_section
 from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import format_number, markdown_table, to_jsonable
@@ -218,6 +219,7 @@ def _targets(results: Mapping[str, Any], summary: Mapping[str, Any]) -> list[lis
             f"largest scenario median {worst:.0f} s",
             worst <= 10,
         )
+    rows += [row for row in [permanence_target(results, visible)] if row]
     detected = [n for n in big if summary[n]["t_dt"]["determined"] * 2 >= summary[n]["n"] > 0]
     add(
         f">= 10 of the {len(big)} big abrupt scenarios detected (in >= half the seeds)",
@@ -425,6 +427,7 @@ def render_report(results: Mapping[str, Any]) -> str:
         "isolation at the group level (PID = the true fault's group is indicated).",
         "",
         _index_table(results, summary),
+        *first_detection_section(results, summary),
         "## What each fault does to the measurements, against the noise",
         "",
         f"Noise-free simulations with and without the fault, over the faulty part: RMS and "

@@ -4,8 +4,9 @@
 was measured for those missed, how many scenarios were detected and isolated, and which faults
 leave the measurements untouched. `GLOSSARY` defines every index and abbreviation
 ``benchmark.md`` prints: the PICalc indices (one definition,
-:data:`bayes_fdi.scoring.picalc.INDEX_MEANINGS`), the DAMADICS terms, and the decision terms
-(:data:`DECISION_TERMS`) the commissioning benchmark's report shares.
+:data:`bayes_fdi.scoring.picalc.INDEX_MEANINGS`) with the first detection beside them
+(:data:`~bayes_fdi.scoring.picalc.FIRST_DETECTION_MEANINGS`), the DAMADICS terms, and the
+decision terms (:data:`DECISION_TERMS`) the commissioning benchmark's report shares.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from bayes_fdi.scoring.picalc import INDEX_MEANINGS
+from bayes_fdi.scoring.picalc import FIRST_DETECTION_MEANINGS, INDEX_MEANINGS
 
 __all__ = ["DECISION_TERMS", "GLOSSARY", "in_short_section"]
 
@@ -26,6 +27,7 @@ DECISION_TERMS: tuple[tuple[str, str], ...] = (
 #: The indices and abbreviations of ``benchmark.md``, in plain words.
 GLOSSARY: tuple[tuple[str, str], ...] = (
     *INDEX_MEANINGS,
+    *FIRST_DETECTION_MEANINGS,
     (
         "DD, PID, CID",
         "the benchmark's decision signals, one per second: DD the detection decision (alarm "

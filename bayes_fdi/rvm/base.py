@@ -6,7 +6,10 @@ candidate basis, fitted-state bookkeeping and the design matrix of new inputs.
 Scale invariance. The fit is computed on rescaled data whenever the data lie far from unit
 scale, in a way that is exact in real arithmetic: with an RBF kernel the inputs are divided by a
 power of two ``x_scale`` and the width with them (``k(x/c, z/c; sigma/c) = k(x, z; sigma)``, so
-the design matrix is unchanged); for regression the targets are divided by a power of two
+the design matrix is unchanged), with a linear or polynomial kernel the inputs are divided by
+a power of two and the kernel follows them (`bayes_fdi.rvm.rescaling`: its columns change by one
+power of two, which the solvers' unit-norm columns absorb); for regression the targets are
+divided by a power of two
 ``t_scale`` (the sparse Bayesian model is scale-equivariant: weights scale with ``t``,
 precisions with ``t^-2``, the log evidence shifts by ``-N log t_scale``). Dividing by a power of
 two loses nothing, so any finite data from ``1e-300`` to ``1e300`` fit; data within
@@ -14,7 +17,8 @@ two loses nothing, so any finite data from ``1e-300`` to ``1e300`` fit; data wit
 in the scaled units (``_mu_``, ``_Sigma_``, ``_X_fit_``, ``_kernel_``; the scales in
 ``_x_scale_`` and ``_t_scale_``) and the public attributes are given in the caller's units.
 
-Imports :mod:`~bayes_fdi.rvm.kernels`, :mod:`~bayes_fdi.rvm.persistence` and the solvers' face
+Imports :mod:`~bayes_fdi.rvm.kernels`, :mod:`~bayes_fdi.rvm.rescaling`,
+:mod:`~bayes_fdi.rvm.persistence` and the solvers' face
 :mod:`bayes_fdi.rvm.sbl`.
 """
 
@@ -34,54 +38,21 @@ from torch import Tensor
 
 from bayes_fdi.rvm.kernels import RBF, Kernel, Linear, Polynomial
 from bayes_fdi.rvm.persistence import save
+from bayes_fdi.rvm.rescaling import (
+    MAX_SCALED_WIDTH,
+    MIN_SCALED_WIDTH,
+    check_kernel_range,
+    has_offset,
+    kernel_factor,
+    power_of_two_scale,
+    rescaled_kernel,
+)
 from bayes_fdi.rvm.sbl import DEFAULT_MAX_BYTES, Design, SBLResult
 
 __all__ = ["RVMBase", "is_torch", "power_of_two_scale"]
 
 _DTYPES = {"float64": torch.float64, "float32": torch.float32}
 _METHODS = ("fast", "em")
-#: data whose largest magnitude lies in [2^-_SCALE_EXPONENT, 2^_SCALE_EXPONENT] are not rescaled
-_SCALE_EXPONENT = 32
-#: RBF widths are clamped to [2^-500, 2^500]: the square stays a normal float64, and outside
-#: that range the kernel of (rescaled, hence at most ~2^33 apart) rows is the same in float64
-#: (below: 0 between distinct rows, 1 between equal ones; above: 1 everywhere)
-_MIN_SCALED_WIDTH = 2.0**-500
-_MAX_SCALED_WIDTH = 2.0**500
-
-
-def power_of_two_scale(values: Tensor) -> float:
-    """A power of two near ``max|values|`` when that lies outside ``[2^-32, 2^32]``, else 1.0.
-
-    Dividing by it is exact (no rounding), so rescaled data hold the same information.
-    """
-    if values.numel() == 0:
-        return 1.0
-    top = float(values.detach().abs().max())
-    if not (math.isfinite(top) and top > 0):
-        return 1.0
-    exponent = math.floor(math.log2(top))
-    if abs(exponent) <= _SCALE_EXPONENT:
-        return 1.0
-    return math.ldexp(1.0, exponent)
-
-
-def _check_kernel_range(kern: Kernel, X: Tensor) -> None:
-    """Refuse inputs whose linear or polynomial kernel values overflow the float type: its
-    largest values lie on the diagonal (Cauchy-Schwarz), ``offset + |x|^2`` or
-    ``(gamma |x|^2 + coef0)^degree``. (The RBF kernel is bounded by 1 and its fits rescale
-    exactly.)"""
-    if not isinstance(kern, (Linear, Polynomial)):
-        return
-    sq = (X * X).sum(dim=1)
-    diag = sq + kern.offset if isinstance(kern, Linear) else (kern.gamma * sq + kern.coef0)
-    if isinstance(kern, Polynomial):
-        diag = diag**kern.degree
-    if not bool(torch.isfinite(diag).all()):
-        top, dtype = float(X.abs().max()), str(X.dtype).removeprefix("torch.")
-        raise ValueError(
-            f"the {kern!r} kernel overflows {dtype} on these inputs (largest |x| {top:.3g}): "
-            "standardise the inputs, or use the RBF kernel, whose fits are scale-invariant"
-        )
 
 
 def is_torch(X: Any) -> bool:
@@ -171,18 +142,28 @@ class RVMBase(BaseEstimator):
             return int(self.max_iter)
         return 10000 if self.method == "fast" else 1000
 
-    def _resolve_kernel(self, width: float | None) -> Kernel | None:
-        """The kernel object for ``width`` (``None`` for ``'precomputed'``)."""
+    def _resolve_kernel(self, width: float | None, x_scale: float = 1.0) -> Kernel | None:
+        """The kernel object for ``width`` on inputs divided by ``x_scale`` (``None`` for
+        ``'precomputed'``).
+
+        An RBF kernel takes the width in rescaled units. On inputs divided by the power of two
+        ``s = x_scale``, a linear kernel ``x.z + c`` becomes ``x.z + c / s^2`` and a polynomial
+        one ``(gamma x.z + c0)^d`` becomes ``(gamma x.z + c0 / s^2)^d``: the caller's kernel
+        divided by ``s^2`` and ``s^(2d)``, so every kernel column differs from the caller's by
+        one power of two and the solvers, which work on unit-norm columns, fit the same model.
+        """
         if self.kernel == "precomputed":
             return None
-        if self._scales_inputs():  # an RBF at the (rescaled) width of the fit
+        if self._is_plain_rbf():  # at the (rescaled) width
             return RBF(width)
+        if self.kernel == "linear":
+            return rescaled_kernel(Linear(), x_scale)
+        if self.kernel == "poly":
+            return rescaled_kernel(Polynomial(self.degree, 1.0, self.coef0), x_scale)
+        if type(self.kernel) in (Linear, Polynomial):
+            return rescaled_kernel(self.kernel, x_scale)
         if isinstance(self.kernel, Kernel):
             return self.kernel
-        if self.kernel == "linear":
-            return Linear()
-        if self.kernel == "poly":
-            return Polynomial(self.degree, 1.0, self.coef0)
         return _CallableKernel(self.kernel)
 
     # ------------------------------------------------------------------ inputs
@@ -280,14 +261,29 @@ class RVMBase(BaseEstimator):
             )
         return out
 
-    def _scales_inputs(self) -> bool:
-        """Whether the kernel lets the inputs be rescaled exactly (a plain RBF kernel)."""
+    def _kernel_factor(self, x_scale: float) -> float:
+        """The caller's kernel over the rescaled one on inputs divided by ``x_scale``
+        (`~bayes_fdi.rvm.rescaling.kernel_factor`; 1 for an RBF kernel)."""
+        if x_scale == 1.0 or self._is_plain_rbf():
+            return 1.0
+        return kernel_factor(self._resolve_kernel(None), x_scale)
+
+    def _is_plain_rbf(self) -> bool:
+        """Whether the kernel is the RBF kernel (by name or as a plain `RBF` object)."""
         return self.kernel == "rbf" or type(self.kernel) is RBF
+
+    def _scales_inputs(self) -> bool:
+        """Whether the kernel lets the inputs be rescaled exactly: a plain RBF, linear or
+        polynomial kernel (see `_resolve_kernel`)."""
+        builtin = ("rbf", "linear", "poly")
+        return self.kernel in builtin or type(self.kernel) in (RBF, Linear, Polynomial)
 
     def _fit_inputs(self, X: Any) -> tuple[Tensor, float]:
         """Training inputs as a (copied) tensor, divided by their power-of-two scale."""
         Xt = self._to_tensor(X, fitting=True)
         x_scale = power_of_two_scale(Xt) if self._scales_inputs() else 1.0
+        if x_scale < 1.0 and not self._is_plain_rbf() and has_offset(self._resolve_kernel(None)):
+            x_scale = 1.0  # tiny inputs of a kernel with an offset stay (`has_offset`)
         if x_scale != 1.0:
             Xt = Xt / x_scale
         return Xt, x_scale
@@ -302,7 +298,7 @@ class RVMBase(BaseEstimator):
         """The RBF width in rescaled input units (``None`` stays ``None``)."""
         if width is None:
             return width
-        return min(max(width / x_scale, _MIN_SCALED_WIDTH), _MAX_SCALED_WIDTH)
+        return min(max(width / x_scale, MIN_SCALED_WIDTH), MAX_SCALED_WIDTH)
 
     @staticmethod
     def _output(value: Tensor, like: Any) -> Any:
@@ -313,12 +309,12 @@ class RVMBase(BaseEstimator):
 
     # ------------------------------------------------------------------ design
     def _design(
-        self, X: Tensor, width: float | None, rhs: Tensor | None = None
+        self, X: Tensor, width: float | None, rhs: Tensor | None = None, x_scale: float = 1.0
     ) -> tuple[Design, Kernel | None]:
-        kern = self._resolve_kernel(width)
+        kern = self._resolve_kernel(width, x_scale)
         if kern is None:
             return Design(matrix=X, bias=self.bias), None
-        _check_kernel_range(kern, X)
+        check_kernel_range(kern, X, x_scale=x_scale, shown=self._resolve_kernel(width))
         design = Design(kernel=kern, X=X, bias=self.bias, max_bytes=self.max_kernel_bytes, rhs=rhs)
         return design, kern
 
@@ -380,10 +376,15 @@ class RVMBase(BaseEstimator):
             if self._rv_ is not None
             else np.empty((feat.numel(), 0))
         )
-        with np.errstate(over="ignore", under="ignore"):
-            mean = result.mean.cpu().numpy() * t_scale
-            self.covariance_ = result.covariance.cpu().numpy() * (t_scale * t_scale)
-            self.alpha_ = result.alpha.cpu().numpy() / (t_scale * t_scale)
+        # kernel columns in the caller's units: the rescaled kernel times `_kernel_factor`
+        per_column = np.where(
+            np.arange(active.numel()) < int(has_bias), 1.0, self._kernel_factor(x_scale)
+        )
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            mean = result.mean.cpu().numpy() * t_scale / per_column
+            cov = result.covariance.cpu().numpy() * (t_scale * t_scale)
+            self.covariance_ = cov / np.multiply.outer(per_column, per_column)
+            self.alpha_ = result.alpha.cpu().numpy() / (t_scale * t_scale) * per_column**2
         shift = X.shape[0] * math.log(t_scale)
         self.mean_ = mean
         self.coef_ = mean[1:] if has_bias else mean
@@ -403,7 +404,9 @@ class RVMBase(BaseEstimator):
             if self._kernel_ is None:
                 parts.append(X[:, self._feat_.to(X.device)])
             else:
-                _check_kernel_range(self._kernel_, X)
+                scale = getattr(self, "_x_scale_", 1.0)
+                shown = self._resolve_kernel(self.width_, 1.0)
+                check_kernel_range(self._kernel_, X, x_scale=scale, shown=shown)
                 parts.append(self._kernel_(X, self._rv_))
         if not parts:
             return torch.zeros(X.shape[0], 0, dtype=X.dtype, device=X.device)
@@ -436,12 +439,20 @@ class RVMBase(BaseEstimator):
             )
         Xt = self._inputs(X)
         if basis == "active":
-            return self._phi(Xt)
+            return self._in_caller_units(self._phi(Xt), int(self._has_bias_))
         parts = []
         if self.bias:
             parts.append(torch.ones(Xt.shape[0], 1, dtype=Xt.dtype, device=Xt.device))
         parts.append(Xt if self._kernel_ is None else self._kernel_(Xt, self._X_fit_))
-        return torch.cat(parts, dim=1)
+        return self._in_caller_units(torch.cat(parts, dim=1), int(self.bias))
+
+    def _in_caller_units(self, Phi: Tensor, n_bias: int) -> Tensor:
+        """Design columns of the rescaled kernel in the caller's kernel units (the first
+        ``n_bias`` columns are the bias)."""
+        factor = self._kernel_factor(getattr(self, "_x_scale_", 1.0))
+        if factor == 1.0 or Phi.shape[1] == n_bias:
+            return Phi
+        return torch.cat([Phi[:, :n_bias], Phi[:, n_bias:] * factor], dim=1)
 
     def fit_posterior(self, X: Any, y: Any, **kwargs: Any) -> Any:
         """Full Bayesian posterior of the weights (Pyro NUTS or SVI) on the fitted basis.

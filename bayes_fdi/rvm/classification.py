@@ -116,8 +116,10 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
         self.moderated = moderated
 
     # ------------------------------------------------------------------ fitting
-    def _solve(self, X: Tensor, t: Tensor, width: float | None) -> tuple[SBLResult, Kernel | None]:
-        design, kern = self._design(X, width)
+    def _solve(
+        self, X: Tensor, t: Tensor, width: float | None, x_scale: float = 1.0
+    ) -> tuple[SBLResult, Kernel | None]:
+        design, kern = self._design(X, width, x_scale=x_scale)
         solver = fast_bernoulli if self.method == "fast" else em_bernoulli
         return solver(design, t, max_iter=self._max_iter(), tol=float(self.tol)), kern
 
@@ -177,7 +179,7 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
             width_s = self._scaled_width(width, x_scale)
 
         if len(targets) == 1:
-            result, kern = self._solve(Xt, targets[0], width_s)
+            result, kern = self._solve(Xt, targets[0], width_s, x_scale)
             self._set_state(result, Xt, kern, width, x_scale=x_scale)
             self.estimators_ = None
         else:
@@ -205,7 +207,7 @@ evidence_trace_, log_evidence_, n_iter_, converged_, width_, n_features_in_
             sub = type(self)(**self.get_params())
             sub.classes_ = np.array([0, 1])
             sub.n_features_in_ = self.n_features_in_
-            result, kern = sub._solve(Xt, t, width_s)
+            result, kern = sub._solve(Xt, t, width_s, x_scale)
             sub._set_state(result, Xt, kern, width, x_scale=x_scale)
             sub.estimators_ = None
             subs.append(sub)

@@ -163,9 +163,10 @@ def _rebuild(meta: dict, arrays: dict, name: str, device: Any) -> Any:
     )
     X_fit = torch.tensor(head.X_fit, dtype=head.dtype, device=dev)
     model.n_features_in_ = head.n_features
-    width_s = model._scaled_width(width, head.x_scale) if model._scales_inputs() else width
-    kern = model._resolve_kernel(width_s)
-    if model._scales_inputs() and width is None:
+    is_rbf = model._is_plain_rbf()
+    width_s = model._scaled_width(width, head.x_scale) if is_rbf else width
+    kern = model._resolve_kernel(width_s, head.x_scale)
+    if is_rbf and width is None:
         raise ValueError(f"{name!r}: an RBF model needs its width")
     n_basis = (1 if model.bias else 0) + (X_fit.shape[0] if kern is not None else head.n_features)
 

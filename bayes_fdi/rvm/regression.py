@@ -185,9 +185,15 @@ class RVR(RegressorMixin, RVMBase):
             raise ValueError(f"polish_pool must be a positive integer, got {self.polish_pool!r}")
 
     def _solve(
-        self, X: Tensor, t: Tensor, width: float | None, *, polish: bool = False
+        self,
+        X: Tensor,
+        t: Tensor,
+        width: float | None,
+        *,
+        polish: bool = False,
+        x_scale: float = 1.0,
     ) -> tuple[SBLResult, Kernel | None, Polish | None]:
-        design, kern = self._design(X, width, rhs=t)
+        design, kern = self._design(X, width, rhs=t, x_scale=x_scale)
         solver = fast_gaussian if self.method == "fast" else em_gaussian
         result = solver(design, t, max_iter=self._max_iter(), tol=float(self.tol))
         if not polish:
@@ -242,7 +248,8 @@ class RVR(RegressorMixin, RVMBase):
             else:
                 width = None
             width_s = self._scaled_width(width, x_scale)
-        result, kern, polished = self._solve(Xt, t, width_s, polish=bool(self.polish))
+        polish = bool(self.polish)
+        result, kern, polished = self._solve(Xt, t, width_s, polish=polish, x_scale=x_scale)
         self._set_state(result, Xt, kern, width, x_scale=x_scale, t_scale=t_scale)
         shift = Xt.shape[0] * math.log(t_scale)  # log evidence in the caller's target units
         self.polish_ = (

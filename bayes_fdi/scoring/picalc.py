@@ -38,6 +38,11 @@ Choices made where the benchmark's documents are silent (each is tested):
   of the zone; ``-1`` without permanent isolation or without the ``indicated`` stream.
 
 The docstring of `picalc` has an example.
+
+Beside PICalc's indices, `first_detection` gives two of this package's own, which the benchmark
+does not define: ``t_dt_first``, the time to the *first* detection in the faulty part, and
+``dd_permanent``, whether DD stayed on from then to the end of the zone (``t_dt`` and
+``t_dt_first`` agree exactly when it did).
 """
 
 from __future__ import annotations
@@ -47,7 +52,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["INDEX_MEANINGS", "PICALC_KEYS", "UNDETERMINED", "picalc"]
+__all__ = [
+    "FIRST_DETECTION_KEYS",
+    "FIRST_DETECTION_MEANINGS",
+    "INDEX_MEANINGS",
+    "PICALC_KEYS",
+    "UNDETERMINED",
+    "first_detection",
+    "picalc",
+]
 
 #: What each PICalc index means, in plain words (for reports' glossaries).
 INDEX_MEANINGS: tuple[tuple[str, str], ...] = (
@@ -82,6 +95,21 @@ PICALC_KEYS: tuple[str, ...] = (
 )
 #: PICalc's value for an index that cannot be determined.
 UNDETERMINED = -1.0
+#: Keys of :func:`first_detection`'s result (not PICalc's: this package's own).
+FIRST_DETECTION_KEYS: tuple[str, ...] = ("t_dt_first", "dd_permanent")
+#: What each of :func:`first_detection`'s indices means, in plain words.
+FIRST_DETECTION_MEANINGS: tuple[tuple[str, str], ...] = (
+    (
+        "t_dt_first",
+        "first detection time: seconds from the fault's start to the first second of the "
+        "faulty part with the alarm on (not a PICalc index; t_dt counts the last rising edge)",
+    ),
+    (
+        "kept on",
+        "the alarm stayed on from the first detection to the end of the zone (then t_dt = "
+        "t_dt_first)",
+    ),
+)
 
 
 def _zone_bounds(t_on: Any, t_from: Any, t_hor: Any) -> tuple[float, float, float]:
@@ -285,3 +313,54 @@ def _dacc(indicated: Any, group_sizes: Any, zone: np.ndarray, edge: int | None, 
     named = ind[zone][edge:].any(axis=0)
     n_faults = int(sizes[named].sum())
     return UNDETERMINED if n_faults == 0 else 1.0 / n_faults
+
+
+def first_detection(
+    time: Any, dd: Any, *, t_on: float, t_from: float, t_hor: float
+) -> dict[str, float]:
+    """The first detection of a fault and whether it was kept (not PICalc indices).
+
+    Parameters
+    ----------
+    time, dd
+        As for `picalc` (NaN in ``dd`` counts as low).
+    t_on, t_from, t_hor
+        The benchmark zone and the fault's start (s), as for `picalc`.
+
+    Returns
+    -------
+    dict
+        ``t_dt_first``: seconds from ``t_from`` to the first second of the faulty part
+        ``[t_from, t_hor)`` with DD high (0 when an alarm raised earlier lasts into it);
+        ``dd_permanent``: 1 when DD stays high from that second to the zone's last second,
+        else 0. Both :data:`UNDETERMINED` when DD is never high in the faulty part.
+
+    Examples
+    --------
+    Detected 5 s after the fault, dropped for one second at 1200 s, detected again:
+
+    >>> import numpy as np
+    >>> t = np.arange(0, 1500.0)
+    >>> dd = (t >= 905) & (t != 1200)
+    >>> first_detection(t, dd, t_on=300, t_from=900, t_hor=1500)
+    {'t_dt_first': 5.0, 'dd_permanent': 0.0}
+    >>> picalc(t, dd, dd, np.zeros_like(t), t_on=300, t_from=900, t_hor=1500)["t_dt"]
+    301.0
+    """
+    _, start, hor = _zone_bounds(t_on, t_from, t_hor)
+    t = np.asarray(time, dtype=np.float64)
+    if t.ndim != 1 or t.size == 0 or not np.isfinite(t).all():
+        raise ValueError("first_detection: time must be a non-empty finite 1-D array")
+    faulty = (t >= start) & (t < hor)
+    if int(faulty.sum()) != round(hor - start):
+        raise ValueError(
+            f"first_detection: the stream does not cover the faulty part [{start:g}, {hor:g}) s"
+        )
+    high = _binary(dd, "dd", t.size)[faulty]
+    if not high.any():
+        return {"t_dt_first": UNDETERMINED, "dd_permanent": UNDETERMINED}
+    first = int(np.argmax(high))
+    return {
+        "t_dt_first": float(t[faulty][first] - start),
+        "dd_permanent": float(high[first:].all()),
+    }

@@ -4,7 +4,7 @@
   turns standardised residuals into about white innovations.
 - `bayes_fdi.diagnosis.detection.detectors`: the sequential tests `CUSUM` and `GLR`.
 - `bayes_fdi.diagnosis.detection.decision`: `DetectionDecision`, the detection decision DD
-  with hysteresis.
+  with hysteresis and a hold (`CLEAR_HOLD`: the online diagnoser's).
 - `bayes_fdi.diagnosis.detection.thresholds`: thresholds for a false-alarm budget.
 
 Each online component here owns its state, a named tuple of arrays (`WhitenState`,
@@ -15,6 +15,7 @@ May import `bayes_fdi.diagnosis.component_state`, `bayes_fdi.datasets` and the f
 """
 
 from bayes_fdi.diagnosis.detection.decision import (
+    CLEAR_HOLD,
     DecisionState,
     DetectionDecision,
     detection_decision,
@@ -34,6 +35,7 @@ from bayes_fdi.diagnosis.detection.thresholds import (
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener, WhitenState
 
 __all__ = [
+    "CLEAR_HOLD",
     "CUSUM",
     "GLR",
     "ARWhitener",

@@ -482,7 +482,7 @@ class DynamicNormalModels(BaseEstimator):
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
         """Saved attributes in today's layout: files of bayes_fdi 0.1.0 hold the compiled
         kernel's arguments as ``_lean`` and ``_kernel_args``; today they are ``params_``; files
-        of format <= 3 fitted the std factors by maximum likelihood (``std_coverage=None``)."""
+        of format <= 4 fitted the std factors by maximum likelihood (``std_coverage=None``)."""
         data = {k: v for k, v in data.items() if k not in ("_lean", "_kernel_args")}
         data.setdefault("std_coverage", None)  # before the parameter: maximum likelihood
         if "regressors_" in data and "params_" not in data:

@@ -78,7 +78,7 @@ class EnvelopeState(NamedTuple):
 
     @classmethod
     def upgrade_model_file(cls, fields: dict, format_version: int) -> dict:
-        """The fields of a state saved before the envelope had rates (model-file format <= 3):
+        """The fields of a state saved before the envelope had rates (model-file format <= 4):
         no last second, rates 0."""
         fields = dict(fields)
         fields.setdefault("previous", np.full(len(RATE_CHANNELS), np.nan))
@@ -204,7 +204,7 @@ class InputEnvelope:
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
-        """An envelope saved before it had rates (model-file format <= 3): no rate check."""
+        """An envelope saved before it had rates (model-file format <= 4): no rate check."""
         data = dict(data)
         data.setdefault("rate_margin", 0.25)
         data.setdefault("rate_seconds", RATE_SECONDS)

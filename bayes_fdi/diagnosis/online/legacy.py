@@ -36,7 +36,7 @@ def upgrade_diagnoser(data: dict[str, Any]) -> dict[str, Any]:
         margin = data.get("input_margin", 0.1)
         data["envelope_"] = InputEnvelope.from_bounds(low, high, margin=margin)
     if "threshold_" in data and "decision_" not in data:
-        data["decision_"] = DetectionDecision(data["threshold_"], data["clear_level_"], 2)
+        data["decision_"] = DetectionDecision(data["threshold_"], data["clear_level_"], 2, hold=0)
     if "normal_models_" in data and "signature_" not in data:
         data["signature_"] = SignatureWindow()
     if isinstance(data.get("_stream"), dict):
@@ -84,7 +84,11 @@ def _nested(
             )
         ),
         "detect": PerOutput(_detector_state(detect["X"]), _detector_state(detect["F"])),
-        "decision": DecisionState(_flag(decision, 0), np.ascontiguousarray(held, np.float64)),
+        "decision": DecisionState(
+            _flag(decision, 0),
+            np.ascontiguousarray(held, np.float64),
+            np.zeros(_flag(decision, 0).shape, dtype=np.int64),
+        ),
         "signature": SignatureState(
             _part(features, 0, 1),
             _part(features, 1, 17),

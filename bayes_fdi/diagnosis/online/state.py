@@ -144,6 +144,9 @@ class StreamState(NamedTuple):
         """The state of `arrays`' output (read-only); a `ValueError` names a missing or
         unknown path."""
         used: set[str] = set()
+        arrays = dict(arrays)
+        if "decision.on" in arrays and "decision.quiet" not in arrays:  # saved before the hold
+            arrays["decision.quiet"] = np.zeros(np.shape(arrays["decision.on"]), dtype=np.int64)
 
         def build(options: tuple[type, ...], where: str) -> Any:
             for option in options:

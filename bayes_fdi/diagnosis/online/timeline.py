@@ -23,6 +23,7 @@ import xarray as xr
 
 from bayes_fdi import atomic
 from bayes_fdi.datasets.plotting import physical_range
+from bayes_fdi.diagnosis.seva.names import describe_state
 
 __all__ = ["STATUS_COLOURS", "plot_timeline"]
 
@@ -133,7 +134,7 @@ def plot_timeline(
     path
         Write the figure there (PNG; atomically) and close it.
     title
-        Figure title (default: the truth's label or the fault).
+        Figure title (default: the truth's label, or the fault by code and name).
 
     Returns
     -------
@@ -173,8 +174,8 @@ def plot_timeline(
         if onset is not None:
             ax.axvline(float(onset) / scale, color="k", ls="--", lw=0.8)
     axes[-1].set_xlabel(f"time [{unit}]")
-    label = (truth or {}).get("label") or fault
-    fig.suptitle(title or (f"{label}" if label else "online diagnosis"), fontsize=11)
+    label = (truth or {}).get("label") or (describe_state(fault) if fault else None)
+    fig.suptitle(title or label or "online diagnosis", fontsize=11)
     if path is not None:
         return atomic.save_figure(fig, path, dpi=100)
     return fig
@@ -264,9 +265,9 @@ def _groups_panels(ax_ind: Any, ax_p: Any, tt: np.ndarray, stream: xr.Dataset, f
             if label != true_label and not (np.nanmax(col, initial=0.0) > 0.2):
                 continue  # keep the legend readable: groups that never reach 0.2 are omitted
             width, colour = (1.6, "C3") if label == true_label else (0.7, f"C{shown % 10}")
-            ax_p.plot(tt, col, lw=width, color=colour, label=label)
+            ax_p.plot(tt, col, lw=width, color=colour, label=describe_state(label))
             shown += 1
-        if shown:
-            ax_p.legend(loc="upper left", fontsize=6, ncol=4)
+        if shown:  # groups by code and name, two to a row
+            ax_p.legend(loc="upper left", fontsize=6, ncol=2)
     ax_p.set_ylim(-0.02, 1.02)
     ax_p.set_ylabel("P(group)")

@@ -10,7 +10,12 @@ classifier learns from the signatures that the stream itself computes on the fau
 each run), taken at chosen ages after each detection that follows the fault's onset
 (`detection_signatures`, `SIGNATURE_AGES`); `fit_isolation` fits the
 `~bayes_fdi.diagnosis.isolation.isolator.FaultIsolator` on them, a seeded subset bounding the
-rows per fault (`cap_rows`), after setting aside the faults the detector misses.
+rows per fault (`cap_rows`), after setting aside the faults the detector misses. The
+recalibration of the group probabilities learns instead from every detected faulty second of
+the calibration runs (`detected_seconds`, at most `CALIBRATION_SECONDS_PER_RUN` per run): the
+probabilities it corrects are those the stream gives second by second, from the first seconds
+after a detection to the settled signature, in the proportions in which the diagnoser meets
+them.
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.datasets import CHANNELS, state_order, validate_dataset
-from bayes_fdi.diagnosis.detection.decision import DetectionDecision
+from bayes_fdi.diagnosis.detection.decision import CLEAR_HOLD, DetectionDecision
 from bayes_fdi.diagnosis.detection.thresholds import fit_threshold
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener
 from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
@@ -31,6 +36,7 @@ from bayes_fdi.diagnosis.isolation.signatures import ISOLATION_FEATURES
 from bayes_fdi.diagnosis.online.step import Components, init_run_state, step
 
 __all__ = [
+    "CALIBRATION_SECONDS_PER_RUN",
     "GROUP_MIN_AGE",
     "SIGNATURE_AGES",
     "DetectionFit",
@@ -38,6 +44,7 @@ __all__ = [
     "Runs",
     "Signatures",
     "cap_rows",
+    "detected_seconds",
     "detection_signatures",
     "fit_detection",
     "fit_isolation",
@@ -55,6 +62,9 @@ SIGNATURE_AGES: tuple[int, ...] = (
 #: what the sensors cannot split once the signature has settled; the calibrated
 #: probabilities carry the uncertainty of the first seconds.
 GROUP_MIN_AGE = 20
+#: Each calibration run gives at most this many of its detected faulty seconds (evenly spaced)
+#: to the recalibration, so that long runs do not outweigh short ones.
+CALIBRATION_SECONDS_PER_RUN = 600
 
 #: Runs given as one dataset or as a list of datasets (e.g. of different durations).
 Runs = xr.Dataset | Sequence[xr.Dataset]
@@ -77,7 +87,7 @@ class DetectionFit(NamedTuple):
     threshold: float
     clear_level: float
     threshold_report: dict[str, Any]  #: `fit_threshold`'s report
-    decision: DetectionDecision  #: DD with the threshold and the clear level
+    decision: DetectionDecision  #: DD with the threshold, the clear level and the hold
 
 
 class IsolationFit(NamedTuple):
@@ -179,6 +189,31 @@ def detection_signatures(
     return rows, row_ages, bool(rise.size)
 
 
+def detected_seconds(
+    detected: np.ndarray,
+    features: np.ndarray,
+    times: np.ndarray,
+    onset: float,
+    cap: int = CALIBRATION_SECONDS_PER_RUN,
+) -> tuple[list[np.ndarray], list[int], bool]:
+    """The signatures of one fault run at its detected seconds after the fault's onset.
+
+    Every second at or after ``onset`` with DD on and a finite signature, at most ``cap`` of
+    them evenly spaced over those seconds: the rows whose group probabilities the online
+    diagnoser reports for the fault. Parameters and returns as `detection_signatures`; the
+    ages are the seconds since the detection each second belongs to.
+    """
+    dd = np.asarray(detected, dtype=bool)
+    rise = np.flatnonzero(dd & ~np.concatenate([[False], dd[:-1]]))
+    finite = np.all(np.isfinite(features), axis=1) if len(features) else np.zeros(0, bool)
+    seconds = np.flatnonzero(dd & (np.asarray(times) >= onset) & finite)
+    if seconds.size > cap:
+        seconds = seconds[np.round(np.linspace(0, seconds.size - 1, cap)).astype(np.int64)]
+    since = rise[np.searchsorted(rise, seconds, side="right") - 1] if seconds.size else seconds
+    rows = [features[t] for t in seconds]
+    return rows, [int(a) for a in seconds - since], bool(np.any(times[rise] >= onset))
+
+
 def cap_rows(y: np.ndarray, cap: int, rng: np.random.Generator) -> np.ndarray:
     """Indices of the rows of ``y`` to keep: all of a label with at most ``cap`` rows, else a
     seeded subset of ``cap`` (sorted)."""
@@ -199,6 +234,7 @@ def fit_detection(
     clear_level: float,
     false_alarm_hours: float,
     random_state: int | None,
+    clear_hold: int = CLEAR_HOLD,
 ) -> DetectionFit:
     """The detection components of `OnlineDiagnoser` (whose parameters the keywords are).
 
@@ -206,7 +242,10 @@ def fit_detection(
     ``(runs, time, 2)`` of the fault-free runs, and the threshold of ``detector`` (a CUSUM or
     GLR; its own threshold is not used) that meets the false-alarm budget on their innovations
     (`~bayes_fdi.diagnosis.detection.thresholds.fit_threshold`); the clear level is at most the
-    threshold.
+    threshold. The decision DD clears only after ``clear_hold`` seconds of in-control evidence
+    (`~bayes_fdi.diagnosis.detection.decision.CLEAR_HOLD` by default). The threshold is measured
+    with plain hysteresis: the hold lengthens alarms and merges those closer than it, never adds
+    one, so the budget holds with it too.
     """
     whiteners = {}
     innovations = [np.empty((oof_z.shape[1], 2)) for _ in range(oof_z.shape[0])]
@@ -227,16 +266,22 @@ def fit_detection(
         threshold,
         clear,
         report,
-        DetectionDecision(threshold, clear, n_channels=2),
+        DetectionDecision(threshold, clear, n_channels=2, hold=int(clear_hold)),
     )
 
 
-def training_signatures(components: Components, runs: Runs) -> Signatures:
+def training_signatures(
+    components: Components, runs: Runs, *, per_second: bool = False
+) -> Signatures:
     """The isolation signatures of fault runs as the fit uses them.
 
     Every run but a fault-free one (``state`` ``"fn"``) goes through the stream of
     ``components`` from a fresh state; its signatures at `SIGNATURE_AGES` after each detection
-    that follows the fault's onset are kept (`detection_signatures`).
+    that follows the fault's onset are kept (`detection_signatures`), or with ``per_second``
+    those of its detected seconds after the onset (`detected_seconds`: the seconds the
+    diagnoser reports, under its decision with the hold). For the ages the decision is plain
+    hysteresis (without its hold): with the hold, an alarm raised before the onset could last
+    into the fault and swallow its own detection, and the run would count as undetected.
 
     Parameters
     ----------
@@ -244,10 +289,16 @@ def training_signatures(components: Components, runs: Runs) -> Signatures:
         The diagnoser's fitted components (the isolator is not used).
     runs
         Fault runs (coordinates ``state`` and, optionally, ``onset``): a dataset or a list.
+    per_second
+        Keep the detected seconds (the recalibration's rows) instead of the ages.
     """
+    pick = detected_seconds if per_second else detection_signatures
     rows, labels, ages = [], [], []
     detected: dict[str, list[bool]] = {}
-    components = components._replace(isolator=None)
+    decision = components.decision
+    if not per_second:  # signatures at ages after each detection: plain hysteresis
+        decision = DetectionDecision(decision.threshold, decision.clear, decision.n_channels)
+    components = components._replace(isolator=None, decision=decision)
     for part in runs_as_list(runs):
         validate_dataset(part, require=CHANNELS, allow_nan=True)
         if "state" not in part.coords:
@@ -266,9 +317,7 @@ def training_signatures(components: Components, runs: Runs) -> Signatures:
                 continue
             arrays = {c: np.ascontiguousarray(v[i]) for c, v in data.items()}
             out, _ = step(components, arrays, init_run_state(components))
-            found, found_ages, hit = detection_signatures(
-                out["DD"], out["features"], times, onset[i]
-            )
+            found, found_ages, hit = pick(out["DD"], out["features"], times, onset[i])
             detected.setdefault(state, []).append(hit)
             rows += found
             labels += [state] * len(found)
@@ -295,7 +344,8 @@ def fit_isolation(
 
     The signatures of the training runs (`training_signatures`) train the classifier, those of
     the validation runs at least `GROUP_MIN_AGE` s after the detection find the isolability
-    groups, those of the calibration runs fit the calibrator. Without validation or
+    groups, those of every detected faulty second of the calibration runs
+    (``training_signatures(..., per_second=True)``) fit the calibrator. Without validation or
     calibration runs, `split_fault_runs` splits ``fault_runs``. Faults detected in fewer than
     ``detect_rate`` of their training runs, or with fewer than 5 signatures, are undetectable
     and not classified; each fault keeps at most ``max_signatures_per_fault`` training rows
@@ -314,7 +364,7 @@ def fit_isolation(
     X, y, _, detected = training_signatures(components, train)
     rates = {f: float(np.mean(v)) for f, v in detected.items()}
     Xv, yv, av, _ = training_signatures(components, validation_runs)
-    Xc, yc, _, _ = training_signatures(components, calibration_runs)
+    Xc, yc, _, _ = training_signatures(components, calibration_runs, per_second=True)
     seconds["signatures"] = time.perf_counter() - t0
     counts = {f: int(np.sum(y == f)) for f in rates}
     undetectable = sorted(

@@ -32,7 +32,9 @@ verification of actions) and the carried screening factors (:class:`TrackedFacto
 
 The modules, bottom up (each imports only modules above it in this list):
 ``screening_copy``, ``design``; ``precision_factor``, ``rounding``, ``noise``; ``result``;
-``decisions``; ``residual_factors``, ``screening``; ``verification``; ``alignment``;
+``decisions``, ``action_kernels``, ``tracked_kernels`` (numba kernels of the decision rules and
+of the carried factors' re-estimation update, used on the CPU in float64);
+``residual_factors``, ``screening``; ``verification``; ``alignment``;
 ``posterior_bounds``, ``tracked_factors``; ``laplace``; ``gaussian``, ``bernoulli``;
 ``reestimation``; ``polish``.
 """

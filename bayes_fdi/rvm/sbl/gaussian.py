@@ -293,6 +293,7 @@ class _FastGaussianRun:
         self.position[act_t] = torch.arange(M, device=device)
         self.tracker = TrackedFactors(P, cap, self.unit, self.Bt_t)
         self.addable = self.addable_mask()
+        self.gram = self.views()[1][self.act_t]  # B^T Phi's active rows, until the basis changes
 
     def addable_mask(self) -> Tensor:
         """Candidates that may be added: usable, aligned with no active column, not active."""
@@ -304,9 +305,9 @@ class _FastGaussianRun:
 
     def statistics(self) -> tuple[PrecisionFactor, Tensor, Tensor, float]:
         """Posterior from a fresh factorisation (never from rank-one updates, which drift)."""
-        Phi, BtPhi = self.views()
+        Phi = self.views()[0]
         act_t, alpha, beta = self.act_t, self.alpha, self.beta
-        fac = factor_precision(alpha, beta * BtPhi[act_t])
+        fac = factor_precision(alpha, beta * self.gram)
         mu = beta * fac.solve(self.Bt_t[act_t])
         resid = self.t - Phi @ mu
         log_ml = gaussian_log_evidence(self.N, beta, float(resid @ resid), alpha, mu, fac)
@@ -314,9 +315,9 @@ class _FastGaussianRun:
 
     def context(self) -> Posterior:
         """The current posterior with the bounds the carried factors need."""
-        BtPhi, act_t = self.views()[1], self.act_t
+        Phi_t = self.Bt_t[self.act_t]
         return posterior_context(
-            self.fac, self.alpha, self.beta, BtPhi[act_t], self.mu, self.Bt_t[act_t], self.gram_eps
+            self.fac, self.alpha, self.beta, self.gram, self.mu, Phi_t, self.gram_eps
         )
 
     def decide(self) -> tuple[Action, _ExactColumns, Posterior]:
@@ -334,7 +335,7 @@ class _FastGaussianRun:
             self.norms,
             self.fac,
             Phi,
-            BtPhi[self.act_t],
+            self.gram,
             self.position,
             self.alpha,
             self.beta,
@@ -399,6 +400,7 @@ class _FastGaussianRun:
         self.in_model[nu] = True
         self.align.add(BtBi)
         self.addable = self.addable_mask()
+        self.gram = self.views()[1][self.act_t]  # B^T Phi's active rows, until the basis changes
         self.tracker.add(post, gram, float(BtBi[nu]), best.new_alpha, BtBi, float(self.Bt_t[nu]))
         self.tracker.stale.add(nu)  # its stored products became the exact Gram entries
         self.position[nu] = M - 1
@@ -422,6 +424,7 @@ class _FastGaussianRun:
         self.act_t = self.act_t[keep_t]
         self.in_model[nu] = False
         self.addable = self.addable_mask()
+        self.gram = self.views()[1][self.act_t]  # B^T Phi's active rows, until the basis changes
 
     def update_noise(self, last: bool) -> bool:
         """Re-estimate ``beta`` (and refactorise); returns ``last``, cleared when this was to be

@@ -19,7 +19,8 @@ BETA_MAX_FACTOR = 1e6
 
 def initial_noise_precision(t: Tensor, N: int) -> tuple[float, float]:
     """SparseBayes' starting noise precision ``1 / (0.1 std(t))^2`` and its upper bound
-    ``BETA_MAX_FACTOR / var(t)``, with ``var(t)`` floored at ``1e-12 ||t||^2 / N``.
+    ``BETA_MAX_FACTOR / var(t)``, with ``var(t)`` floored at ``1e-12 ||t||^2 / N`` (at ``1e-12``,
+    that of a unit target, when every target is 0).
 
     Parameters
     ----------
@@ -34,7 +35,9 @@ def initial_noise_precision(t: Tensor, N: int) -> tuple[float, float]:
     """
     t_var = float(t.var(unbiased=False))
     t_sq = float(t @ t)
-    var_floor = max(t_var, 1e-12 * t_sq / N, 1e-300)
+    # targets of all zeros carry no scale: they are given that of a unit target (the scale the
+    # estimators rescale every other target to), which keeps every precision far from overflow
+    var_floor = max(t_var, 1e-12 * t_sq / N, 1e-300) if t_sq > 0 else 1e-12
     beta_max = BETA_MAX_FACTOR / var_floor
     beta = min(1.0 / (0.1 * math.sqrt(var_floor)) ** 2, beta_max)
     return beta, beta_max

@@ -70,12 +70,17 @@ def em_gaussian(
     G_all = Phi_all.T @ Phi_all
     Pt_all = Phi_all.T @ t
     t_sq = float(t @ t)
+    t_ref = t_sq if t_sq > 0 else float(N)  # all-zero targets: the scale of a unit target
     beta, beta_max = initial_noise_precision(t, N)
     alpha = torch.full(
-        (active.numel(),), active.numel() / max(t_sq, 1e-300), dtype=dtype, device=device
+        (active.numel(),), active.numel() / max(t_ref, 1e-300), dtype=dtype, device=device
     )
     keep = torch.arange(active.numel(), device=device)  # positions in Phi_all
-    alpha_floor = 1e-10 / max(t_sq, 1e-300)  # prior sd at most 1e5 |t| on a unit column
+    alpha_floor = 1e-10 / max(t_ref, 1e-300)  # prior sd at most 1e5 |t| on a unit column
+    # a basis whose precision exceeds prune * beta_max is pruned at any noise level; the one
+    # kept when all are (a zero target) stays at that level, not at ~1e300 (mu = 0 exactly),
+    # so that its precision in the caller's basis (times its column's squared norm) is finite
+    alpha_ceiling = prune * beta_max
     trace: list[float] = []
     converged = False
     it = 0
@@ -88,7 +93,7 @@ def em_gaussian(
         gain = log_ml - trace[-1] if trace else math.inf
         trace.append(log_ml)
         gamma = (1.0 - alpha * Sigma.diagonal()).clamp(0.0, 1.0)
-        new_alpha = (gamma / (mu * mu).clamp_min(1e-300)).clamp_min(alpha_floor)
+        new_alpha = (gamma / (mu * mu).clamp_min(1e-300)).clamp(alpha_floor, alpha_ceiling)
         new_beta = reestimated_noise_precision(N, float(gamma.sum()), ee, beta_max)
         d_alpha = float((torch.log(new_alpha) - torch.log(alpha)).abs().max())
         d_beta = abs(math.log(new_beta) - math.log(beta))

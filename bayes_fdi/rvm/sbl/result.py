@@ -55,11 +55,21 @@ class SBLResult(NamedTuple):
     converged: bool
 
 
+#: columns with a norm below this fraction of the largest are left out (`unit_columns`)
+RELATIVE_NORM_FLOOR = 2.0**-500
+
+
 def unit_columns(design: Design) -> tuple[Tensor, Tensor]:
-    """Column norms of ``design`` (zero norms replaced by 1) and a mask of its usable (non-zero)
-    columns: the solvers divide the columns by these norms."""
+    """Column norms of ``design`` (zero norms replaced by 1) and a mask of its usable columns:
+    the solvers divide the columns by these norms.
+
+    A column is usable when its norm exceeds ``2^-500`` times the largest: one below is zero
+    beside the others in float64 (its squared norm, by which its precision is mapped back to
+    the caller's basis, would leave the normal range), so it is left out like a zero column.
+    """
     norms = design.column_norms()
-    valid = norms > 0
+    top = norms.max() if norms.numel() else norms.new_zeros(())
+    valid = (norms > 0) & (norms > top * RELATIVE_NORM_FLOOR)
     return torch.where(valid, norms, torch.ones_like(norms)), valid
 
 

@@ -39,15 +39,20 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
 from bayes_fdi.rvm.sbl.rounding import rounding_gamma, thin_matmul
 from bayes_fdi.rvm.sbl.screening import gaussian_screened_Q, screened_factors
+from bayes_fdi.rvm.sbl.tracked_kernels import reestimate_rows
 
-__all__ = ["TrackedFactors"]
+__all__ = ["COMPILED_UPDATE", "TrackedFactors"]
 
+#: Run the re-estimation update compiled (:mod:`~bayes_fdi.rvm.sbl.tracked_kernels`) on CPU
+#: float64; tests clear it to compare with the torch update.
+COMPILED_UPDATE = True
 #: the carried bounds are used while the stored Gram matrix's error inflates them by at most
 #: this factor (``psd``, see :mod:`bayes_fdi.rvm.sbl.posterior_bounds`); beyond it the solver
 #: screens directly
@@ -80,6 +85,10 @@ class TrackedFactors:
         self.needs_refresh = True
         self.stale: set[int] = set()
         self._u = torch.finfo(self.dtype).eps / 2.0
+        # CPU float64: the re-estimation update runs compiled (tracked_kernels)
+        self._compiled = (
+            COMPILED_UPDATE and unit.device.type == "cpu" and self.dtype == torch.float64
+        )
 
     # ----------------------------------------------------------------------- fresh values
     def refresh(self, post: Posterior, Z: Tensor, rows: Tensor | None = None) -> None:
@@ -235,11 +244,30 @@ class TrackedFactors:
         kappa = delta / den
         kappa_err = delta * delta * es_k / (den * den_lo) + g4 * abs(kappa)
         kap = abs(kappa) + kappa_err
-        ck = self.C[:, k].clone()
-        ack = ck.abs()
-        e = (sA * math.sqrt(post.psd)) * self.rho  # bound of |c_k - exact c_k|
+        e_scale = sA * math.sqrt(post.psd)  # e = e_scale rho bounds |c_k - exact c_k|
         mk = float(post.mu[k])
         e_mu = sA * post.mu_error_w  # bound of |mu_k - exact mu_k|
+        # residual in the new weights: entry k's weight changes by (a_old / a_new)^1/2
+        root_new = post.root.clone()
+        root_new[k] = math.sqrt(a_new)
+        grow = max(1.0, math.sqrt(a_old / a_new))
+        r_new = float(torch.linalg.vector_norm(r_s / root_new)) + r_round / float(root_new.min())
+        s_norm = float(torch.linalg.vector_norm(s))
+        to_w = (post.Hb_F + abs(delta)) / float(root_new.min())  # ||A'^-1/2 H_'|| bound
+        rho_ack = g4 * abs(delta) / math.sqrt(a_new) + abs(kappa) * r_new
+        rho_aa = self._u * to_w * s_norm
+        rho_nu = to_w * g2
+        if self._compiled:  # one pass over the rows (tracked_kernels)
+            scalars = [kappa, kappa_err, kap, e_scale, mk, e_mu, g4, grow]
+            scalars += [rho_ack, rho_aa, rho_nu, s_norm, g2]
+            arrays = (self.S, self.Q, self.S_err, self.Q_err, self.rho, self.nu)
+            reestimate_rows(
+                self.C.numpy(), M, k, s.numpy(), *(v.numpy() for v in arrays), np.array(scalars)
+            )
+            return
+        ck = self.C[:, k].clone()
+        ack = ck.abs()
+        e = e_scale * self.rho
         dS = kappa * ck * ck
         dQ = (kappa * mk) * ck
         self.S += dS
@@ -254,21 +282,8 @@ class TrackedFactors:
         )
         a = -kappa * ck
         self.C[:, :M].addr_(a, s)
-        # residual in the new weights: entry k's weight changes by (a_old / a_new)^1/2
-        root_new = post.root.clone()
-        root_new[k] = math.sqrt(a_new)
-        grow = max(1.0, math.sqrt(a_old / a_new))
-        r_new = float(torch.linalg.vector_norm(r_s / root_new)) + r_round / float(root_new.min())
-        s_norm = float(torch.linalg.vector_norm(s))
-        H_F = post.Hb_F + abs(delta)
         aa = a.abs()
-        to_w = H_F / float(root_new.min())  # ||A'^-1/2 H_'|| bound
-        self.rho = (
-            self.rho * grow
-            + ack * (g4 * abs(delta) / math.sqrt(a_new) + abs(kappa) * r_new)
-            + aa * (self._u * to_w * s_norm)
-            + to_w * g2 * (self.nu + aa * s_norm)
-        )
+        self.rho = self.rho * grow + ack * rho_ack + aa * rho_aa + rho_nu * (self.nu + aa * s_norm)
         self.nu = (self.nu + aa * s_norm) * (1.0 + g2)
 
     def delete(self, post: Posterior, k: int) -> None:

@@ -34,6 +34,11 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
+from bayes_fdi.rvm.sbl.action_kernels import (
+    best_action_kernel,
+    round_candidates,
+    unsure_actives,
+)
 from bayes_fdi.rvm.sbl.decisions import (
     NEGLIGIBLE_GAIN,
     TIE_RELATIVE,
@@ -44,6 +49,7 @@ from bayes_fdi.rvm.sbl.decisions import (
 )
 
 __all__ = [
+    "COMPILED_RULES",
     "SHORTLIST_MAX",
     "exact_near_threshold",
     "lazy_verified_action",
@@ -56,6 +62,9 @@ __all__ = [
 
 #: At most this many addition candidates are recomputed exactly per round of verification.
 SHORTLIST_MAX = 64
+#: Decide with the compiled rules (:mod:`~bayes_fdi.rvm.sbl.action_kernels`) on CPU float64
+#: factors; tests clear it to compare with the torch rules.
+COMPILED_RULES = True
 #: relative slack on the bounds for the rounding of their own evaluation
 _SLACK = 1e-12
 
@@ -290,38 +299,89 @@ def lazy_verified_action(
     """
     looked = _Looked(S, Q, S_err, Q_err, exact, tighten, budget, tighten_budget)
     verified = looked.verified
+    arrays = _cpu_arrays(S, Q, S_err, Q_err, act, alpha, addable, verified)
     while True:
         if act.numel() > 1:  # deletions pre-empt: possibly useless actives are looked at first
-            theta_lo = useful_lower_bound(S[act], S_err[act], Q[act], Q_err[act], alpha)
-            unsure = act[~verified[act] & ~(theta_lo > ZERO_FACTOR)]
+            if arrays is not None:  # the compiled rule (action_kernels)
+                Sn, Qn, Sen, Qen, actn, alphan, _, vn = arrays
+                unsure = torch.from_numpy(unsure_actives(Sn, Sen, Qn, Qen, actn, alphan, vn))
+            else:
+                theta_lo = useful_lower_bound(S[act], S_err[act], Q[act], Q_err[act], alpha)
+                unsure = act[~verified[act] & ~(theta_lo > ZERO_FACTOR)]
             if unsure.numel():
                 if not looked.look(unsure):
                     return None, looked.n_exact
                 continue
-        best = best_action(S, Q, act, alpha, addable)
+        best = _best_action(S, Q, act, alpha, addable, arrays)
         if best.kind == 2:
             return best, looked.n_exact
         g = best.gain if best.kind >= 0 else NEGLIGIBLE_GAIN
         band = g - TIE_RELATIVE * abs(g) if best.kind >= 0 else NEGLIGIBLE_GAIN
-        # re-estimations that could reach the band
-        un_a = ~verified[act]
-        re_ub = reestimate_gain_bounds(S[act], S_err[act], Q[act], Q_err[act])
-        reach = un_a & (re_ub >= band)
-        cand_a, ub_a = act[reach], re_ub[reach]
-        # additions that could reach it
-        x = torch.where(addable & ~verified, optimistic_ratio(S, Q, S_err, Q_err), 0.0)
-        cand_n = (x >= _ratio_of_gain(band) * (1.0 - 1e-8)).nonzero().squeeze(1)
-        if cand_a.numel() + cand_n.numel() == 0:
+        ratio = _ratio_of_gain(band) * (1.0 - 1e-8)
+        if arrays is not None:
+            Sn, Qn, Sen, Qen, actn, _, addn, vn = arrays
+            cand_np, ub_np = round_candidates(Sn, Qn, Sen, Qen, actn, addn, vn, band, ratio)
+            cand, ub = torch.from_numpy(cand_np), torch.from_numpy(ub_np)
+        else:
+            cand, ub = _round_candidates(S, Q, S_err, Q_err, act, addable, verified, band, ratio)
+        if cand.numel() == 0:
             return best, looked.n_exact
-        cand = torch.cat([cand_a, cand_n])
         limit = shortlist if tighten is None else max(shortlist, tighten_budget or 0)
         if cand.numel() > limit:  # the most promising first: by upper bound of the gain
-            xn = x[cand_n]
-            ub_n = torch.where(torch.isfinite(xn), _ratio_gain(xn.clamp_min(1.0)), math.inf)
-            cand = cand[torch.topk(torch.cat([ub_a, ub_n]), limit).indices]
+            cand = cand[torch.topk(ub, limit).indices]
         likely = best.index if best.kind >= 0 and not bool(verified[best.index]) else -1
         if not looked.look(cand, likely):
             return None, looked.n_exact
+
+
+def _round_candidates(
+    S: Tensor,
+    Q: Tensor,
+    S_err: Tensor,
+    Q_err: Tensor,
+    act: Tensor,
+    addable: Tensor,
+    verified: Tensor,
+    band: float,
+    ratio: float,
+) -> tuple[Tensor, Tensor]:
+    """One round's candidates (torch; :func:`~bayes_fdi.rvm.sbl.action_kernels.round_candidates`
+    on CPU float64): unverified re-estimations whose gain could reach ``band``, then unverified
+    additions whose optimistic ratio reaches ``ratio``, with upper bounds of their gains."""
+    re_ub = reestimate_gain_bounds(S[act], S_err[act], Q[act], Q_err[act])
+    reach = ~verified[act] & (re_ub >= band)
+    x = torch.where(addable & ~verified, optimistic_ratio(S, Q, S_err, Q_err), 0.0)
+    cand_n = (x >= ratio).nonzero().squeeze(1)
+    xn = x[cand_n]
+    ub_n = torch.where(torch.isfinite(xn), _ratio_gain(xn.clamp_min(1.0)), math.inf)
+    return torch.cat([act[reach], cand_n]), torch.cat([re_ub[reach], ub_n])
+
+
+def _cpu_arrays(*tensors: Tensor) -> tuple | None:
+    """NumPy views of the decision's tensors (sharing memory) when the compiled rules apply:
+    CPU, float64 factors; None otherwise (torch rules, any device or dtype)."""
+    if not COMPILED_RULES or tensors[0].dtype != torch.float64:
+        return None
+    if any(t.device.type != "cpu" for t in tensors):
+        return None
+    if tensors[5].dtype != torch.float64:
+        return None
+    return tuple(t.numpy() for t in tensors)
+
+
+def _best_action(
+    S: Tensor, Q: Tensor, act: Tensor, alpha: Tensor, addable: Tensor, arrays: tuple | None
+) -> Action:
+    """:func:`~bayes_fdi.rvm.sbl.decisions.best_action`, compiled on CPU float64 arrays."""
+    if arrays is None or act.numel() == 0:
+        return best_action(S, Q, act, alpha, addable)
+    Sn, Qn, _, _, actn, alphan, addn, _ = arrays
+    index, gain, kind, new_alpha, position, any_delete = best_action_kernel(
+        Sn, Qn, actn, alphan, addn
+    )
+    return Action(
+        int(index), float(gain), int(kind), float(new_alpha), int(position), bool(any_delete)
+    )
 
 
 class _Looked:

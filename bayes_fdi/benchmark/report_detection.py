@@ -1,0 +1,115 @@
+"""The first detection of each fault and whether DD stayed on, for ``benchmark.md``.
+
+PICalc times a detection to the *last* rising edge of DD (a detection counts once it is
+permanent), so one dropped second late in a fault moves ``t_dt`` far from the moment the fault
+was first seen. Beside it the benchmark records, run by run, the time to the first detection
+(``t_dt_first``) and whether DD stayed on from then to the end of the zone (``dd_permanent``;
+`bayes_fdi.scoring.picalc.first_detection`). `first_detection_summary` gathers them per
+scenario, `permanence_target` is the report's target row on them and `first_detection_section`
+its table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from bayes_fdi.reporting import markdown_table
+from bayes_fdi.scoring.picalc import UNDETERMINED
+
+__all__ = ["PERMANENT_SHARE", "first_detection_section", "first_detection_summary",
+           "permanence_target"]  # fmt: skip
+
+#: Share of the detected runs of the visible big abrupt faults whose DD must stay on after the
+#: first detection.
+PERMANENT_SHARE = 0.95
+
+
+def _scenario_name(row: Mapping[str, Any]) -> str:
+    return " ".join(p for p in (row["fault"], row["mode"], row.get("size")) if p)
+
+
+def first_detection_summary(results: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """Per scenario: ``n`` runs, ``detected`` (DD on in the faulty part), ``kept`` (of those,
+    DD on from the first detection to the end), and the median, min and max of ``t_dt_first``
+    over the detected runs (None when none). Rows without ``first_detection`` (results of an
+    earlier version) are left out."""
+    runs: dict[str, list[Mapping[str, float]]] = {}
+    for row in results["scenarios"]:
+        if "first_detection" in row:
+            runs.setdefault(_scenario_name(row), []).append(row["first_detection"])
+    out = {}
+    for name, firsts in runs.items():
+        t = np.array([f["t_dt_first"] for f in firsts], dtype=np.float64)
+        found = t != UNDETERMINED
+        kept = sum(f["dd_permanent"] == 1.0 for f in firsts)
+        out[name] = {
+            "n": len(firsts),
+            "detected": int(found.sum()),
+            "kept": int(kept),
+            "median": float(np.median(t[found])) if found.any() else None,
+            "min": float(t[found].min()) if found.any() else None,
+            "max": float(t[found].max()) if found.any() else None,
+        }
+    return out
+
+
+def permanence_target(results: Mapping[str, Any], names: Sequence[str]) -> list[str] | None:
+    """The target row (target, measured, met) "DD kept on after its first detection in >= 95 %
+    of the detected runs" over the scenarios ``names``; None without first detections."""
+    summary = first_detection_summary(results)
+    entries = [summary[n] for n in names if n in summary]
+    if not entries:
+        return None
+    detected = sum(e["detected"] for e in entries)
+    kept = sum(e["kept"] for e in entries)
+    share = kept / detected if detected else 0.0
+    met = detected > 0 and share >= PERMANENT_SHARE
+    return [
+        f"DD kept on after its first detection in >= {100 * PERMANENT_SHARE:.0f} % of the "
+        "detected runs of those big abrupt faults",
+        f"{kept} of {detected} runs ({100 * share:.1f} %)",
+        "yes" if met else "**no**",
+    ]
+
+
+def _times(median: float | None, low: float | None, high: float | None) -> str:
+    if median is None:
+        return "–"
+    return f"{median:.0f}" + (f" [{low:.0f}, {high:.0f}]" if low != high else "")
+
+
+def first_detection_section(
+    results: Mapping[str, Any], summary: Mapping[str, Mapping[str, Any]]
+) -> list[str]:
+    """The report's lines on the first detection: per scenario detected in some run, ``t_dt``
+    (last rising edge, from ``summary``: `bayes_fdi.benchmark.report.summarise`) beside
+    ``t_dt_first`` and the runs whose DD stayed on."""
+    firsts = first_detection_summary(results)
+    rows = []
+    for name, e in firsts.items():
+        if not e["detected"]:
+            continue
+        last = summary.get(name, {}).get("t_dt", {})
+        rows.append(
+            [
+                name,
+                _times(last.get("median"), last.get("min"), last.get("max")),
+                _times(e["median"], e["min"], e["max"]),
+                f"{e['kept']} of {e['detected']}",
+            ]
+        )
+    if not rows:
+        return []
+    return [
+        "## First detection and permanence",
+        "",
+        "t_dt (PICalc) runs to the last rising edge of DD; t_dt_first to the first second of "
+        "the faulty part with DD on (median [min, max] over the runs that detect). They differ "
+        "where DD dropped after the first detection; *kept on*: runs whose DD stayed on from "
+        "the first detection to the end of the zone, of the runs that detect.",
+        "",
+        markdown_table(["scenario", "t_dt [s]", "t_dt_first [s]", "kept on"], rows),
+    ]

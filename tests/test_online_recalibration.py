@@ -1,0 +1,119 @@
+"""The recalibration of the online diagnoser's group probabilities
+(bayes_fdi.diagnosis.online.training): fitted on the per-second probabilities the stream gives
+on the calibration runs, the seconds the benchmark scores."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
+from bayes_fdi.calibration import TemperatureScaler, expected_calibration_error
+from bayes_fdi.diagnosis import OnlineDiagnoser
+from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
+from bayes_fdi.diagnosis.online.training import CALIBRATION_SECONDS_PER_RUN, detected_seconds
+
+
+def test_detected_seconds_by_hand():
+    # DD rises at 2 (before the onset 3) and at 5; second 6 has no signature
+    dd = np.array([0, 0, 1, 1, 0, 1, 1, 1], dtype=bool)
+    features = np.arange(16.0).reshape(8, 2)
+    features[6, 1] = np.nan
+    times = np.arange(8.0)
+    rows, ages, hit = detected_seconds(dd, features, times, 3.0)
+    assert [r[0] for r in rows] == [6.0, 10.0, 14.0]  # seconds 3, 5, 7
+    assert ages == [1, 0, 2]  # seconds since the rise each belongs to (2, 5, 5)
+    assert hit  # the rise at 5 follows the onset
+    rows, ages, _ = detected_seconds(dd, features, times, 3.0, cap=2)
+    assert [r[0] for r in rows] == [6.0, 14.0]  # evenly spaced: the first and the last
+    _, _, hit = detected_seconds(dd, features, times, 6.0)
+    assert not hit  # DD on from 5: no rise at or after 6
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    models = DynamicNormalModels(
+        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
+        calibration_folds=2, random_state=0,
+    )  # fmt: skip
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    kinds = ("f1", "f7", "f18")
+    specs = [Fault(f, s, 100.0) for f in kinds for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
+    faults = simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
+    held = [Fault(f, s, 80.0) for f in kinds for s in (0.5, 0.9)]
+    validation = simulate(benchmark_inputs(len(held), 300, seed=4, vary=True), held, seed=4)
+    calibration = simulate(benchmark_inputs(len(held), 300, seed=5, vary=True), held, seed=5)
+    diag = OnlineDiagnoser(models, calibrator=TemperatureScaler(), max_signatures_per_fault=20).fit(
+        normal, faults, validation_runs=validation, calibration_runs=calibration
+    )
+    return diag, calibration
+
+
+def _scored_seconds(stream, calibration, faults):
+    """The detected seconds after each run's onset with a finite group probability, at most
+    CALIBRATION_SECONDS_PER_RUN evenly spaced: read off the decision stream."""
+    t = stream["time"].values
+    picks = []
+    for r in range(stream.sizes["run"]):
+        if str(calibration["state"].values[r]) not in faults:
+            continue
+        gp = stream["group_proba"].isel(run=r).transpose("time", "group").values
+        ok = (t >= float(calibration["onset"].values[r])) & stream["DD"].isel(run=r).values
+        keep = np.flatnonzero(ok & np.isfinite(gp).all(axis=1))
+        if keep.size > CALIBRATION_SECONDS_PER_RUN:
+            pos = np.linspace(0, keep.size - 1, CALIBRATION_SECONDS_PER_RUN)
+            keep = keep[np.round(pos).astype(np.int64)]
+        picks += [(r, k) for k in keep]
+    return picks
+
+
+def test_recalibration_is_fitted_on_the_streams_per_second_probabilities(fitted):
+    diag, calibration = fitted
+    iso = diag.isolator_
+    assert len(iso.groups_) > 1 and iso.calibrator_ is not None
+    fitted_cal = iso.calibrator_
+    try:  # the stream's probabilities before recalibration
+        iso.calibrator_ = None
+        raw = diag.run(calibration)
+    finally:
+        iso.calibrator_ = fitted_cal
+    picks = _scored_seconds(raw, calibration, set(iso.faults_))
+    assert fitted_cal.n_samples_ == len(picks) > 0
+    gp = np.array([raw["group_proba"].values[r, k] for r, k in picks])
+    group = {f: g for g, members in zip(iso.group_labels_, iso.groups_, strict=True)
+             for f in members}  # fmt: skip
+    y = [group[str(calibration["state"].values[r])] for r, _ in picks]
+    again = TemperatureScaler(classes=list(iso.group_labels_)).fit(gp, y)
+    assert fitted_cal.temperature_ == pytest.approx(again.temperature_, rel=1e-9)
+    # and the calibrated stream is those probabilities at that temperature
+    stream = diag.run(calibration)
+    got = np.array([stream["group_proba"].values[r, k] for r, k in picks])
+    np.testing.assert_allclose(got, again.transform(gp), rtol=1e-9, atol=1e-12)
+
+
+def test_the_recalibration_survives_a_model_file(fitted, tmp_path):
+    diag, calibration = fitted
+    path = diag.save(tmp_path / "diag.bfdi")
+    back = OnlineDiagnoser.load(path)
+    assert back.isolator_.temperature() == diag.isolator_.temperature()
+    a, b = diag.run(calibration), back.run(calibration)
+    np.testing.assert_array_equal(a["group_proba"].values, b["group_proba"].values)
+
+
+def test_per_second_temperature_removes_a_known_miscalibration():
+    # seconds of 300 runs whose probabilities are over-confident by a known power 2.5 and
+    # correlated within a run (one true distribution per run): the temperature fitted on the
+    # seconds recovers 2.5 and leaves an ECE at the noise floor
+    rng = np.random.default_rng(7)
+    n_runs, per_run, k = 300, 50, 4
+    logits = rng.normal(0.0, 1.5, (n_runs, k))
+    true = np.exp(logits) / np.exp(logits).sum(axis=1, keepdims=True)
+    y = np.concatenate([rng.choice(k, per_run, p=p) for p in true])
+    true = np.repeat(true, per_run, axis=0)
+    shown = true**2.5 / (true**2.5).sum(axis=1, keepdims=True)
+    before = expected_calibration_error(y, shown, classes=np.arange(k))
+    scaler = TemperatureScaler(classes=np.arange(k)).fit(shown, y)
+    after = expected_calibration_error(y, scaler.transform(shown), classes=np.arange(k))
+    assert scaler.temperature_ == pytest.approx(2.5, rel=0.1)
+    assert before.value > 0.08
+    assert after.value < 2 * after.noise_floor + 0.01

@@ -1,0 +1,162 @@
+"""The compiled (numba) engine of the fast Gaussian solver against the torch rules it replaces:
+the best action on exact factors (ties, deletions, the gain floor), the rounds of the lazy
+verification (against the public bound functions), the carried factors' re-estimation update
+(against its formulas in NumPy), and whole fits, which take the same actions either way."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import bayes_fdi.rvm.sbl.action_kernels as action_kernels
+import bayes_fdi.rvm.sbl.tracked_factors as tracked_module
+import bayes_fdi.rvm.sbl.tracked_kernels as tracked_kernels
+import bayes_fdi.rvm.sbl.verification as verification_module
+from bayes_fdi.rvm.kernels import RBF
+from bayes_fdi.rvm.sbl import (
+    Design,
+    best_action,
+    fast_gaussian,
+    optimistic_ratio,
+    reestimate_gain_bounds,
+    useful_lower_bound,
+)
+from bayes_fdi.rvm.threads import fit_threads
+
+
+def _factors(seed: int, P: int = 60):
+    """Random factors of ``P`` candidates, ``M`` actives (with precisions above ``S``, as a
+    posterior has), duplicated candidates (ties) every third draw."""
+    g = torch.Generator().manual_seed(seed)
+    M = int(torch.randint(1, 12, (1,), generator=g))
+    act = torch.randperm(P, generator=g)[:M]
+    S = torch.rand(P, generator=g, dtype=torch.float64) * 2.0
+    Q = torch.randn(P, generator=g, dtype=torch.float64) * 2.0
+    if seed % 3 == 0:
+        S[10:20], Q[10:20] = S[0], Q[0]
+    alpha = torch.rand(M, generator=g, dtype=torch.float64) * 5.0 + S[act]
+    addable = torch.rand(P, generator=g) > 0.3
+    addable[act] = False
+    return S, Q, act, alpha, addable
+
+
+def test_compiled_best_action_is_the_torch_rules_choice():
+    kinds = set()
+    for seed in range(300):
+        S, Q, act, alpha, addable = _factors(seed)
+        want = best_action(S, Q, act, alpha, addable)
+        index, gain, kind, new_alpha, position, any_delete = action_kernels.best_action_kernel(
+            S.numpy(), Q.numpy(), act.numpy(), alpha.numpy(), addable.numpy()
+        )
+        assert (index, kind, position, bool(any_delete)) == (
+            want.index,
+            want.kind,
+            want.position,
+            want.any_delete,
+        ), seed
+        # the same formulas; only log1p's last bit may differ between libm and torch
+        assert gain == want.gain or gain == pytest.approx(want.gain, rel=1e-14)
+        assert new_alpha == want.new_alpha or new_alpha == pytest.approx(want.new_alpha, rel=1e-14)
+        kinds.add(kind)
+    assert kinds == {0, 1, 2}  # additions, re-estimates and deletions were compared
+
+
+@pytest.mark.parametrize("seed", range(50))
+def test_compiled_verification_round_matches_the_bound_functions(seed):
+    S, Q, act, alpha, addable = _factors(seed)
+    g = torch.Generator().manual_seed(1000 + seed)
+    S_err = torch.rand(S.shape, generator=g, dtype=torch.float64) * 0.2
+    Q_err = torch.rand(S.shape, generator=g, dtype=torch.float64) * 0.2
+    verified = torch.rand(S.shape, generator=g) > 0.7
+    arrays = [v.numpy() for v in (S, S_err, Q, Q_err, act, alpha, verified)]
+    unsure = action_kernels.unsure_actives(*arrays)
+    theta_lo = useful_lower_bound(S[act], S_err[act], Q[act], Q_err[act], alpha)
+    want = act[~verified[act] & ~(theta_lo > 1e-12)]
+    np.testing.assert_array_equal(unsure, want.numpy())
+
+    band, ratio = 0.05, 1.4
+    cand, ub = action_kernels.round_candidates(
+        S.numpy(), Q.numpy(), S_err.numpy(), Q_err.numpy(), act.numpy(), addable.numpy(),
+        verified.numpy(), band, ratio,
+    )  # fmt: skip
+    re_ub = reestimate_gain_bounds(S[act], S_err[act], Q[act], Q_err[act])
+    reach = ~verified[act] & (re_ub >= band)
+    x = torch.where(addable & ~verified, optimistic_ratio(S, Q, S_err, Q_err), 0.0)
+    adds = (x >= ratio).nonzero().squeeze(1)
+    np.testing.assert_array_equal(cand, torch.cat([act[reach], adds]).numpy())
+    xa = x[adds]
+    ub_add = torch.where(torch.isfinite(xa), 0.5 * (xa - 1.0 - torch.log(xa)), math.inf)
+    np.testing.assert_allclose(ub, torch.cat([re_ub[reach], ub_add]).numpy(), rtol=1e-13)
+
+
+def test_compiled_reestimation_update_follows_its_formulas():
+    rng = np.random.default_rng(5)
+    P, cap, M, k = 40, 8, 6, 2
+    C = rng.standard_normal((P, cap))
+    s = rng.standard_normal(M)
+    S, Q = rng.random(P), rng.standard_normal(P)
+    S_err, Q_err, rho, nu = (rng.random(P) * 1e-9 for _ in range(4))
+    sc = dict(kappa=0.3, kappa_err=1e-12, kap=0.3 + 1e-12, e_scale=2.0, mk=-0.7, e_mu=1e-10)
+    sc |= dict(g4=4.4e-16, grow=1.5, rho_ack=1e-11, rho_aa=1e-13, rho_nu=1e-12, s_norm=1.3)
+    sc |= dict(g2=2.2e-16)
+    c = C[:, k].copy()
+    a = -sc["kappa"] * c
+    e = sc["e_scale"] * rho
+    dS, dQ = sc["kappa"] * c * c, sc["kappa"] * sc["mk"] * c
+    want_S, want_Q = S + dS, Q + dQ
+    want_Se = S_err + (
+        sc["kappa_err"] * c * c
+        + sc["kap"] * e * (2 * abs(c) + e)
+        + sc["g4"] * (abs(want_S) + abs(dS))
+    )
+    want_Qe = Q_err + (
+        sc["kappa_err"] * abs(sc["mk"]) * abs(c)
+        + sc["kap"] * (sc["e_mu"] * abs(c) + (abs(sc["mk"]) + sc["e_mu"]) * e)
+        + sc["g4"] * (abs(want_Q) + abs(dQ))
+    )
+    want_C = C.copy()
+    want_C[:, :M] += np.outer(a, s)
+    want_rho = (
+        rho * sc["grow"]
+        + abs(c) * sc["rho_ack"]
+        + abs(a) * sc["rho_aa"]
+        + sc["rho_nu"] * (nu + abs(a) * sc["s_norm"])
+    )
+    want_nu = (nu + abs(a) * sc["s_norm"]) * (1 + sc["g2"])
+    tracked_kernels.reestimate_rows(
+        C, M, k, s, S, Q, S_err, Q_err, rho, nu, np.array([*sc.values()])
+    )
+    for got, want in (
+        (C, want_C), (S, want_S), (Q, want_Q), (S_err, want_Se), (Q_err, want_Qe),
+        (rho, want_rho), (nu, want_nu),
+    ):  # fmt: skip
+        np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-300)
+
+
+def _rbf_problem(seed: int, n: int, width: float):
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-10.0, 10.0, size=(n, 2))
+    y = np.sinc(X / np.pi).sum(1) + 0.1 * rng.standard_normal(n)
+    X_t = torch.from_numpy(X)
+    return Design(matrix=RBF(width)(X_t, X_t), bias=True), torch.from_numpy(y)
+
+
+@pytest.mark.parametrize(
+    ("seed", "n", "width"),
+    [(0, 150, 2.0), pytest.param(1, 400, 1.2, marks=pytest.mark.slow), (2, 120, 3.0)],
+)
+def test_compiled_engine_takes_the_torch_engines_actions(seed, n, width, monkeypatch):
+    design, t = _rbf_problem(seed, n, width)
+    with fit_threads():
+        fast = fast_gaussian(design, t)
+        monkeypatch.setattr(verification_module, "COMPILED_RULES", False)
+        monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", False)
+        slow = fast_gaussian(design, t)
+    assert torch.equal(fast.active, slow.active)
+    assert fast.n_iter == slow.n_iter and fast.converged == slow.converged
+    assert torch.equal(fast.alpha.isfinite(), slow.alpha.isfinite())
+    torch.testing.assert_close(fast.alpha, slow.alpha, rtol=1e-8, atol=0.0)
+    assert fast.log_evidence == pytest.approx(slow.log_evidence, rel=1e-12, abs=1e-9)
