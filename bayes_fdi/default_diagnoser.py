@@ -1,16 +1,23 @@
 """The training campaigns of the online diagnoser and `fit_online_diagnoser`.
 
 The online diagnoser (`bayes_fdi.diagnosis.OnlineDiagnoser`) is fitted on simulated campaigns
-declared in ``sim/``:
+declared in ``sim/``, in one of two trainings (`TRAININGS`):
 
-- ``online-normal.toml``: fault-free runs (normal models, whitening, detector threshold);
-- ``online-faults-abrupt.toml`` and ``online-faults-incipient.toml``: every fault at
-  magnitudes from 0.1 to 1.0, abrupt and ramping, each simulated with three seeds for the
-  training, validation (isolability groups) and calibration (group probabilities) sets.
+- ``"dgen"`` (default): the DGen sines of the benchmark with run-to-run variation:
+  ``online-normal.toml`` (fault-free runs: normal models, whitening, detector threshold, input
+  envelope), ``online-faults-abrupt.toml`` and ``online-faults-incipient.toml`` (every fault at
+  magnitudes from 0.1 to 1.0, abrupt and ramping);
+- ``"excitation-mix"``: the same files with fewer runs, plus their sister files
+  ``online-*-sine-sum.toml``, ``-step-ramp.toml`` and ``-level-loop.toml``: the excitation
+  families of `bayes_fdi.actuator.excitation` (sums of sines, steps and ramps, a PI level loop)
+  over the DABLib operating ranges of P1, P2, T1, and normal models whose std factors are
+  fitted by coverage (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels`
+  ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all.
 
-Every seed is below 1000, apart from the benchmark's evaluation seeds (>= 10 000, see
-``bayes_fdi.benchmark.scenarios``). The group probabilities are recalibrated with a
-`~bayes_fdi.calibration.TemperatureScaler`.
+Each fault file is simulated with three seeds for the training, validation (isolability groups)
+and calibration (group probabilities) sets. Every seed is below 1000, apart from the
+benchmark's evaluation seeds (>= 10 000, see ``bayes_fdi.benchmark.scenarios``). The group
+probabilities are recalibrated with a `~bayes_fdi.calibration.TemperatureScaler`.
 
 ``small=True`` is a quick version for tests, notebooks and ``make demo``: fewer and shorter
 runs, and lighter normal-model fits.
@@ -29,76 +36,129 @@ from bayes_fdi.campaigns.spec import Campaign
 
 __all__ = [
     "CAMPAIGNS",
-    "SEED_OFFSETS",
+    "SET_SEED_OFFSETS",
+    "TRAININGS",
     "fit_online_diagnoser",
     "online_campaigns",
     "simulate_online_campaigns",
 ]
 
-#: The campaign files (names in ``sim/``).
-CAMPAIGNS: dict[str, str] = {
-    "normal": "online-normal",
-    "abrupt": "online-faults-abrupt",
-    "incipient": "online-faults-incipient",
+#: The campaign files (names in ``sim/``) of each set of each training, with the overrides
+#: each file is loaded with: the DGen sines first, then the excitation families.
+TRAININGS: dict[str, dict[str, tuple[tuple[str, dict[str, Any]], ...]]] = {
+    "dgen": {
+        "normal": (("online-normal", {}),),
+        "abrupt": (("online-faults-abrupt", {}),),
+        "incipient": (("online-faults-incipient", {}),),
+    },
+    "excitation-mix": {
+        "normal": (("online-normal", {"runs_per_state": 18, "batch_size": 18}),
+                   ("online-normal-sine-sum", {}), ("online-normal-step-ramp", {}),
+                   ("online-normal-level-loop", {})),
+        "abrupt": (("online-faults-abrupt", {"runs_per_state": 4, "batch_size": 76}),
+                   ("online-faults-abrupt-sine-sum", {}), ("online-faults-abrupt-step-ramp", {}),
+                   ("online-faults-abrupt-level-loop", {})),
+        "incipient": (("online-faults-incipient", {"runs_per_state": 2, "batch_size": 38}),
+                      ("online-faults-incipient-sine-sum", {}),
+                      ("online-faults-incipient-level-loop", {})),
+    },
+}  # fmt: skip
+#: The campaign files of each set of the default training (``"dgen"``).
+CAMPAIGNS: dict[str, tuple[str, ...]] = {
+    key: tuple(name for name, _ in files) for key, files in TRAININGS["dgen"].items()
 }
-#: Campaign seed of each set (plus the ``seed`` argument): all below 1000.
-SEED_OFFSETS: dict[str, dict[str, int]] = {
-    "normal": {"normal": 101},
-    "abrupt": {"train": 201, "validation": 301, "calibration": 401},
-    "incipient": {"train": 251, "validation": 351, "calibration": 451},
-}
-#: Overrides of the quick version (``small=True``).
+#: The parts each fault campaign is simulated for, and what they add to the file's seed (plus
+#: the ``seed`` argument): every seed stays below 1000.
+SET_SEED_OFFSETS: dict[str, int] = {"train": 0, "validation": 100, "calibration": 200}
+#: Overrides of the quick version (``small=True``), per set, applied to each of its files (the
+#: runs per state of the DGen-only training; a mix takes one run per file fewer in all).
 SMALL: dict[str, dict[str, Any]] = {
     "normal": {"runs_per_state": 8, "duration": 600},
     "abrupt": {"runs_per_state": 3, "duration": 400, "faults.onset": 100.0},
     "incipient": {"runs_per_state": 1, "duration": 600, "faults.onset": 100.0,
                   "faults.ramp": 300.0},
 }  # fmt: skip
-#: Largest ``seed``: keeps every campaign seed below 1000.
-MAX_SEED = 1000 - max(v for d in SEED_OFFSETS.values() for v in d.values())
+#: Runs per state of each file of a mix with ``small=True`` (normal, abrupt, incipient).
+_SMALL_MIX_RUNS = {"normal": 2, "abrupt": 1, "incipient": 1}
+#: Largest campaign seed of a file in ``sim/`` plus the largest set offset is below this.
+_SEED_CEILING = 1000
 
 
-def online_campaigns(*, small: bool = False) -> dict[str, Campaign]:
-    """The three campaigns (``small``: the quick version)."""
+def _check_training(training: Any) -> str:
+    if training not in TRAININGS:
+        raise ValueError(f"training must be one of {', '.join(TRAININGS)}, got {training!r}")
+    return training
+
+
+def online_campaigns(
+    *, small: bool = False, training: str = "dgen"
+) -> dict[str, tuple[Campaign, ...]]:
+    """The campaigns of each set of ``training`` (`TRAININGS`; ``small``: the quick version)."""
     from bayes_fdi.campaigns.cache import campaign_file
 
     out = {}
-    for key, name in CAMPAIGNS.items():
-        overrides = SMALL[key] if small else {}
-        out[key] = load_campaign(campaign_file(name), **overrides)
+    files_of = TRAININGS[_check_training(training)]
+    for key, files in files_of.items():
+        loaded = []
+        for name, overrides in files:
+            overrides = dict(overrides)
+            if small:
+                overrides.update(SMALL[key])
+                if len(files) > 1:
+                    overrides["runs_per_state"] = _SMALL_MIX_RUNS[key]
+            loaded.append(load_campaign(campaign_file(name), **overrides))
+        out[key] = tuple(loaded)
     return out
 
 
+def _max_seed(campaigns: dict[str, tuple[Campaign, ...]]) -> int:
+    """The largest ``seed`` argument that keeps every campaign seed below 1000."""
+    top = max(c.seed for cs in campaigns.values() for c in cs) + max(SET_SEED_OFFSETS.values())
+    return _SEED_CEILING - top
+
+
 def simulate_online_campaigns(
-    *, seed: int = 0, small: bool = False, progress: bool = True
+    *, seed: int = 0, small: bool = False, progress: bool = True, training: str = "dgen"
 ) -> dict[str, list[xr.Dataset]]:
-    """Simulate the training data: ``{"normal": [...], "train": [...], "validation": [...],
-    "calibration": [...]}`` (lists of datasets, one per campaign)."""
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < MAX_SEED:
-        raise ValueError(f"seed must be an integer in [0, {MAX_SEED}), got {seed!r}")
-    campaigns = online_campaigns(small=small)
+    """Simulate the training data of ``training``: ``{"normal": [...], "train": [...],
+    "validation": [...], "calibration": [...]}`` (lists of datasets, one per campaign file)."""
+    campaigns = online_campaigns(small=small, training=training)
+    max_seed = _max_seed(campaigns)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < max_seed:
+        raise ValueError(f"seed must be an integer in [0, {max_seed}), got {seed!r}")
     out: dict[str, list[xr.Dataset]] = {"normal": [], "train": [], "validation": [],
                                         "calibration": []}  # fmt: skip
-    for key, campaign in campaigns.items():
-        for part, offset in SEED_OFFSETS[key].items():
-            ds = simulate_campaign(campaign, seed=offset + seed, progress=progress)
-            out[part].append(ds)
+    for key, files in campaigns.items():
+        parts = {"normal": 0} if key == "normal" else SET_SEED_OFFSETS
+        for campaign in files:
+            for part, offset in parts.items():
+                ds = simulate_campaign(campaign, seed=campaign.seed + offset + seed,
+                                       progress=progress)  # fmt: skip
+                out[part].append(ds)
     return out
 
 
 def fit_online_diagnoser(
-    *, seed: int = 0, small: bool = False, progress: bool = True, **params: Any
+    *,
+    seed: int = 0,
+    small: bool = False,
+    progress: bool = True,
+    training: str = "dgen",
+    **params: Any,
 ) -> Any:
     """Simulate the online training campaigns and fit an `OnlineDiagnoser` on them.
 
     Parameters
     ----------
     seed
-        Added to every campaign seed (all stay below 1000).
+        Added to every campaign seed (all must stay below 1000: a ``ValueError`` says the
+        largest allowed).
     small
         The quick version (tests, notebooks, ``make demo``).
     progress
         Progress bars and a one-line summary on stderr.
+    training
+        ``"dgen"`` (default) or ``"excitation-mix"`` (`TRAININGS`).
     **params
         Parameters of `OnlineDiagnoser` (default: ``calibrator=TemperatureScaler()``,
         ``random_state=seed``; with ``small``, lighter normal models).
@@ -115,18 +175,25 @@ def fit_online_diagnoser(
     from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 
     t0 = time.perf_counter()
-    data = simulate_online_campaigns(seed=seed, small=small, progress=progress)
+    mix = _check_training(training) != "dgen"
+    data = simulate_online_campaigns(seed=seed, small=small, progress=progress, training=training)
     simulated = time.perf_counter() - t0
     params.setdefault("calibrator", TemperatureScaler())
     params.setdefault("random_state", seed)
+    coverage = 0.9 if mix else None
     if small:
         params.setdefault("max_signatures_per_fault", 25)
         params.setdefault(
             "normal_models",
-            DynamicNormalModels(max_train_samples=800, calibration_folds=3, random_state=seed),
+            DynamicNormalModels(max_train_samples=800, calibration_folds=3,
+                                std_coverage=coverage, random_state=seed),
+        )  # fmt: skip
+    elif mix:
+        params.setdefault(
+            "normal_models", DynamicNormalModels(std_coverage=coverage, random_state=seed)
         )
     diag = OnlineDiagnoser(**params).fit(
-        data["normal"][0] if len(data["normal"]) == 1 else xr.concat(data["normal"], "run"),
+        data["normal"][0] if len(data["normal"]) == 1 else data["normal"],
         data["train"],
         validation_runs=data["validation"],
         calibration_runs=data["calibration"],

@@ -113,3 +113,25 @@ def test_fit_refuses_faulty_runs():
     bad = simulate(benchmark_inputs(2, 60, seed=1), [None, Fault("f1", 0.5)], seed=1)
     with pytest.raises(ValueError, match="fault-free"):
         DynamicNormalModels().fit(bad)
+
+
+@pytest.mark.parametrize("coverage", [0.9, None])
+def test_each_speed_bin_is_calibrated_to_its_rule(coverage):
+    # a step of the command puts a heavy tail into the out-of-fold residuals
+    drive = benchmark_inputs(4, 300, seed=21, vary=True)
+    cv = drive["CV"].values.copy()
+    cv[:, 150:] -= 0.15  # CV stays in [0.05, 0.65]: X never at a rail
+    normal = simulate(drive.assign(CV=(("run", "time"), cv)), seed=21)
+    nm = DynamicNormalModels(
+        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
+        calibration_folds=2, std_coverage=coverage, random_state=0,
+    ).fit(normal)  # fmt: skip
+    speed = np.abs(np.diff(cv, axis=1, prepend=cv[:, :1]))
+    bins = np.searchsorted(nm.std_scale_edges_, speed, side="right")
+    z = nm.oof_z_[..., 0]
+    for b in range(nm.std_scale_edges_.size + 1):
+        zb = np.abs(z[(bins == b) & np.isfinite(z)])
+        if coverage is None:  # maximum likelihood: unit mean square in every bin
+            assert np.sqrt(np.mean(zb**2)) == pytest.approx(1.0, rel=1e-9)
+        else:  # the central 90 % interval, +-1.645, covers 90 % of the bin's residuals
+            assert np.quantile(zb, 0.9) == pytest.approx(1.6448536269514722, rel=1e-9)

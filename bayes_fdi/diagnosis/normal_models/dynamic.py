@@ -25,16 +25,14 @@ better):
 Both are RBF `~bayes_fdi.rvm.RVR` models whose widths maximise the evidence over a grid;
 the predictions are clipped to the sensors' range [0, 1]. The predictive standard deviations
 are calibrated by cross-fitting (fault-free runs split by run, or by time block when there are
-fewer runs than folds): per bin of the command speed ``|CV(t) - CV(t-1)|`` (causal, so the
-online path can compute it).
+fewer runs than folds): one factor per bin of the command speed ``|CV(t) - CV(t-1)|`` (causal),
+by maximum likelihood or by coverage of the out-of-fold residuals (``std_coverage``).
 
-**Rails.** The sensors clip at 0 and 1, and F' sits at its upper rail for much of a
-benchmark run (whenever the valve is more than about two thirds open). A measurement at a rail
-whose prediction is at the same rail carries no information about a change (the true value is
-only known to lie beyond the rail), so its standardised residual is 0 (`standardised_residuals`);
-otherwise ``1 - F_hat >= 0`` on every railed second would bias the residuals.
-The out-of-fold standardised residuals are kept (``oof_z_``) for the detector's whitening and
-threshold.
+**Rails.** The sensors clip at 0 and 1, and F' sits at its upper rail for much of a benchmark
+run. A measurement at a rail whose prediction is at the same rail carries no information about a
+change (the true value is only known to lie beyond the rail), so its standardised residual is 0
+(`standardised_residuals`). The out-of-fold standardised residuals are kept (``oof_z_``) for
+the detector's whitening and threshold.
 
 Every prediction (`predict`, and the online diagnoser's per-second path) goes through one
 compiled kernel (`bayes_fdi.diagnosis.normal_models.dynamic_kernel`) with the fitted values as
@@ -55,6 +53,7 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
+from scipy import stats
 from sklearn.base import BaseEstimator
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
@@ -121,6 +120,10 @@ class DynamicNormalModels(BaseEstimator):
         Folds of the cross-fit that calibrates the predictive standard deviations (>= 2).
     calibration_bins
         Bins of the command speed ``|CV(t) - CV(t-1)|`` with their own std factor.
+    std_coverage
+        None (default): each bin's std factor by maximum likelihood, ``sqrt(mean(z^2))`` of the
+        out-of-fold ``z``; a level ``q``: the central interval of level ``q`` covers a share ``q``
+        of them (robust to a heavy tail, e.g. the seconds after command steps).
     random_state
         Seed of the subsets and folds.
 
@@ -157,6 +160,7 @@ class DynamicNormalModels(BaseEstimator):
         max_train_samples: int = 2000,
         calibration_folds: int = 4,
         calibration_bins: int = 5,
+        std_coverage: float | None = None,
         random_state: int | None = 0,
     ) -> None:
         self.n_differences = n_differences
@@ -166,6 +170,7 @@ class DynamicNormalModels(BaseEstimator):
         self.max_train_samples = max_train_samples
         self.calibration_folds = calibration_folds
         self.calibration_bins = calibration_bins
+        self.std_coverage = std_coverage
         self.random_state = random_state
 
     # ---------------------------------------------------------------- fitting
@@ -185,6 +190,8 @@ class DynamicNormalModels(BaseEstimator):
             grid = tuple(getattr(self, name))
             if not grid or not all(math.isfinite(float(w)) and float(w) > 0 for w in grid):
                 raise ValueError(f"{name} must be a non-empty grid of positive widths")
+        if self.std_coverage is not None and not 0 < self.std_coverage < 1:
+            raise ValueError(f"std_coverage must be None or in (0, 1), got {self.std_coverage!r}")
 
     def fit(self, normal_runs: xr.Dataset) -> DynamicNormalModels:
         """Fit both models on fault-free runs and calibrate their predictive stds.
@@ -322,7 +329,11 @@ class DynamicNormalModels(BaseEstimator):
         )
 
         def mle(zz: np.ndarray, fallback: float) -> float:
-            return float(np.sqrt(np.mean(zz**2))) if zz.size >= 10 and np.any(zz != 0) else fallback
+            if zz.size < 10 or not np.any(zz != 0):
+                return fallback
+            if (q := self.std_coverage) is None:
+                return float(np.sqrt(np.mean(zz**2)))
+            return float(np.quantile(np.abs(zz), q) / stats.norm.ppf(0.5 + q / 2)) or fallback
 
         if used.sum() < 10:
             warnings.warn(
@@ -470,8 +481,10 @@ class DynamicNormalModels(BaseEstimator):
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
         """Saved attributes in today's layout: files of bayes_fdi 0.1.0 hold the compiled
-        kernel's arguments as ``_lean`` and ``_kernel_args``; today they are ``params_``."""
+        kernel's arguments as ``_lean`` and ``_kernel_args``; today they are ``params_``; files
+        of format <= 4 fitted the std factors by maximum likelihood (``std_coverage=None``)."""
         data = {k: v for k, v in data.items() if k not in ("_lean", "_kernel_args")}
+        data.setdefault("std_coverage", None)  # before the parameter: maximum likelihood
         if "regressors_" in data and "params_" not in data:
             models = cls.__new__(cls)
             models.__dict__.update(data)

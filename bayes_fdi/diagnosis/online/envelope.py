@@ -2,7 +2,13 @@
 
 The normal models are trusted only where they were fitted. `InputEnvelope` is the training
 range of the inputs CV, P1, P2, T1 widened by ``margin`` of its span (at least
-`INPUT_MARGIN_FLOOR`): a second whose inputs lie outside it is DAZZLED (``outside``), and a
+`INPUT_MARGIN_FLOOR`), and of their dynamics: the mean absolute one-second increment of CV and
+P1 over the last ``rate_seconds`` (an exponential average), at most the largest seen in
+training widened by ``rate_margin``. The normal models take the recent increments of the
+command and of the pressure drop as inputs, so a command moving faster than any training run
+(a fast sine, a chattering controller) makes them extrapolate although every level lies inside
+its range. A second whose inputs lie outside the envelope (levels, ``outside``; or rates,
+``run_flags``) is DAZZLED, and a
 detection that began while the inputs were outside it is not trusted for isolation
 (``run``/``update``, an online component with its `EnvelopeState`): the inputs are averaged over
 the seconds without detection, and at each rising edge of DD that average is checked against the
@@ -10,13 +16,16 @@ envelope and the answer held until DD falls. The average of the seconds *before*
 is what counts: a fault that itself moves an input (f7 makes T1 jump) is detected within
 seconds, before the average has moved, while a plant running outside the training range
 (another temperature, another pressure) is caught. A detection from the stream's first second,
-before any second without one, is judged on the inputs of its first second.
+before any second without one, is judged on the inputs of its first second. The rates are
+judged as they stood before the detection's first second (they are averaged over every second:
+CV is the command and P1 the supply pressure, which no fault of the benchmark moves).
 
 Written by hand: a training range and a compiled exponential average.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -26,12 +35,20 @@ from numba import njit
 from bayes_fdi.diagnosis.component_state import (
     check_stacked_state,
     check_state,
+    stack_states,
     working_state,
     writable_copy,
 )
 from bayes_fdi.diagnosis.isolation.signatures import INPUT_REFERENCE_SECONDS
 
-__all__ = ["ENVELOPE_CHANNELS", "INPUT_MARGIN_FLOOR", "EnvelopeState", "InputEnvelope"]
+__all__ = [
+    "ENVELOPE_CHANNELS",
+    "INPUT_MARGIN_FLOOR",
+    "RATE_CHANNELS",
+    "RATE_SECONDS",
+    "EnvelopeState",
+    "InputEnvelope",
+]
 
 #: The inputs the envelope covers, in column order.
 ENVELOPE_CHANNELS = ("CV", "P1", "P2", "T1")
@@ -39,6 +56,14 @@ ENVELOPE_CHANNELS = ("CV", "P1", "P2", "T1")
 #: standard deviations): an input held constant in training (T1 under the DGen sines) would
 #: otherwise have an envelope as narrow as its noise.
 INPUT_MARGIN_FLOOR = 0.02
+#: The inputs whose rates the envelope covers (columns of `ENVELOPE_CHANNELS`).
+RATE_CHANNELS = ("CV", "P1")
+_RATE_COLUMNS = np.array([ENVELOPE_CHANNELS.index(c) for c in RATE_CHANNELS], dtype=np.int64)
+#: Time constant (s) of the average of the inputs' absolute increments.
+RATE_SECONDS = 30.0
+#: Smallest bound of the mean absolute increment (normalised full scale per second): about the
+#: sensor noise's, so that an input held constant in training is not flagged for its noise.
+RATE_FLOOR = 0.003
 
 
 class EnvelopeState(NamedTuple):
@@ -48,13 +73,46 @@ class EnvelopeState(NamedTuple):
     average_set: np.ndarray  #: ``(1,)`` bool: the average has a first value
     novel_at_onset: np.ndarray  #: ``(1,)`` bool: the current detection began outside
     detected: np.ndarray  #: ``(1,)`` bool: DD of the last second
+    previous: np.ndarray  #: ``(2,)`` CV and P1 of the last second (NaN: none)
+    rate: np.ndarray  #: ``(2,)`` average absolute one-second increment of CV and P1
+
+    @classmethod
+    def upgrade_model_file(cls, fields: dict, format_version: int) -> dict:
+        """The fields of a state saved before the envelope had rates (model-file format <= 4):
+        no last second, rates 0."""
+        fields = dict(fields)
+        fields.setdefault("previous", np.full(len(RATE_CHANNELS), np.nan))
+        fields.setdefault("rate", np.zeros(len(RATE_CHANNELS)))
+        return fields
 
 
 @njit(cache=True, error_model="numpy")
-def _onset_kernel(dd, inputs, low, high, alpha, state, out):  # pragma: no cover - compiled
-    """Whether each second's detection began outside ``[low, high]`` (``state`` in place)."""
+def _rates_kernel(x, columns, rate_high, beta, state, t):  # pragma: no cover - compiled
+    """Whether the rates stood above ``rate_high`` before second ``t``; then update them."""
+    fast = False
+    for j in range(columns.size):
+        if state.rate[j] > rate_high[j]:
+            fast = True
+        v = x[t, columns[j]]
+        if np.isfinite(v) and np.isfinite(state.previous[j]):
+            state.rate[j] += beta * (abs(v - state.previous[j]) - state.rate[j])
+        state.previous[j] = v  # NaN: the next increment is skipped
+    return fast
+
+
+@njit(cache=True, error_model="numpy")
+def _onset_kernel(
+    dd, inputs, low, high, alpha, columns, rate_high, beta, state, out, fast
+):  # pragma: no cover - compiled
+    """Whether each second's detection began outside the envelope (``out``) and whether the
+    rates stand above ``rate_high`` after each second (``fast``); ``state`` in place."""
     average = state.average
     for t in range(dd.size):
+        fast_before = _rates_kernel(inputs, columns, rate_high, beta, state, t)
+        fast[t] = False
+        for j in range(columns.size):
+            if state.rate[j] > rate_high[j]:
+                fast[t] = True
         if not dd[t]:
             ok = True
             for j in range(4):
@@ -72,7 +130,7 @@ def _onset_kernel(dd, inputs, low, high, alpha, state, out):  # pragma: no cover
             out[t] = False
             continue
         if not state.detected[0]:  # a new detection: were the inputs before it inside?
-            novel = False
+            novel = fast_before
             if state.average_set[0]:
                 for j in range(4):
                     if average[j] < low[j] or average[j] > high[j]:
@@ -87,17 +145,24 @@ def _onset_kernel(dd, inputs, low, high, alpha, state, out):  # pragma: no cover
 
 
 @njit(cache=True, error_model="numpy")
-def _onset_runs(dd, inputs, low, high, alpha, state, out):  # pragma: no cover - compiled
+def _onset_runs(
+    dd, inputs, low, high, alpha, columns, rate_high, beta, state, out, fast
+):  # pragma: no cover - compiled
     """`_onset_kernel` over each run (row) of ``dd``; ``state`` stacks the runs' states."""
     for r in range(dd.shape[0]):
         run_state = EnvelopeState(
-            state.average[r], state.average_set[r], state.novel_at_onset[r], state.detected[r]
-        )
-        _onset_kernel(dd[r], inputs[r], low, high, alpha, run_state, out[r])
+            state.average[r], state.average_set[r], state.novel_at_onset[r], state.detected[r],
+            state.previous[r], state.rate[r],
+        )  # fmt: skip
+        _onset_kernel(
+            dd[r], inputs[r], low, high, alpha, columns, rate_high, beta, run_state, out[r],
+            fast[r],
+        )  # fmt: skip
 
 
 class InputEnvelope:
-    """The training range of the inputs CV, P1, P2, T1, and the onset check against it.
+    """The training range of the inputs CV, P1, P2, T1 and of the rates of CV and P1, and the
+    onset check against it.
 
     Parameters
     ----------
@@ -109,11 +174,18 @@ class InputEnvelope:
         Time constant (s) of the average of the inputs before a detection (default
         `~bayes_fdi.diagnosis.isolation.signatures.INPUT_REFERENCE_SECONDS`, as the isolation
         signatures' input reference).
+    rate_margin
+        Widening of the largest training rate, as a share of it (default 0.25).
+    rate_seconds
+        Time constant (s) of the average of the absolute increments (default `RATE_SECONDS`).
 
     Attributes
     ----------
     low_, high_ : numpy.ndarray
         ``(4,)`` the envelope of CV, P1, P2, T1.
+    rate_high_ : numpy.ndarray
+        ``(2,)`` the largest mean absolute increment of CV and P1 (per second) inside the
+        envelope (infinite: no rate check, as in a model saved before the envelope had rates).
     """
 
     def __init__(
@@ -121,15 +193,34 @@ class InputEnvelope:
         margin: float = 0.1,
         margin_floor: float = INPUT_MARGIN_FLOOR,
         reference_seconds: float = INPUT_REFERENCE_SECONDS,
+        rate_margin: float = 0.25,
+        rate_seconds: float = RATE_SECONDS,
     ) -> None:
         self.margin = margin
         self.margin_floor = margin_floor
         self.reference_seconds = reference_seconds
+        self.rate_margin = rate_margin
+        self.rate_seconds = rate_seconds
+
+    @classmethod
+    def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
+        """An envelope saved before it had rates (model-file format <= 4): no rate check."""
+        data = dict(data)
+        data.setdefault("rate_margin", 0.25)
+        data.setdefault("rate_seconds", RATE_SECONDS)
+        if "low_" in data:
+            data.setdefault("rate_high_", np.full(len(RATE_CHANNELS), np.inf))
+        return data
 
     def fit(self, normal_runs: xr.Dataset) -> InputEnvelope:
-        """The range of CV, P1, P2, T1 over the (NaN-padded) training runs, widened."""
+        """The range of CV, P1, P2, T1 over the (NaN-padded) training runs, widened, and the
+        largest mean absolute increments of CV and P1 (`training_rates`), widened."""
         if not self.margin >= 0:
             raise ValueError(f"input_margin is out of range: {self.margin!r}")
+        if not (self.rate_margin >= 0 and math.isfinite(self.rate_margin)):
+            raise ValueError(f"rate_margin must be finite and >= 0, got {self.rate_margin!r}")
+        if not (self.rate_seconds >= 1 and math.isfinite(self.rate_seconds)):
+            raise ValueError(f"rate_seconds must be finite and >= 1, got {self.rate_seconds!r}")
         lows, highs = [], []
         for c in ENVELOPE_CHANNELS:
             v = np.asarray(normal_runs[c].values, dtype=np.float64)
@@ -139,16 +230,43 @@ class InputEnvelope:
             lows.append(lo - margin)
             highs.append(hi + margin)
         self.low_, self.high_ = np.array(lows), np.array(highs)
+        self.rate_high_ = np.full(len(RATE_CHANNELS), np.inf)
+        rates = self.training_rates(normal_runs)
+        self.rate_high_ = np.maximum(rates * (1.0 + self.rate_margin), RATE_FLOOR)
         return self
 
+    def training_rates(self, runs: xr.Dataset) -> np.ndarray:
+        """``(2,)`` the largest mean absolute increment of CV and P1 over ``runs`` (the
+        average `run_flags` keeps, after each run's first ``rate_seconds``)."""
+        x = np.stack(
+            [np.asarray(runs[c].transpose("run", "time").values, np.float64) for c in
+             ENVELOPE_CHANNELS], axis=-1,
+        )  # fmt: skip
+        state = stack_states([self.init_state()] * x.shape[0])
+        dd = np.zeros(x.shape[:2], dtype=np.bool_)
+        largest = np.zeros(len(RATE_CHANNELS))
+        warm = min(int(self.rate_seconds), x.shape[1])
+        for t in range(x.shape[1]):  # the average after each second, every run at once
+            _, _, state = self.run_stacked_flags(x[:, t : t + 1], dd[:, t : t + 1], state)
+            if t >= warm:
+                largest = np.fmax(largest, np.nanmax(state.rate, axis=0))
+        return largest
+
     @classmethod
-    def from_bounds(cls, low: Any, high: Any, **params: Any) -> InputEnvelope:
-        """An envelope with the given ``(4,)`` bounds (``params``: the constructor's)."""
+    def from_bounds(
+        cls, low: Any, high: Any, rate_high: Any = None, **params: Any
+    ) -> InputEnvelope:
+        """An envelope with the given ``(4,)`` bounds and ``(2,)`` rate bounds (default: no
+        rate check) (``params``: the constructor's)."""
         envelope = cls(**params)
         envelope.low_ = np.array(low, dtype=np.float64)
         envelope.high_ = np.array(high, dtype=np.float64)
         if envelope.low_.shape != (4,) or envelope.high_.shape != (4,):
             raise ValueError("low and high must hold the bounds of CV, P1, P2, T1")
+        rate = np.inf if rate_high is None else rate_high
+        envelope.rate_high_ = np.broadcast_to(np.asarray(rate, np.float64), (2,)).copy()
+        if np.any(np.isnan(envelope.rate_high_)) or np.any(envelope.rate_high_ < 0):
+            raise ValueError(f"rate_high must hold two bounds >= 0, got {rate_high!r}")
         return envelope
 
     def _check_fitted(self) -> None:
@@ -157,7 +275,7 @@ class InputEnvelope:
 
     def outside(self, inputs: Any) -> np.ndarray:
         """Per row of ``inputs`` ``(n, 4)`` (CV, P1, P2, T1): whether an input lies outside
-        the envelope (False for NaN)."""
+        the envelope's levels (False for NaN; the rates need the stream: `run_flags`)."""
         self._check_fitted()
         x = np.asarray(inputs, dtype=np.float64)
         if x.ndim != 2 or x.shape[1] != len(ENVELOPE_CHANNELS):
@@ -166,19 +284,29 @@ class InputEnvelope:
             return np.any((x < self.low_) | (x > self.high_), axis=1)
 
     def init_state(self) -> EnvelopeState:
-        """A fresh state: no average yet, no detection."""
+        """A fresh state: no average yet, no detection, no last second."""
         flag = np.zeros(1, dtype=np.bool_)
-        return EnvelopeState(np.zeros(4), flag, flag.copy(), flag.copy())
+        n = len(RATE_CHANNELS)
+        return EnvelopeState(
+            np.zeros(4), flag, flag.copy(), flag.copy(), np.full(n, np.nan), np.zeros(n)
+        )
 
     def check_state(self, state: Any) -> None:
         """Raise a `ValueError` naming the field unless ``state`` is an envelope state."""
         check_state(state, self.init_state(), "envelope state")
 
-    def run(
+    def _kernel_args(self) -> tuple:
+        low, high = np.ascontiguousarray(self.low_), np.ascontiguousarray(self.high_)
+        rate_high = np.ascontiguousarray(self.rate_high_, dtype=np.float64)
+        return (low, high, 1.0 / self.reference_seconds, _RATE_COLUMNS, rate_high,
+                1.0 / self.rate_seconds)  # fmt: skip
+
+    def run_flags(
         self, inputs: Any, detected: Any, state: EnvelopeState | None = None
-    ) -> tuple[np.ndarray, EnvelopeState]:
+    ) -> tuple[np.ndarray, np.ndarray, EnvelopeState]:
         """Per second: whether the current detection began while the inputs were outside the
-        envelope (False while DD is off).
+        envelope (False while DD is off), and whether the rates of CV or P1 stand above their
+        bounds.
 
         Parameters
         ----------
@@ -191,7 +319,7 @@ class InputEnvelope:
 
         Returns
         -------
-        novel_onset : numpy.ndarray
+        novel_onset, fast : numpy.ndarray
             ``(n,)`` bool.
         state : EnvelopeState
             The state after the last second.
@@ -203,16 +331,24 @@ class InputEnvelope:
             raise ValueError(f"inputs must be (n, 4) and detected (n,), got {x.shape}, {dd.shape}")
         state = working_state(self, state)
         out = np.zeros(dd.size, dtype=np.bool_)
-        low, high = np.ascontiguousarray(self.low_), np.ascontiguousarray(self.high_)
-        _onset_kernel(dd, x, low, high, 1.0 / self.reference_seconds, state, out)
+        fast = np.zeros(dd.size, dtype=np.bool_)
+        _onset_kernel(dd, x, *self._kernel_args(), state, out, fast)
+        return out, fast, state
+
+    def run(
+        self, inputs: Any, detected: Any, state: EnvelopeState | None = None
+    ) -> tuple[np.ndarray, EnvelopeState]:
+        """`run_flags` without the rates' flags: the ``(n,)`` onset flags and the state."""
+        out, _, state = self.run_flags(inputs, detected, state)
         return out, state
 
-    def run_stacked(
+    def run_stacked_flags(
         self, inputs: Any, detected: Any, state: EnvelopeState
-    ) -> tuple[np.ndarray, EnvelopeState]:
-        """`run` of many runs at once: ``inputs`` ``(runs, n, 4)``, ``detected`` ``(runs, n)``,
-        ``state`` their states stacked along a leading run axis; returns ``(runs, n)`` flags and
-        the stacked states after them (each run's equal to `run`'s)."""
+    ) -> tuple[np.ndarray, np.ndarray, EnvelopeState]:
+        """`run_flags` of many runs at once: ``inputs`` ``(runs, n, 4)``, ``detected``
+        ``(runs, n)``, ``state`` their states stacked along a leading run axis; returns the
+        ``(runs, n)`` flags and the stacked states after them (each run's equal to
+        `run_flags`')."""
         self._check_fitted()
         x = np.ascontiguousarray(np.asarray(inputs, dtype=np.float64))
         dd = np.ascontiguousarray(np.asarray(detected, dtype=np.bool_))
@@ -223,8 +359,15 @@ class InputEnvelope:
         check_stacked_state(state, self.init_state(), x.shape[0], "envelope state")
         state = writable_copy(state)
         out = np.zeros(dd.shape, dtype=np.bool_)
-        low, high = np.ascontiguousarray(self.low_), np.ascontiguousarray(self.high_)
-        _onset_runs(dd, x, low, high, 1.0 / self.reference_seconds, state, out)
+        fast = np.zeros(dd.shape, dtype=np.bool_)
+        _onset_runs(dd, x, *self._kernel_args(), state, out, fast)
+        return out, fast, state
+
+    def run_stacked(
+        self, inputs: Any, detected: Any, state: EnvelopeState
+    ) -> tuple[np.ndarray, EnvelopeState]:
+        """`run_stacked_flags` without the rates' flags."""
+        out, _, state = self.run_stacked_flags(inputs, detected, state)
         return out, state
 
     def update(

@@ -96,8 +96,13 @@ def _nested(
             _flag(features, 20),
             _flag(features, 21),
         ),
-        "onset": EnvelopeState(
-            _part(onset, 0, 4), _flag(onset, 4), _flag(onset, 5), _flag(onset, 6)
+        "onset": EnvelopeState(  # 0.1.0 had no rates: no last second, rates 0
+            _part(onset, 0, 4),
+            _flag(onset, 4),
+            _flag(onset, 5),
+            _flag(onset, 6),
+            np.full((*np.shape(onset)[:-1], 2), np.nan),
+            np.zeros((*np.shape(onset)[:-1], 2)),
         ),
     }
 

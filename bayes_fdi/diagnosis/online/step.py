@@ -146,8 +146,9 @@ def step_runs(
     )
     out["features"], signature = components.signature.run_stacked(window, state.signature)
     inputs = np.stack([c[k] for k in ENVELOPE_CHANNELS], axis=-1)
-    out["novel_inputs"] = components.envelope.outside(inputs.reshape(-1, 4)).reshape(dd.shape)
-    out["novel_onset"], onset = components.envelope.run_stacked(inputs, dd, state.onset)
+    novel_levels = components.envelope.outside(inputs.reshape(-1, 4)).reshape(dd.shape)
+    out["novel_onset"], fast, onset = components.envelope.run_stacked_flags(inputs, dd, state.onset)
+    out["novel_inputs"] = novel_levels | fast
     out.update(_isolate(components.isolator, out["features"]))
     end = StreamState(
         models=models_state,

@@ -1,0 +1,146 @@
+"""The default online diagnoser on held-out runs of its own training excitation families.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/heldout_families.py \
+        [--model FILE | --small] [--runs 8] [--duration 900] [--fault-runs 1] [--seed 900]
+
+Fault-free part: ``--runs`` runs of ``--duration`` s per family (the DGen sines with run-to-run
+variation, and the three excitation families of `bayes_fdi.actuator.excitation`: sums of sines,
+steps and ramps, a PI level loop), simulated with seeds ``--seed`` .. ``--seed + 3`` (below
+1000 and away from every training seed, so neither a training nor an evaluation set). After each
+run's first 120 s (the start-up), per family: the RMS of the standardised residuals
+``z = (y - y_hat) / std`` of X and F (1 on the training distribution if the predictive standard
+deviations are calibrated), the share of seconds with DD on, DD's rising edges per hour, and
+the shares of CLEAR and DAZZLED seconds.
+
+Fault part (``--fault-runs`` > 0): every fault f1..f19 at strength 1.0 from t = 300 s in
+``--fault-runs`` runs of 600 s per family: the share of runs detected after the onset, the
+median detection time, and the share of detected seconds whose diagnosed group holds the true
+fault (a group-level r_ti over the runs).
+
+Results go to stdout and ``benchmarks/out/heldout_families.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+ROOT = Path(__file__).resolve().parents[1]
+FAMILIES = ("dgen", "sine-sum", "step-ramp", "level-loop")
+START_UP = 120
+FAULT_ONSET = 300.0
+
+
+def family_inputs(family: str, n_runs: int, duration: int, seed: int) -> xr.Dataset:
+    """Fault-free inputs of ``family`` (the generators' defaults)."""
+    from bayes_fdi.actuator import benchmark_inputs
+    from bayes_fdi.actuator.excitation import (
+        level_loop_inputs,
+        sine_sum_inputs,
+        step_ramp_inputs,
+    )
+
+    if family == "dgen":
+        return benchmark_inputs(n_runs, duration, seed=seed, vary=True)
+    make = {"sine-sum": sine_sum_inputs, "step-ramp": step_ramp_inputs,
+            "level-loop": level_loop_inputs}[family]  # fmt: skip
+    return make(n_runs, duration, seed=seed)
+
+
+def fault_free_figures(diagnoser, runs: xr.Dataset) -> dict[str, float]:
+    from bayes_fdi.diagnosis.normal_models.dynamic import standardised_residuals
+
+    stream = diagnoser.run(runs)
+    keep = slice(START_UP, None)
+    out = {}
+    for y in ("X", "F"):
+        _, z = standardised_residuals(
+            runs[y].values[:, keep], stream[f"{y}_hat"].values[:, keep],
+            stream[f"{y}_hat_std"].values[:, keep],
+        )  # fmt: skip
+        out[f"z_rms_{y}"] = float(np.sqrt(np.nanmean(z**2)))
+    dd = stream["DD"].values[:, keep]
+    hours = dd.size / 3600.0
+    edges = np.sum(dd[:, 1:] & ~dd[:, :-1]) + np.sum(dd[:, 0])
+    status = stream["status"].values[:, keep]
+    out.update(
+        dd_share=float(dd.mean()),
+        alarms_per_hour=float(edges / hours),
+        clear_share=float(np.mean(status == "CLEAR")),
+        dazzled_share=float(np.mean(status == "DAZZLED")),
+    )
+    return out
+
+
+def fault_figures(diagnoser, runs: xr.Dataset, faults: list[str]) -> dict[str, float]:
+    stream = diagnoser.run(runs)
+    t = runs["time"].values
+    after = t >= FAULT_ONSET
+    groups = json.loads(stream.attrs["groups"])
+    detected, delays, right, seconds = 0, [], 0, 0
+    for r, fault in enumerate(faults):
+        dd = stream["DD"].values[r] & after
+        if not dd.any():
+            continue
+        detected += 1
+        delays.append(float(t[np.argmax(dd)] - FAULT_ONSET))
+        state = stream["state"].values[r][dd]
+        right += int(sum(fault in groups.get(s, ()) for s in state))
+        seconds += int(dd.sum())
+    return {
+        "detected_share": detected / len(faults),
+        "median_t_dt": float(np.median(delays)) if delays else float("nan"),
+        "group_r_ti": right / seconds if seconds else float("nan"),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", help="a model file of bayes-fdi fit (default: fit one)")
+    parser.add_argument("--small", action="store_true", help="fit the small default model")
+    parser.add_argument("--runs", type=int, default=8)
+    parser.add_argument("--duration", type=int, default=900)
+    parser.add_argument("--fault-runs", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=900)
+    parser.add_argument("--out", default=str(ROOT / "benchmarks" / "out" / "heldout_families.json"))
+    args = parser.parse_args()
+    if not (0 <= args.seed and args.seed + len(FAMILIES) + 60 < 1000):
+        raise SystemExit("--seed must keep every seed below 1000 (away from the benchmark's)")
+    from bayes_fdi.actuator import Fault, simulate
+    from bayes_fdi.actuator.faults import FAULT_NAMES
+    from bayes_fdi.campaigns.spec import FAULT_DIRECTION
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+
+    if args.model:
+        diagnoser = OnlineDiagnoser.load(args.model)
+    else:
+        from bayes_fdi.default_diagnoser import fit_online_diagnoser
+
+        diagnoser = fit_online_diagnoser(small=args.small, progress=False)
+    results: dict[str, dict[str, float]] = {}
+    t0 = time.process_time()
+    for k, family in enumerate(FAMILIES):
+        seed = args.seed + k
+        drive = family_inputs(family, args.runs, args.duration, seed)
+        runs = simulate(drive, None, seed=seed + 20)
+        results[family] = fault_free_figures(diagnoser, runs)
+        if args.fault_runs > 0:
+            faults = [f for f in FAULT_NAMES for _ in range(args.fault_runs)]
+            drive = family_inputs(family, len(faults), 600, seed + 40)
+            plan = [Fault(f, float(FAULT_DIRECTION[f]), FAULT_ONSET, "abrupt", 0.0) for f in faults]
+            runs = simulate(drive, plan, seed=seed + 60)
+            results[family].update(fault_figures(diagnoser, runs, faults))
+        print(family, {k: round(v, 4) for k, v in results[family].items()}, flush=True)
+    print(f"load average {os.getloadavg()[0]:.1f}; {time.process_time() - t0:.0f} CPU s")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(results, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,99 @@
+"""The default diagnoser's training campaigns (`sim/online-*.toml`, `bayes_fdi.default_diagnoser`).
+
+The default training is the DGen sines; the training "excitation-mix" spans the DGen sines and
+the three training excitation families over the DABLib operating ranges, never a family of the
+shift benchmark. Seeds are below 1000 and no two simulations share one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayes_fdi.campaigns.simulation import simulate_campaign
+from bayes_fdi.default_diagnoser import (
+    CAMPAIGNS,
+    SET_SEED_OFFSETS,
+    TRAININGS,
+    online_campaigns,
+    simulate_online_campaigns,
+)
+
+MIX = "excitation-mix"
+
+TRAINING_FAMILIES = {"sine-sum", "step-ramp", "level-loop"}
+SHIFT_FAMILIES = {"telegraph", "chirp", "flow-loop"}
+
+
+def _family(campaign) -> str:
+    return "dgen" if campaign.source == "benchmark-inputs" else campaign.excitation["family"]
+
+
+@pytest.mark.parametrize("small", [False, True])
+def test_every_set_of_the_mix_spans_dgen_and_the_training_families(small):
+    campaigns = online_campaigns(small=small, training=MIX)
+    assert set(campaigns) == {"normal", "abrupt", "incipient"}
+    for key, files in campaigns.items():
+        families = [_family(c) for c in files]
+        assert families[0] == "dgen"  # the benchmark's excitation first
+        assert not set(families) & SHIFT_FAMILIES
+        assert len(set(families)) == len(families)
+        if key != "incipient":
+            assert set(families) == {"dgen"} | TRAINING_FAMILIES
+        for c in files:
+            if c.source == "excitation":  # over the DABLib ranges: the generators' defaults
+                assert not c.excitation["operating"]
+    normal = campaigns["normal"]
+    assert all(set(c.run_specs(c.seed).state) == {"fn"} for c in normal)
+    for key in ("abrupt", "incipient"):
+        for c in campaigns[key]:
+            assert set(c.run_specs(c.seed).state) == {f"f{i}" for i in range(1, 20)}
+    if not small:  # 12 h of fault-free training, as before the families were added
+        assert sum(c.n_runs * c.duration for c in normal) == 48 * 900
+        dgen = normal[0].n_runs * normal[0].duration
+        assert 0.3 < dgen / (48 * 900) < 0.5
+
+
+def test_the_default_training_is_the_dgen_sines_as_declared():
+    campaigns = online_campaigns()
+    assert {k: tuple(c.name for c in v) for k, v in campaigns.items()} == CAMPAIGNS
+    assert [(c.n_runs, c.duration) for cs in campaigns.values() for c in cs] == [
+        (48, 900),
+        (190, 600),
+        (76, 900),
+    ]
+    assert all(c.source == "benchmark-inputs" for cs in campaigns.values() for c in cs)
+
+
+def test_the_seeds_are_below_1000_and_distinct():
+    campaigns = online_campaigns(training=MIX)
+    seeds = []
+    for key, files in campaigns.items():
+        offsets = [0] if key == "normal" else SET_SEED_OFFSETS.values()
+        seeds += [c.seed + o for c in files for o in offsets]
+    assert len(set(seeds)) == len(seeds) == 4 + 3 * (4 + 3)
+    assert max(seeds) < 1000 and min(seeds) >= 0
+    assert [c.name for cs in campaigns.values() for c in cs] == [
+        name for files in TRAININGS[MIX].values() for name, _ in files
+    ]
+
+
+def test_a_training_family_campaign_simulates_its_generator_inputs():
+    from bayes_fdi.actuator.excitation import step_ramp_inputs
+
+    normal = online_campaigns(small=True, training=MIX)["normal"]
+    (campaign,) = [c for c in normal if _family(c) == "step-ramp"]
+    ds = simulate_campaign(campaign, seed=campaign.seed, progress=False)
+    seed = ds.attrs["inputs_seed"]
+    inputs = step_ramp_inputs(campaign.n_runs, campaign.duration, seed=seed)
+    np.testing.assert_array_equal(ds["CV"].values, inputs["CV"].values)
+    assert (ds["P1"].values > ds["P2"].values).all()
+
+
+def test_a_seed_beyond_the_last_allowed_or_an_unknown_training_is_refused_by_name():
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 529\)"):
+        simulate_online_campaigns(seed=529, small=True, progress=False, training=MIX)
+    with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 549\)"):
+        simulate_online_campaigns(seed=549, small=True, progress=False)
+    with pytest.raises(ValueError, match="training must be one of dgen, excitation-mix"):
+        online_campaigns(training="chirp")
