@@ -290,3 +290,17 @@ def test_the_report_opens_with_its_targets_in_short_a_glossary_and_the_fault_nam
         assert f"- {fault} {FAULT_TABLE[fault].description}\n" in head, fault
     # DGN0 is the OK state alone when the diagnoser declares no fault undetectable
     assert re.search(r"\| DGN0 \| OK(, f\d+)* \|", report)
+
+
+def test_an_alarm_left_on_through_the_fault_free_hours_fails_their_target():
+    """One rising edge whose alarm then stays on is one alarm, but not a quiet 8 hours: the
+    fault-free target also bounds the share of seconds with DD on (r_fd <= 0.01)."""
+    from bayes_fdi.benchmark.report import fault_free_target
+
+    def target(alarms: int, on: float) -> tuple[str, str, bool]:
+        ff = {"hours": 8.0, "alarms": alarms, "alarms_per_8h": float(alarms), "r_fd": on}
+        return fault_free_target(ff)
+
+    _, measured, met = target(1, 0.999)
+    assert not met and measured == "1 alarm(s) = 1.00 per 8 h, DD on 99.90 %"
+    assert target(1, 0.004)[2] and not target(2, 0.0)[2]

@@ -31,8 +31,8 @@ from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import format_number, markdown_table, to_jsonable
 from bayes_fdi.scoring.picalc import PICALC_KEYS
 
-__all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "render_report", "summarise", "target_rows",
-           "write_report"]  # fmt: skip
+__all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "fault_free_target", "render_report",
+           "summarise", "target_rows", "write_report"]  # fmt: skip
 
 #: Matched-filter separation (in noise standard deviations) below which no method can detect a
 #: fault: an ideal detector that knows the exact noise-free signals with and without the fault
@@ -170,6 +170,18 @@ def _detected_all(entry: Mapping[str, Any]) -> bool:
     return entry["t_dt"]["determined"] == entry["n"]
 
 
+def fault_free_target(ff: Mapping[str, Any]) -> tuple[str, str, bool]:
+    """The fault-free hours' target (target, measured, met): at most one alarm in 8 hours and DD
+    on at most 1 % of the time (an alarm left on is one rising edge; its time share counts)."""
+    on = ff.get("r_fd")
+    return (
+        f"<= 1 alarm in 8 fault-free hours, DD on <= 1 % ({ff['hours']:g} h simulated)",
+        f"{ff['alarms']} alarm(s) = {ff['alarms_per_8h']:.2f} per 8 h"
+        + ("" if on is None else f", DD on {100 * on:.2f} %"),
+        ff["alarms_per_8h"] <= 1.0 and (on is None or on <= 0.01),
+    )
+
+
 def target_rows(results: Mapping[str, Any], summary: Mapping[str, Any]) -> list[list[str]]:
     """The targets table: rows (target, measured, met: "yes", "**no**" or "–" not judged)."""
     rows: list[list[str]] = []
@@ -180,12 +192,7 @@ def target_rows(results: Mapping[str, Any], summary: Mapping[str, Any]) -> list[
     r_fd = [r["indices"]["r_fd"] for r in results["scenarios"]]
     med = float(np.median(r_fd))
     add("median r_fd <= 0.01 (scenarios' fault-free parts)", f"{med:.4f}", med <= 0.01)
-    ff = results["fault_free"]
-    add(
-        f"<= 1 alarm in 8 fault-free hours ({ff['hours']:g} h simulated)",
-        f"{ff['alarms']} alarm(s) = {ff['alarms_per_8h']:.2f} per 8 h",
-        ff["alarms_per_8h"] <= 1.0,
-    )
+    add(*fault_free_target(results["fault_free"]))
     real = results.get("real_hour")
     if real:
         add(
