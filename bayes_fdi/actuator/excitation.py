@@ -38,8 +38,14 @@ from bayes_fdi.memory import check_memory
 
 __all__ = [
     "FAMILIES",
+    "P_RANGE",
+    "T_RANGE",
     "LevelLoop",
     "OperatingRange",
+    "check_band",
+    "check_count",
+    "check_run_shape",
+    "excitation_dataset",
     "level_loop_inputs",
     "sine_sum_inputs",
     "step_ramp_inputs",
@@ -49,8 +55,8 @@ __all__ = [
 FAMILIES: dict[str, int] = {"sine-sum": 1, "step-ramp": 2, "level-loop": 3}
 #: float64 values held per (run, second) at the peak of a generator.
 _VALUES_PER_SAMPLE = 16
-_P_RANGE = 4e6  # full scale of P1', P2' [Pa]
-_T_RANGE = 200.0  # full scale of T1' [°C]
+P_RANGE = 4e6  #: full scale of P1', P2' [Pa]
+T_RANGE = 200.0  #: full scale of T1' [°C]
 
 
 class OperatingRange(NamedTuple):
@@ -77,13 +83,15 @@ class OperatingRange(NamedTuple):
 DEFAULT_OPERATING = OperatingRange()
 
 
-def _check_count(value: Any, name: str, who: str) -> int:
+def check_count(value: Any, name: str, who: str) -> int:
+    """``value`` as an integer >= 1, else a ValueError naming ``who`` and ``name``."""
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
         raise ValueError(f"{who}: {name} must be an integer >= 1, got {value!r}")
     return int(value)
 
 
-def _check_band(band: Any, name: str, who: str, low: float, high: float) -> tuple[float, float]:
+def check_band(band: Any, name: str, who: str, low: float, high: float) -> tuple[float, float]:
+    """``band`` as a pair ``(a, b)`` with ``low <= a <= b <= high``, else a ValueError."""
     try:
         a, b = (float(v) for v in band)
     except (TypeError, ValueError):
@@ -113,20 +121,22 @@ def _operating_point(rng: np.random.Generator, n: int, op: OperatingRange) -> di
     p1_t = p1 + _ou(rng, n, op.p1_drift, tau) + rng.standard_normal(n) * op.p1_noise
     p2_t = (p1 - dp) + _ou(rng, n, op.p2_drift, tau) + rng.standard_normal(n) * op.p2_noise
     t1_t = t1 + _ou(rng, n, op.t1_drift, tau) + rng.standard_normal(n) * op.t1_noise
-    p1_t = np.clip(p1_t, 0.05 * _P_RANGE, 0.995 * _P_RANGE)
-    p2_t = np.clip(np.minimum(p2_t, p1_t - 0.05e6), 0.01 * _P_RANGE, None)
-    t1_t = np.clip(t1_t, 1.0, 0.99 * _T_RANGE)
+    p1_t = np.clip(p1_t, 0.05 * P_RANGE, 0.995 * P_RANGE)
+    p2_t = np.clip(np.minimum(p2_t, p1_t - 0.05e6), 0.01 * P_RANGE, None)
+    t1_t = np.clip(t1_t, 1.0, 0.99 * T_RANGE)
     return {"P1": p1_t, "P2": p2_t, "T1": t1_t}
 
 
-def _dataset(
+def excitation_dataset(
     cv: np.ndarray, points: list[dict[str, np.ndarray]], family: str, seed: int, attrs: dict
 ) -> xr.Dataset:
+    """The dataset of a generator's runs: CV, and each run's P1, P2 [Pa] and T1 [°C] in
+    ``points`` normalised to full scale; ``attrs`` become ``excitation_*`` attributes."""
     channels = {
         "CV": cv,
-        "P1": np.stack([p["P1"] for p in points]) / _P_RANGE,
-        "P2": np.stack([p["P2"] for p in points]) / _P_RANGE,
-        "T1": np.stack([p["T1"] for p in points]) / _T_RANGE,
+        "P1": np.stack([p["P1"] for p in points]) / P_RANGE,
+        "P2": np.stack([p["P2"] for p in points]) / P_RANGE,
+        "T1": np.stack([p["T1"] for p in points]) / T_RANGE,
     }
     return make_dataset(
         channels,
@@ -137,9 +147,10 @@ def _dataset(
     )
 
 
-def _start(n_runs: Any, duration: Any, who: str) -> tuple[int, int]:
-    n_runs = _check_count(n_runs, "n_runs", who)
-    duration = _check_count(duration, "duration", who)
+def check_run_shape(n_runs: Any, duration: Any, who: str) -> tuple[int, int]:
+    """A generator's ``n_runs`` and ``duration`` checked, and the memory they need."""
+    n_runs = check_count(n_runs, "n_runs", who)
+    duration = check_count(duration, "duration", who)
     check_memory(8.0 * _VALUES_PER_SAMPLE * n_runs * duration, f"{who}: {n_runs} x {duration} s")
     return n_runs, duration
 
@@ -162,13 +173,13 @@ def sine_sum_inputs(
     amplitudes sum to a total drawn in ``cv_amplitude``. CV is clipped to [0.02, 0.98].
     """
     who = "sine_sum_inputs"
-    n_runs, duration = _start(n_runs, duration, who)
-    n_sines = _check_count(n_sines, "n_sines", who)
-    f_lo, f_hi = _check_band(frequencies, "frequencies", who, 1e-5, 0.5)
+    n_runs, duration = check_run_shape(n_runs, duration, who)
+    n_sines = check_count(n_sines, "n_sines", who)
+    f_lo, f_hi = check_band(frequencies, "frequencies", who, 1e-5, 0.5)
     if f_lo <= 0:
         raise ValueError(f"{who}: frequencies must be positive")
-    m_lo, m_hi = _check_band(cv_mean, "cv_mean", who, 0.0, 1.0)
-    a_lo, a_hi = _check_band(cv_amplitude, "cv_amplitude", who, 0.0, 1.0)
+    m_lo, m_hi = check_band(cv_mean, "cv_mean", who, 0.0, 1.0)
+    a_lo, a_hi = check_band(cv_amplitude, "cv_amplitude", who, 0.0, 1.0)
     t = np.arange(duration, dtype=np.float64)
     cv = np.empty((n_runs, duration))
     points = []
@@ -181,7 +192,7 @@ def sine_sum_inputs(
         cv[r] = np.clip(rng.uniform(m_lo, m_hi) + wave, 0.02, 0.98)
         points.append(_operating_point(rng, duration, operating))
     attrs = {"n_sines": n_sines, "f_low": f_lo, "f_high": f_hi}
-    return _dataset(cv, points, "sine-sum", int(seed), attrs)
+    return excitation_dataset(cv, points, "sine-sum", int(seed), attrs)
 
 
 def step_ramp_inputs(
@@ -198,10 +209,10 @@ def step_ramp_inputs(
     """CV held at random levels in ``cv_range`` for ``hold_seconds``, moving to the next level
     by a step or, with probability ``ramp_share``, by a ramp lasting ``ramp_seconds``."""
     who = "step_ramp_inputs"
-    n_runs, duration = _start(n_runs, duration, who)
-    h_lo, h_hi = _check_band(hold_seconds, "hold_seconds", who, 1.0, 1e7)
-    r_lo, r_hi = _check_band(ramp_seconds, "ramp_seconds", who, 1.0, 1e7)
-    c_lo, c_hi = _check_band(cv_range, "cv_range", who, 0.0, 1.0)
+    n_runs, duration = check_run_shape(n_runs, duration, who)
+    h_lo, h_hi = check_band(hold_seconds, "hold_seconds", who, 1.0, 1e7)
+    r_lo, r_hi = check_band(ramp_seconds, "ramp_seconds", who, 1.0, 1e7)
+    c_lo, c_hi = check_band(cv_range, "cv_range", who, 0.0, 1.0)
     if not 0.0 <= float(ramp_share) <= 1.0:
         raise ValueError(f"{who}: ramp_share must lie in [0, 1], got {ramp_share!r}")
     cv = np.empty((n_runs, duration))
@@ -223,7 +234,7 @@ def step_ramp_inputs(
             level = target
         points.append(_operating_point(rng, duration, operating))
     attrs = {"hold_low": h_lo, "hold_high": h_hi, "ramp_share": float(ramp_share)}
-    return _dataset(cv, points, "step-ramp", int(seed), attrs)
+    return excitation_dataset(cv, points, "step-ramp", int(seed), attrs)
 
 
 class LevelLoop(NamedTuple):
@@ -313,9 +324,9 @@ def level_loop_inputs(
     actuator). CV is clipped to [0, 1] by the controller, with anti-windup.
     """
     who = "level_loop_inputs"
-    n_runs, duration = _start(n_runs, duration, who)
+    n_runs, duration = check_run_shape(n_runs, duration, who)
     for name in ("area_seconds", "kp", "ti", "level_noise", "setpoint_hold", "demand"):
-        _check_band(getattr(loop, name), f"loop.{name}", who, 0.0, 1e9)
+        check_band(getattr(loop, name), f"loop.{name}", who, 0.0, 1e9)
     if not (loop.positioner_seconds > 0 and loop.setpoint_ramp >= 1):
         raise ValueError(f"{who}: the positioner lag and the set-point ramp must be positive")
     if not (loop.characteristic > 0 and loop.kv_ratio > 0):
@@ -329,5 +340,5 @@ def level_loop_inputs(
         cv[r], level[r] = _loop_run(rng, duration, point["P1"] - point["P2"], loop)
         points.append(point)
     attrs = {"kp_low": loop.kp[0], "kp_high": loop.kp[1]}
-    ds = _dataset(cv, points, "level-loop", int(seed), attrs)
+    ds = excitation_dataset(cv, points, "level-loop", int(seed), attrs)
     return ds.assign_coords(level=(("run", "time"), level))

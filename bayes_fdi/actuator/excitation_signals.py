@@ -31,45 +31,25 @@ Written by hand: no maintained library generates control-loop excitation for thi
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.actuator.excitation import DEFAULT_OPERATING, OperatingRange
+from bayes_fdi.actuator.excitation import (
+    DEFAULT_OPERATING,
+    P_RANGE,
+    T_RANGE,
+    OperatingRange,
+    check_band,
+    check_run_shape,
+    excitation_dataset,
+)
 from bayes_fdi.actuator.valve import flow_rate
-from bayes_fdi.datasets import make_dataset
-from bayes_fdi.memory import check_memory
 
 __all__ = ["SIGNAL_FAMILIES", "chirp_inputs", "flow_loop_inputs", "telegraph_inputs"]
 
 #: Family names (the attribute ``generator`` of the datasets) and their seed stream index.
 SIGNAL_FAMILIES: dict[str, int] = {"telegraph": 11, "chirp": 12, "flow-loop": 13}
-_VALUES_PER_SAMPLE = 16  #: float64 values held per (run, second) at a generator's peak
-_P_RANGE = 4e6  # full scale of P1', P2' [Pa]
-_T_RANGE = 200.0  # full scale of T1' [°C]
-
-
-def _count(value: Any, name: str, who: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
-        raise ValueError(f"{who}: {name} must be an integer >= 1, got {value!r}")
-    return int(value)
-
-
-def _band(band: Any, name: str, who: str, low: float, high: float) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in band)
-    except (TypeError, ValueError):
-        raise ValueError(f"{who}: {name} must be a pair (low, high), got {band!r}") from None
-    if not (math.isfinite(a) and math.isfinite(b) and low <= a <= b <= high):
-        raise ValueError(f"{who}: {name} must satisfy {low} <= low <= high <= {high}, got {band}")
-    return a, b
-
-
-def _start(n_runs: Any, duration: Any, who: str) -> tuple[int, int]:
-    n_runs, duration = _count(n_runs, "n_runs", who), _count(duration, "duration", who)
-    check_memory(8.0 * _VALUES_PER_SAMPLE * n_runs * duration, f"{who}: {n_runs} x {duration} s")
-    return n_runs, duration
 
 
 def _levels(rng: np.random.Generator, n: int, op: OperatingRange) -> dict[str, np.ndarray]:
@@ -83,17 +63,12 @@ def _levels(rng: np.random.Generator, n: int, op: OperatingRange) -> dict[str, n
 
 
 def _dataset(cv: np.ndarray, points: list[dict], family: str, seed: int, attrs: dict):
-    p1 = np.clip(np.stack([p["P1"] for p in points]), 0.05 * _P_RANGE, 0.995 * _P_RANGE)
-    p2 = np.clip(np.minimum(np.stack([p["P2"] for p in points]), p1 - 0.05e6), 0.04e6, None)
-    t1 = np.clip(np.stack([p["T1"] for p in points]), 1.0, 0.99 * _T_RANGE)
-    channels = {"CV": cv, "P1": p1 / _P_RANGE, "P2": p2 / _P_RANGE, "T1": t1 / _T_RANGE}
-    return make_dataset(
-        channels,
-        state="fn",
-        campaign=family,
-        seed=seed,
-        attrs={"generator": family, **{f"excitation_{k}": v for k, v in attrs.items()}},
-    )
+    """`excitation_dataset` of the runs, their P1, P2, T1 kept within the sensors' ranges."""
+    for p in points:
+        p["P1"] = np.clip(p["P1"], 0.05 * P_RANGE, 0.995 * P_RANGE)
+        p["P2"] = np.clip(np.minimum(p["P2"], p["P1"] - 0.05e6), 0.04e6, None)
+        p["T1"] = np.clip(p["T1"], 1.0, 0.99 * T_RANGE)
+    return excitation_dataset(cv, points, family, seed, attrs)
 
 
 def telegraph_inputs(
@@ -114,10 +89,10 @@ def telegraph_inputs(
     only on the clock's ticks, and switches at about half of them.
     """
     who = "telegraph_inputs"
-    n_runs, duration = _start(n_runs, duration, who)
-    c_lo, c_hi = _band(clock_seconds, "clock_seconds", who, 1.0, 1e6)
-    m_lo, m_hi = _band(cv_mean, "cv_mean", who, 0.0, 1.0)
-    a_lo, a_hi = _band(cv_amplitude, "cv_amplitude", who, 0.0, 0.5)
+    n_runs, duration = check_run_shape(n_runs, duration, who)
+    c_lo, c_hi = check_band(clock_seconds, "clock_seconds", who, 1.0, 1e6)
+    m_lo, m_hi = check_band(cv_mean, "cv_mean", who, 0.0, 1.0)
+    a_lo, a_hi = check_band(cv_amplitude, "cv_amplitude", who, 0.0, 0.5)
     if m_lo - a_hi < 0.0 or m_hi + a_hi > 1.0:
         raise ValueError(f"{who}: cv_mean ± cv_amplitude must stay within [0, 1]")
     cv = np.empty((n_runs, duration))
@@ -153,12 +128,12 @@ def chirp_inputs(
     and the phases; CV is clipped to [0.02, 0.98].
     """
     who = "chirp_inputs"
-    n_runs, duration = _start(n_runs, duration, who)
-    f_lo, f_hi = _band(frequencies, "frequencies", who, 1e-5, 0.25)
-    s_lo, s_hi = _band(sweep_seconds, "sweep_seconds", who, 2.0, 1e7)
-    m_lo, m_hi = _band(cv_mean, "cv_mean", who, 0.0, 1.0)
-    a_lo, a_hi = _band(cv_amplitude, "cv_amplitude", who, 0.0, 0.5)
-    p_lo, p_hi = _band(p1_amplitude, "p1_amplitude", who, 0.0, 1e6)
+    n_runs, duration = check_run_shape(n_runs, duration, who)
+    f_lo, f_hi = check_band(frequencies, "frequencies", who, 1e-5, 0.25)
+    s_lo, s_hi = check_band(sweep_seconds, "sweep_seconds", who, 2.0, 1e7)
+    m_lo, m_hi = check_band(cv_mean, "cv_mean", who, 0.0, 1.0)
+    a_lo, a_hi = check_band(cv_amplitude, "cv_amplitude", who, 0.0, 0.5)
+    p_lo, p_hi = check_band(p1_amplitude, "p1_amplitude", who, 0.0, 1e6)
     if not (math.isfinite(p1_frequency) and 0.0 <= p1_frequency <= 0.5):
         raise ValueError(f"{who}: p1_frequency must lie in [0, 0.5] Hz, got {p1_frequency!r}")
     t = np.arange(duration, dtype=np.float64)
@@ -223,12 +198,12 @@ def flow_loop_inputs(
     anti-windup.
     """
     who = "flow_loop_inputs"
-    n_runs, duration = _start(n_runs, duration, who)
+    n_runs, duration = check_run_shape(n_runs, duration, who)
     names = ("kp", "ti", "setpoint_cv", "setpoint_hold", "p1_step", "p1_hold")
     bands = dict(zip(names, (kp, ti, setpoint_cv, setpoint_hold, p1_step, p1_hold), strict=True))
     limits = {"setpoint_cv": (0.0, 1.0), "ti": (1.0, 1e6), "setpoint_hold": (1.0, 1e7),
               "p1_hold": (1.0, 1e7), "kp": (0.0, 10.0), "p1_step": (0.0, 2e6)}  # fmt: skip
-    b = {k: _band(v, k, who, *limits[k]) for k, v in bands.items()}
+    b = {k: check_band(v, k, who, *limits[k]) for k, v in bands.items()}
     if not (math.isfinite(flow_noise) and 0.0 <= flow_noise < 0.5):
         raise ValueError(f"{who}: flow_noise must lie in [0, 0.5), got {flow_noise!r}")
     if not (math.isfinite(positioner_seconds) and positioner_seconds > 0):
