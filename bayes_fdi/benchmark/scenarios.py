@@ -32,7 +32,7 @@ scenario and each seed only draws its noise (:func:`bayes_fdi.actuator.simulate_
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -115,6 +115,19 @@ class BenchmarkScenario(NamedTuple):
         """The fault strength (magnitude, the benchmark's ``fs``) at the given times (s)."""
         return np.abs(np.asarray(self.fault_spec().value_at(time), dtype=np.float64))
 
+    def run_attrs(self, position: int, seeds: Sequence[int]) -> dict[str, Any]:
+        """The attributes of a dataset of this scenario's runs (run id ``position``, noise
+        ``seeds``): its name, zone times, position and seeds."""
+        return {
+            "scenario": self.name,
+            "t_on": self.t_on,
+            "t_from": self.t_from,
+            "t_fd": self.t_fd,
+            "t_hor": self.t_hor,
+            "scenario_position": int(position),
+            "seeds": ",".join(str(int(s)) for s in seeds),
+        }
+
     def truncated(self, t_hor: float) -> BenchmarkScenario:
         """The same scenario observed only up to ``min(t_hor, self.t_hor)`` (quick runs)."""
         if not t_hor > self.t_from:
@@ -188,15 +201,7 @@ def simulate_scenario(
     runs = simulate_replicas(inputs, [scenario.fault_spec()], seeds=seeds)
     ds = xr.concat(runs, dim="run", combine_attrs="drop_conflicts")
     ds = ds.assign_coords(run=np.asarray(seeds, dtype=np.int64))
-    ds.attrs.update(
-        scenario=scenario.name,
-        t_on=scenario.t_on,
-        t_from=scenario.t_from,
-        t_fd=scenario.t_fd,
-        t_hor=scenario.t_hor,
-        scenario_position=int(position),
-        seeds=",".join(map(str, seeds)),
-    )
+    ds.attrs.update(scenario.run_attrs(position, seeds))
     return ds
 
 

@@ -146,16 +146,7 @@ class ShiftInputs:
         drive = self.inputs.sel(run=[int(s) for s in seeds]).isel(time=slice(0, duration))
         faults = [scenario.fault_spec()] * drive.sizes["run"]
         ds = simulate(drive, faults, seed=SHIFT_NOISE_SEED + position)
-        ds.attrs.update(
-            scenario=scenario.name,
-            t_on=scenario.t_on,
-            t_from=scenario.t_from,
-            t_fd=scenario.t_fd,
-            t_hor=scenario.t_hor,
-            scenario_position=position,
-            excitation=self.family.name,
-            seeds=",".join(str(int(s)) for s in seeds),
-        )
+        ds.attrs.update(scenario.run_attrs(position, seeds), excitation=self.family.name)
         return ds
 
     def effects_inputs(self, duration: int) -> xr.Dataset:
