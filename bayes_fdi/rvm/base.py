@@ -314,7 +314,7 @@ class RVMBase(BaseEstimator):
         kern = self._resolve_kernel(width, x_scale)
         if kern is None:
             return Design(matrix=X, bias=self.bias), None
-        check_kernel_range(kern, X, x_scale=x_scale, shown=self._resolve_kernel(width))
+        check_kernel_range(kern, X, x_scale=x_scale, shown=lambda: self._resolve_kernel(width))
         design = Design(kernel=kern, X=X, bias=self.bias, max_bytes=self.max_kernel_bytes, rhs=rhs)
         return design, kern
 
@@ -405,8 +405,12 @@ class RVMBase(BaseEstimator):
                 parts.append(X[:, self._feat_.to(X.device)])
             else:
                 scale = getattr(self, "_x_scale_", 1.0)
-                shown = self._resolve_kernel(self.width_, 1.0)
-                check_kernel_range(self._kernel_, X, x_scale=scale, shown=shown)
+                check_kernel_range(
+                    self._kernel_,
+                    X,
+                    x_scale=scale,
+                    shown=lambda: self._resolve_kernel(self.width_, 1.0),
+                )
                 parts.append(self._kernel_(X, self._rv_))
         if not parts:
             return torch.zeros(X.shape[0], 0, dtype=X.dtype, device=X.device)

@@ -17,6 +17,7 @@ bookkeeping specific to these estimators.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -61,13 +62,17 @@ def power_of_two_scale(values: Tensor) -> float:
 
 
 def check_kernel_range(
-    kern: Kernel, X: Tensor, *, x_scale: float = 1.0, shown: Kernel | None = None
+    kern: Kernel,
+    X: Tensor,
+    *,
+    x_scale: float = 1.0,
+    shown: Callable[[], Kernel] | None = None,
 ) -> None:
     """Refuse inputs whose linear or polynomial kernel values overflow the float type: its
     largest values lie on the diagonal (Cauchy-Schwarz), ``offset + |x|^2`` or
     ``(gamma |x|^2 + coef0)^degree``. (The RBF kernel is bounded by 1.) ``X`` and ``kern``
     are in rescaled units (inputs divided by ``x_scale``); the message names the caller's
-    kernel ``shown`` and inputs."""
+    kernel (``shown()``, built only for the message) and inputs."""
     if not isinstance(kern, (Linear, Polynomial)):
         return
     sq = (X * X).sum(dim=1)
@@ -76,7 +81,7 @@ def check_kernel_range(
         diag = diag**kern.degree
     if not bool(torch.isfinite(diag).all()):
         top, dtype = float(X.abs().max()) * x_scale, str(X.dtype).removeprefix("torch.")
-        name = repr(shown if shown is not None else kern)
+        name = repr(shown() if shown is not None else kern)
         raise ValueError(
             f"the {name} kernel overflows {dtype} on these inputs (largest |x| {top:.3g}): "
             "standardise the inputs, or use the RBF kernel, whose fits are scale-invariant"
