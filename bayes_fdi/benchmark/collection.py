@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from bayes_fdi.benchmark.report_detection import alarm_at_onset
 from bayes_fdi.benchmark.scenarios import BenchmarkScenario
 from bayes_fdi.scoring.decision_signals import decision_signals
 from bayes_fdi.scoring.picalc import first_detection, picalc
@@ -36,7 +37,8 @@ class RunCollector:
 
     `add` scores one run's decision stream; the attributes hold what the benchmark reports:
     ``rows`` (one per run: fault, mode, size, seed, PICalc indices, ``first_detection``:
-    `bayes_fdi.scoring.picalc.first_detection`'s ``t_dt_first`` and ``dd_permanent``),
+    `bayes_fdi.scoring.picalc.first_detection`'s ``t_dt_first`` and ``dd_permanent``;
+    ``alarm_at_onset``: DD on at the last second before the fault),
     ``faulty_seconds`` and
     ``confident_wrong`` (seconds of a fault with a wrong group above `CONFIDENT`),
     ``model_std`` (median predictive std of X and F before each fault) and the calibration
@@ -82,6 +84,7 @@ class RunCollector:
             "seed": int(seed),
             "indices": indices,
             "first_detection": first,
+            "alarm_at_onset": alarm_at_onset(t, sig.dd, t_from=scenario.t_from),
         }
         self.rows.append(row)
         labels = [str(g) for g in one["group"].values]

@@ -7,6 +7,11 @@ was first seen. Beside it the benchmark records, run by run, the time to the fir
 `bayes_fdi.scoring.picalc.first_detection`). `first_detection_summary` gathers them per
 scenario, `permanence_target` is the report's target row on them and `first_detection_section`
 its table.
+
+A run whose alarm was already on at the last second before the fault (``alarm_at_onset``, where
+an excitation the normal models do not know keeps DD on) has ``t_dt = 0`` without having
+detected anything: `judged_at_onset` marks its detection undetermined, so that the targets
+tables count a fault as detected only where DD was off when it began (`ONSET_RULE`).
 """
 
 from __future__ import annotations
@@ -19,12 +24,43 @@ import numpy as np
 from bayes_fdi.reporting import markdown_table
 from bayes_fdi.scoring.picalc import UNDETERMINED
 
-__all__ = ["PERMANENT_SHARE", "first_detection_section", "first_detection_summary",
-           "permanence_target"]  # fmt: skip
+__all__ = ["ONSET_RULE", "PERMANENT_SHARE", "alarm_at_onset", "first_detection_section",
+           "first_detection_summary", "judged_at_onset", "permanence_target"]  # fmt: skip
 
 #: Share of the detected runs of the visible big abrupt faults whose DD must stay on after the
 #: first detection.
 PERMANENT_SHARE = 0.95
+
+
+#: How the targets tables count a detection, in their words.
+ONSET_RULE = "a run counts as detected only if DD was off at the last second before the fault"
+
+
+def alarm_at_onset(time: Any, dd: Any, *, t_from: float) -> float:
+    """1.0 when DD is high at the last second before the fault (``t_from - 1``), else 0.0
+    (also when the stream has no such second; NaN in ``dd`` counts as low)."""
+    t = np.asarray(time, dtype=np.float64)
+    high = np.asarray(dd, dtype=np.float64) == 1.0
+    if t.shape != high.shape:
+        raise ValueError(f"time {t.shape} and dd {high.shape} differ in shape")
+    return float(high[t == float(t_from) - 1.0].any())
+
+
+def judged_at_onset(results: Mapping[str, Any]) -> dict[str, Any]:
+    """``results`` with the detection of every run whose alarm was on at the fault's start
+    (``alarm_at_onset`` 1) undetermined: its ``t_dt``, ``t_dt_first`` and ``dd_permanent``
+    set to :data:`~bayes_fdi.scoring.picalc.UNDETERMINED` (the other indices kept; the rows
+    are copies, ``results`` is not changed). Rows without ``alarm_at_onset`` (results of an
+    earlier version) are kept as they are."""
+    rows = []
+    for row in results["scenarios"]:
+        if row.get("alarm_at_onset") == 1.0:
+            row = {**row, "indices": {**row["indices"], "t_dt": UNDETERMINED}}
+            if "first_detection" in row:
+                row["first_detection"] = {"t_dt_first": UNDETERMINED,
+                                          "dd_permanent": UNDETERMINED}  # fmt: skip
+        rows.append(row)
+    return {**results, "scenarios": rows}
 
 
 def _scenario_name(row: Mapping[str, Any]) -> str:

@@ -8,17 +8,22 @@ training widened by ``rate_margin``. The normal models take the recent increment
 command and of the pressure drop as inputs, so a command moving faster than any training run
 (a fast sine, a chattering controller) makes them extrapolate although every level lies inside
 its range. A second whose inputs lie outside the envelope (levels, ``outside``; or rates,
-``run_flags``) is DAZZLED, and a
-detection that began while the inputs were outside it is not trusted for isolation
-(``run``/``update``, an online component with its `EnvelopeState`): the inputs are averaged over
-the seconds without detection, and at each rising edge of DD that average is checked against the
-envelope and the answer held until DD falls. The average of the seconds *before* the detection
-is what counts: a fault that itself moves an input (f7 makes T1 jump) is detected within
-seconds, before the average has moved, while a plant running outside the training range
-(another temperature, another pressure) is caught. A detection from the stream's first second,
-before any second without one, is judged on the inputs of its first second. The rates are
-judged as they stood before the detection's first second (they are averaged over every second:
-CV is the command and P1 the supply pressure, which no fault of the benchmark moves).
+``run_flags``) is DAZZLED, and a detection that began while the inputs were outside it is not
+trusted for isolation (``run``/``update``, an online component with its `EnvelopeState`): the
+inputs are averaged over the seconds without detection, and at each rising edge of DD the average
+as it stood *before the detector's estimated change point* is checked against the envelope and
+the answer held until DD falls. The change point is the start of the excursion of the statistic
+that raised the detection (`change_ages`: the CUSUM's sum last at 0, the GLR's best window); the
+state keeps the averages of the last ``change_lookback`` seconds to look it up (a change older
+than that is judged on the oldest one kept). So a fault that itself moves an input (f7 makes T1
+jump, f17 drops P2) is judged on the inputs before its own effect, however many seconds the
+detector took, while a plant running outside the training range (another temperature, another
+pressure) is caught: its inputs were outside before any change point. ``change_lookback = 0``
+judges the average before the detection's first second (model files saved before the change
+point was used). A detection from the stream's first second, before any second without one, is
+judged on the inputs of its first second. The rates are judged as they stood before the
+detection's first second (they are averaged over every second: CV is the command and P1 the
+supply pressure, which no fault of the benchmark moves).
 
 Written by hand: a training range and a compiled exponential average.
 """
@@ -42,12 +47,14 @@ from bayes_fdi.diagnosis.component_state import (
 from bayes_fdi.diagnosis.isolation.signatures import INPUT_REFERENCE_SECONDS
 
 __all__ = [
+    "CHANGE_LOOKBACK",
     "ENVELOPE_CHANNELS",
     "INPUT_MARGIN_FLOOR",
     "RATE_CHANNELS",
     "RATE_SECONDS",
     "EnvelopeState",
     "InputEnvelope",
+    "change_ages",
 ]
 
 #: The inputs the envelope covers, in column order.
@@ -64,6 +71,11 @@ RATE_SECONDS = 30.0
 #: Smallest bound of the mean absolute increment (normalised full scale per second): about the
 #: sensor noise's, so that an input held constant in training is not flagged for its noise.
 RATE_FLOOR = 0.003
+#: Seconds of input averages the onset check keeps to look up the one before a detection's
+#: estimated change point: two time constants of the average, longer than the CUSUM takes to
+#: detect an abrupt fault above the noise; a plant drifting out of the envelope over longer than
+#: that is judged on the average this long before its detection.
+CHANGE_LOOKBACK = 120
 
 
 class EnvelopeState(NamedTuple):
@@ -75,15 +87,50 @@ class EnvelopeState(NamedTuple):
     detected: np.ndarray  #: ``(1,)`` bool: DD of the last second
     previous: np.ndarray  #: ``(2,)`` CV and P1 of the last second (NaN: none)
     rate: np.ndarray  #: ``(2,)`` average absolute one-second increment of CV and P1
+    history: np.ndarray  #: ``(change_lookback, 4)`` the average after each recent second, a ring
+    stored: np.ndarray  #: ``(1,)`` int64: averages in the ring (at most ``change_lookback``)
+    slot: np.ndarray  #: ``(1,)`` int64: where the next average goes
 
     @classmethod
     def upgrade_model_file(cls, fields: dict, format_version: int) -> dict:
-        """The fields of a state saved before the envelope had rates (model-file format <= 4):
-        no last second, rates 0."""
+        """The fields of a state saved before the envelope had rates (model-file format <= 4:
+        no last second, rates 0) or looked up the change point (format <= 5: an empty ring, as
+        the envelope of such a file has ``change_lookback = 0``); with or without a leading
+        run axis."""
         fields = dict(fields)
-        fields.setdefault("previous", np.full(len(RATE_CHANNELS), np.nan))
-        fields.setdefault("rate", np.zeros(len(RATE_CHANNELS)))
+        runs = np.shape(fields["average"])[:-1]
+        fields.setdefault("previous", np.full((*runs, len(RATE_CHANNELS)), np.nan))
+        fields.setdefault("rate", np.zeros((*runs, len(RATE_CHANNELS))))
+        fields.setdefault("history", np.zeros((*runs, 0, 4)))
+        fields.setdefault("stored", np.zeros((*runs, 1), dtype=np.int64))
+        fields.setdefault("slot", np.zeros((*runs, 1), dtype=np.int64))
         return fields
+
+
+def change_ages(statistics: Any, since: Any, threshold: float) -> np.ndarray:
+    """Per second, the age of the estimated change behind the detection: the largest
+    ``since`` (samples since the estimated change, as `DetectorOutput` gives it) among the
+    outputs whose statistic exceeds ``threshold``, 0 where none does.
+
+    Parameters
+    ----------
+    statistics, since
+        ``(..., outputs)`` the detectors' statistics and change ages (NaN and -1 in a gap).
+    threshold
+        The detection threshold (a statistic above it raises DD).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(...)`` int64.
+    """
+    stats = np.asarray(statistics, dtype=np.float64)
+    ages = np.asarray(since, dtype=np.float64)
+    if stats.shape != ages.shape:
+        raise ValueError(f"statistics {stats.shape} and since {ages.shape} differ in shape")
+    with np.errstate(invalid="ignore"):
+        raising = np.isfinite(stats) & (stats > threshold) & (ages > 0)
+    return np.where(raising, ages, 0.0).max(axis=-1, initial=0.0).astype(np.int64)
 
 
 @njit(cache=True, error_model="numpy")
@@ -101,8 +148,45 @@ def _rates_kernel(x, columns, rate_high, beta, state, t):  # pragma: no cover - 
 
 
 @njit(cache=True, error_model="numpy")
+def _outside(values, low, high):  # pragma: no cover - compiled
+    """Whether one of the ``(4,)`` ``values`` lies outside ``[low, high]``."""
+    for j in range(4):
+        if values[j] < low[j] or values[j] > high[j]:
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def _reference_outside(inputs, low, high, age, state, t):  # pragma: no cover - compiled
+    """Whether the input average before a change ``age`` seconds old (ending at second ``t``)
+    lies outside ``[low, high]``: the ring's average after second ``t - age``, the oldest kept
+    if the change is older, the current average without a ring, else the inputs of second
+    ``t``."""
+    size = state.history.shape[0]
+    stored = state.stored[0]
+    if size > 0 and stored > 0:
+        back = min(max(age - 1, 0), stored - 1)
+        return _outside(state.history[(state.slot[0] - 1 - back) % size], low, high)
+    if state.average_set[0]:
+        return _outside(state.average, low, high)
+    return _outside(inputs[t], low, high)  # detected since the stream began: this second
+
+
+@njit(cache=True, error_model="numpy")
+def _remember_average(state):  # pragma: no cover - compiled
+    """Push the current average into the ring (once it has a first value)."""
+    size = state.history.shape[0]
+    if size == 0 or not state.average_set[0]:
+        return
+    state.history[state.slot[0]] = state.average
+    state.slot[0] = (state.slot[0] + 1) % size
+    if state.stored[0] < size:
+        state.stored[0] += 1
+
+
+@njit(cache=True, error_model="numpy")
 def _onset_kernel(
-    dd, inputs, low, high, alpha, columns, rate_high, beta, state, out, fast
+    dd, ages, inputs, low, high, alpha, columns, rate_high, beta, state, out, fast
 ):  # pragma: no cover - compiled
     """Whether each second's detection began outside the envelope (``out``) and whether the
     rates stand above ``rate_high`` after each second (``fast``); ``state`` in place."""
@@ -128,35 +212,29 @@ def _onset_kernel(
             state.novel_at_onset[0] = False
             state.detected[0] = False
             out[t] = False
+            _remember_average(state)
             continue
-        if not state.detected[0]:  # a new detection: were the inputs before it inside?
-            novel = fast_before
-            if state.average_set[0]:
-                for j in range(4):
-                    if average[j] < low[j] or average[j] > high[j]:
-                        novel = True
-            else:  # detected since the stream began: judge the inputs of this second
-                for j in range(4):
-                    if inputs[t, j] < low[j] or inputs[t, j] > high[j]:
-                        novel = True
-            state.novel_at_onset[0] = novel
+        if not state.detected[0]:  # a new detection: were the inputs before its change inside?
+            outside = _reference_outside(inputs, low, high, ages[t], state, t)
+            state.novel_at_onset[0] = fast_before or outside
         state.detected[0] = True
         out[t] = state.novel_at_onset[0]
+        _remember_average(state)
 
 
 @njit(cache=True, error_model="numpy")
 def _onset_runs(
-    dd, inputs, low, high, alpha, columns, rate_high, beta, state, out, fast
+    dd, ages, inputs, low, high, alpha, columns, rate_high, beta, state, out, fast
 ):  # pragma: no cover - compiled
     """`_onset_kernel` over each run (row) of ``dd``; ``state`` stacks the runs' states."""
     for r in range(dd.shape[0]):
         run_state = EnvelopeState(
             state.average[r], state.average_set[r], state.novel_at_onset[r], state.detected[r],
-            state.previous[r], state.rate[r],
+            state.previous[r], state.rate[r], state.history[r], state.stored[r], state.slot[r],
         )  # fmt: skip
         _onset_kernel(
-            dd[r], inputs[r], low, high, alpha, columns, rate_high, beta, run_state, out[r],
-            fast[r],
+            dd[r], ages[r], inputs[r], low, high, alpha, columns, rate_high, beta, run_state,
+            out[r], fast[r],
         )  # fmt: skip
 
 
@@ -178,6 +256,9 @@ class InputEnvelope:
         Widening of the largest training rate, as a share of it (default 0.25).
     rate_seconds
         Time constant (s) of the average of the absolute increments (default `RATE_SECONDS`).
+    change_lookback
+        Seconds of input averages kept to judge a detection by the inputs before its estimated
+        change point (default `CHANGE_LOOKBACK`; 0: by the inputs before its first second).
 
     Attributes
     ----------
@@ -195,17 +276,22 @@ class InputEnvelope:
         reference_seconds: float = INPUT_REFERENCE_SECONDS,
         rate_margin: float = 0.25,
         rate_seconds: float = RATE_SECONDS,
+        change_lookback: int = CHANGE_LOOKBACK,
     ) -> None:
         self.margin = margin
         self.margin_floor = margin_floor
         self.reference_seconds = reference_seconds
         self.rate_margin = rate_margin
         self.rate_seconds = rate_seconds
+        self.change_lookback = change_lookback
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
-        """An envelope saved before it had rates (model-file format <= 4): no rate check."""
+        """An envelope saved before it had rates (model-file format <= 4): no rate check;
+        before it looked up the change point (format <= 5): ``change_lookback = 0``, the onset
+        check it was saved with."""
         data = dict(data)
+        data.setdefault("change_lookback", 0)
         data.setdefault("rate_margin", 0.25)
         data.setdefault("rate_seconds", RATE_SECONDS)
         if "low_" in data:
@@ -221,6 +307,7 @@ class InputEnvelope:
             raise ValueError(f"rate_margin must be finite and >= 0, got {self.rate_margin!r}")
         if not (self.rate_seconds >= 1 and math.isfinite(self.rate_seconds)):
             raise ValueError(f"rate_seconds must be finite and >= 1, got {self.rate_seconds!r}")
+        self._check_lookback()
         lows, highs = [], []
         for c in ENVELOPE_CHANNELS:
             v = np.asarray(normal_runs[c].values, dtype=np.float64)
@@ -269,6 +356,13 @@ class InputEnvelope:
             raise ValueError(f"rate_high must hold two bounds >= 0, got {rate_high!r}")
         return envelope
 
+    def _check_lookback(self) -> None:
+        lookback = self.change_lookback
+        if isinstance(lookback, bool) or not isinstance(lookback, int | np.integer):
+            raise ValueError(f"change_lookback must be an int >= 0, got {lookback!r}")
+        if lookback < 0:
+            raise ValueError(f"change_lookback must be an int >= 0, got {lookback!r}")
+
     def _check_fitted(self) -> None:
         if not hasattr(self, "low_"):
             raise ValueError("InputEnvelope is not fitted; call fit(normal_runs) first")
@@ -284,12 +378,15 @@ class InputEnvelope:
             return np.any((x < self.low_) | (x > self.high_), axis=1)
 
     def init_state(self) -> EnvelopeState:
-        """A fresh state: no average yet, no detection, no last second."""
+        """A fresh state: no average yet, no detection, no last second, an empty ring."""
+        self._check_lookback()
         flag = np.zeros(1, dtype=np.bool_)
         n = len(RATE_CHANNELS)
+        count = np.zeros(1, dtype=np.int64)
         return EnvelopeState(
-            np.zeros(4), flag, flag.copy(), flag.copy(), np.full(n, np.nan), np.zeros(n)
-        )
+            np.zeros(4), flag, flag.copy(), flag.copy(), np.full(n, np.nan), np.zeros(n),
+            np.zeros((int(self.change_lookback), 4)), count, count.copy(),
+        )  # fmt: skip
 
     def check_state(self, state: Any) -> None:
         """Raise a `ValueError` naming the field unless ``state`` is an envelope state."""
@@ -302,7 +399,11 @@ class InputEnvelope:
                 1.0 / self.rate_seconds)  # fmt: skip
 
     def run_flags(
-        self, inputs: Any, detected: Any, state: EnvelopeState | None = None
+        self,
+        inputs: Any,
+        detected: Any,
+        state: EnvelopeState | None = None,
+        change_age: Any = None,
     ) -> tuple[np.ndarray, np.ndarray, EnvelopeState]:
         """Per second: whether the current detection began while the inputs were outside the
         envelope (False while DD is off), and whether the rates of CV or P1 stand above their
@@ -316,6 +417,9 @@ class InputEnvelope:
             ``(n,)`` the detection decision DD.
         state
             The state after the preceding second (default: a fresh one); not changed.
+        change_age
+            ``(n,)`` per second, seconds since the detector's estimated change point
+            (`change_ages`; default 0: a change at that second). Read at DD's rising edges.
 
         Returns
         -------
@@ -329,24 +433,30 @@ class InputEnvelope:
         dd = np.ascontiguousarray(np.asarray(detected, dtype=np.bool_))
         if x.ndim != 2 or x.shape[1] != 4 or dd.shape != (x.shape[0],):
             raise ValueError(f"inputs must be (n, 4) and detected (n,), got {x.shape}, {dd.shape}")
+        ages = _ages(change_age, dd.shape)
         state = working_state(self, state)
         out = np.zeros(dd.size, dtype=np.bool_)
         fast = np.zeros(dd.size, dtype=np.bool_)
-        _onset_kernel(dd, x, *self._kernel_args(), state, out, fast)
+        _onset_kernel(dd, ages, x, *self._kernel_args(), state, out, fast)
         return out, fast, state
 
     def run(
-        self, inputs: Any, detected: Any, state: EnvelopeState | None = None
+        self,
+        inputs: Any,
+        detected: Any,
+        state: EnvelopeState | None = None,
+        change_age: Any = None,
     ) -> tuple[np.ndarray, EnvelopeState]:
         """`run_flags` without the rates' flags: the ``(n,)`` onset flags and the state."""
-        out, _, state = self.run_flags(inputs, detected, state)
+        out, _, state = self.run_flags(inputs, detected, state, change_age)
         return out, state
 
     def run_stacked_flags(
-        self, inputs: Any, detected: Any, state: EnvelopeState
+        self, inputs: Any, detected: Any, state: EnvelopeState, change_age: Any = None
     ) -> tuple[np.ndarray, np.ndarray, EnvelopeState]:
-        """`run_flags` of many runs at once: ``inputs`` ``(runs, n, 4)``, ``detected``
-        ``(runs, n)``, ``state`` their states stacked along a leading run axis; returns the
+        """`run_flags` of many runs at once: ``inputs`` ``(runs, n, 4)``, ``detected`` and
+        ``change_age`` ``(runs, n)``, ``state`` their states stacked along a leading run axis;
+        returns the
         ``(runs, n)`` flags and the stacked states after them (each run's equal to
         `run_flags`')."""
         self._check_fitted()
@@ -356,24 +466,41 @@ class InputEnvelope:
             raise ValueError(
                 f"inputs must be (runs, n, 4) and detected (runs, n), got {x.shape}, {dd.shape}"
             )
+        ages = _ages(change_age, dd.shape)
         check_stacked_state(state, self.init_state(), x.shape[0], "envelope state")
         state = writable_copy(state)
         out = np.zeros(dd.shape, dtype=np.bool_)
         fast = np.zeros(dd.shape, dtype=np.bool_)
-        _onset_runs(dd, x, *self._kernel_args(), state, out, fast)
+        _onset_runs(dd, ages, x, *self._kernel_args(), state, out, fast)
         return out, fast, state
 
     def run_stacked(
-        self, inputs: Any, detected: Any, state: EnvelopeState
+        self, inputs: Any, detected: Any, state: EnvelopeState, change_age: Any = None
     ) -> tuple[np.ndarray, EnvelopeState]:
         """`run_stacked_flags` without the rates' flags."""
-        out, _, state = self.run_stacked_flags(inputs, detected, state)
+        out, _, state = self.run_stacked_flags(inputs, detected, state, change_age)
         return out, state
 
     def update(
-        self, inputs: Any, detected: bool, state: EnvelopeState | None = None
+        self,
+        inputs: Any,
+        detected: bool,
+        state: EnvelopeState | None = None,
+        change_age: int = 0,
     ) -> tuple[bool, EnvelopeState]:
         """`run` on one second (``inputs`` ``(4,)``): a bool and the new state."""
         row = np.asarray(inputs, dtype=np.float64).reshape(1, -1)
-        out, state = self.run(row, np.array([bool(detected)]), state)
+        out, state = self.run(row, np.array([bool(detected)]), state, np.array([change_age]))
         return bool(out[0]), state
+
+
+def _ages(change_age: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``change_age`` as a contiguous int64 array of ``shape`` (zeros for None)."""
+    if change_age is None:
+        return np.zeros(shape, dtype=np.int64)
+    ages = np.asarray(change_age)
+    if ages.shape != shape:
+        raise ValueError(f"change_age must have shape {shape}, got {ages.shape}")
+    if not np.issubdtype(ages.dtype, np.integer):
+        raise ValueError(f"change_age must hold integers (seconds), got {ages.dtype}")
+    return np.ascontiguousarray(ages, dtype=np.int64)

@@ -34,7 +34,7 @@ def upgrade_diagnoser(data: dict[str, Any]) -> dict[str, Any]:
     if "input_low_" in data:
         low, high = data.pop("input_low_"), data.pop("input_high_")
         margin = data.get("input_margin", 0.1)
-        data["envelope_"] = InputEnvelope.from_bounds(low, high, margin=margin)
+        data["envelope_"] = InputEnvelope.from_bounds(low, high, margin=margin, change_lookback=0)
     if "threshold_" in data and "decision_" not in data:
         data["decision_"] = DetectionDecision(data["threshold_"], data["clear_level_"], 2, hold=0)
     if "normal_models_" in data and "signature_" not in data:
@@ -103,6 +103,9 @@ def _nested(
             _flag(onset, 6),
             np.full((*np.shape(onset)[:-1], 2), np.nan),
             np.zeros((*np.shape(onset)[:-1], 2)),
+            np.zeros((*np.shape(onset)[:-1], 0, 4)),  # no ring: judged before the detection
+            np.zeros((*np.shape(onset)[:-1], 1), dtype=np.int64),
+            np.zeros((*np.shape(onset)[:-1], 1), dtype=np.int64),
         ),
     }
 

@@ -25,7 +25,7 @@ from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
 from bayes_fdi.diagnosis.isolation.signatures import SignatureInputs, SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic import standardised_residuals
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import signed_root
-from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, InputEnvelope
+from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, InputEnvelope, change_ages
 from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
 from bayes_fdi.diagnosis.online.stream import MODEL_OUTPUTS
 
@@ -147,7 +147,11 @@ def step_runs(
     out["features"], signature = components.signature.run_stacked(window, state.signature)
     inputs = np.stack([c[k] for k in ENVELOPE_CHANNELS], axis=-1)
     novel_levels = components.envelope.outside(inputs.reshape(-1, 4)).reshape(dd.shape)
-    out["novel_onset"], fast, onset = components.envelope.run_stacked_flags(inputs, dd, state.onset)
+    since = np.stack([test_x.since, test_f.since], axis=-1)
+    ages = change_ages(stats, since, components.decision.threshold)
+    out["novel_onset"], fast, onset = components.envelope.run_stacked_flags(
+        inputs, dd, state.onset, ages
+    )
     out["novel_inputs"] = novel_levels | fast
     out.update(_isolate(components.isolator, out["features"]))
     end = StreamState(
