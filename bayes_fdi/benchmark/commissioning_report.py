@@ -50,7 +50,10 @@ GLOSSARY: tuple[tuple[str, str], ...] = (
         "detector built on these normal models can find it",
     ),
     *DECISION_TERMS,
-    ("mismatch", "a detection that began outside the normal models' envelope (commission it)"),
+    (
+        "mismatch",
+        "a detection whose change began outside the normal models' envelope (commission it)",
+    ),
     ("unknown", "a detection unlike every fault the diagnoser knows"),
 )
 

@@ -447,9 +447,9 @@ class OnlineDiagnoser(BaseEstimator):
             - ``DD`` (bool): the detection decision; ``FFID`` (bool): fault-free indication, not DD
               and no channel missing;
             - ``state`` (str): the diagnosed group's label, ``"unknown"`` (detected, but no fault
-              library or a signature unlike every known fault), ``"mismatch"`` (a detection that
-              began while the inputs lay outside the normal models' envelope: the model does not fit
-              this valve, commission it) or ``"fn"`` (no detection); ``probability``: that group's
+              library or a signature unlike every known fault), ``"mismatch"`` (a detection whose
+              change began with the inputs outside the normal models' envelope: the model does not
+              fit this valve) or ``"fn"`` (no detection); ``probability``: that group's
               calibrated probability (NaN unless isolated); ``evidence`` (str): while DD is on,
               which residual raised it and its sign (``"X high"``, ``"F low"``, ``"X low, F
               high"``), else ``""``;

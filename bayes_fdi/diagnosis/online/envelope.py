@@ -7,25 +7,26 @@ P1 over the last ``rate_seconds`` (an exponential average), at most the largest 
 training widened by ``rate_margin``. The normal models take the recent increments of the
 command and of the pressure drop as inputs, so a command moving faster than any training run
 (a fast sine, a chattering controller) makes them extrapolate although every level lies inside
-its range. A second whose inputs lie outside the envelope (levels, ``outside``; or rates,
-``run_flags``) is DAZZLED, and a detection that began while the inputs were outside it is not
-trusted for isolation (``run``/``update``, an online component with its `EnvelopeState`): the
-inputs are averaged over the seconds without detection, and at each rising edge of DD the average
-as it stood *before the detector's estimated change point* is checked against the envelope and
-the answer held until DD falls. The change point is the start of the excursion of the statistic
-that raised the detection (`change_ages`: the CUSUM's sum last at 0, the GLR's best window); the
-state keeps the averages of the last ``change_lookback`` seconds to look it up (a change older
-than that is judged on the oldest one kept). So a fault that itself moves an input (f7 makes T1
-jump, f17 drops P2) is judged on the inputs before its own effect, however many seconds the
-detector took, while a plant running outside the training range (another temperature, another
-pressure) is caught: its inputs were outside before any change point. ``change_lookback = 0``
-judges the average before the detection's first second (model files saved before the change
-point was used). A detection from the stream's first second, before any second without one, is
-judged on the inputs of its first second. The rates are judged as they stood before the
-detection's first second (they are averaged over every second: CV is the command and P1 the
-supply pressure, which no fault of the benchmark moves).
+its range. A second without detection whose inputs lie outside the envelope (levels,
+``outside``; or rates, ``run_flags``) is DAZZLED, and a detection whose change began while the
+inputs were outside it is not trusted for isolation (``run``/``update``, an online component
+with its `EnvelopeState`): the inputs are averaged over the seconds without detection, and at
+each rising edge of DD the average as it stood *before the detector's estimated change point*
+is checked against the envelope and the answer held until DD falls. The change point is the
+start of the excursion of the statistic that raised the detection (`change_ages`: the CUSUM's
+sum last at 0, the GLR's best window); the state keeps the averages of the last
+``change_lookback`` seconds to look it up (a change older than that is judged on the oldest one
+kept). So a fault that itself moves an input (f7 makes T1 jump, f17 drops P2) is judged on the
+inputs before its own effect, however many seconds the detector took, while a plant running
+outside the training range (another temperature, another pressure) is caught: its inputs were
+outside before any change point. ``change_lookback = 0`` judges the average before the
+detection's first second (model files saved before the change point was used). A detection from
+the stream's first second, before any second without one, is judged on the inputs of its first
+second. The rates are judged as they stood before the detection's first second (they are
+averaged over every second: CV is the command and P1 the supply pressure, which no fault of the
+benchmark moves).
 
-Written by hand: a training range and a compiled exponential average.
+Written by hand: a training range, a compiled exponential average and a ring of its past values.
 """
 
 from __future__ import annotations
@@ -83,7 +84,7 @@ class EnvelopeState(NamedTuple):
 
     average: np.ndarray  #: ``(4,)`` average of CV, P1, P2, T1 over seconds without detection
     average_set: np.ndarray  #: ``(1,)`` bool: the average has a first value
-    novel_at_onset: np.ndarray  #: ``(1,)`` bool: the current detection began outside
+    novel_at_onset: np.ndarray  #: ``(1,)`` bool: the current detection's change began outside
     detected: np.ndarray  #: ``(1,)`` bool: DD of the last second
     previous: np.ndarray  #: ``(2,)`` CV and P1 of the last second (NaN: none)
     rate: np.ndarray  #: ``(2,)`` average absolute one-second increment of CV and P1
@@ -405,9 +406,9 @@ class InputEnvelope:
         state: EnvelopeState | None = None,
         change_age: Any = None,
     ) -> tuple[np.ndarray, np.ndarray, EnvelopeState]:
-        """Per second: whether the current detection began while the inputs were outside the
-        envelope (False while DD is off), and whether the rates of CV or P1 stand above their
-        bounds.
+        """Per second: whether the current detection's estimated change began while the inputs
+        were outside the envelope (False while DD is off), and whether the rates of CV or P1
+        stand above their bounds.
 
         Parameters
         ----------

@@ -49,8 +49,9 @@ def status_reasons(
     raised = f" ({dec['evidence'][i]})" if dec["evidence"][i] else ""
     if dec["novel_onset"][i]:
         return (
-            f"model mismatch: commission this valve (a detection{raised} began while the inputs "
-            "lay outside what the normal models were fitted on; it is not read as a fault)",
+            f"model mismatch: commission this valve (a detection{raised} whose change began while "
+            "the inputs lay outside what the normal models were fitted on; it is not read as a "
+            "fault)",
         )
     if not isolating:
         return (

@@ -36,8 +36,8 @@ __all__ = [
 
 #: The fault names of the stream's ``fault`` coordinate.
 FAULTS: tuple[str, ...] = tuple(f"f{i}" for i in range(1, 20))
-#: The state of a detection that began while the inputs lay outside the normal models' envelope:
-#: the model does not fit this valve or operating point, which is not a fault.
+#: The state of a detection whose estimated change began while the inputs lay outside the normal
+#: models' envelope: the model does not fit this valve or operating point, which is not a fault.
 MISMATCH = "mismatch"
 #: A statistic at or above this share of the threshold counts as raising the detection.
 RAISED_SHARE = 0.5
@@ -102,8 +102,8 @@ def decide(
         The run's ``(n,)`` channels CV, P1, P2, T1, X, F (NaN = missing).
     out
         The per-second quantities: ``DD``, ``group_proba`` ``(n, n_groups)``, ``novelty``,
-        ``novel_inputs`` (inputs outside the envelope now) and ``novel_onset`` (the detection
-        began outside it).
+        ``novel_inputs`` (inputs outside the envelope now) and ``novel_onset`` (the detection's
+        estimated change began outside it).
     group_labels
         The isolability groups' labels, columns of ``group_proba``.
     threshold
@@ -118,10 +118,10 @@ def decide(
         ``blind``, ``novel_inputs``, ``novel_signature``, ``novel_onset``, ``evidence``
         (arrays of ``n``) and ``z`` (the normal quantile of ``coverage``).
 
-    A detection is named ``"mismatch"`` when it began while the inputs lay outside the normal
-    models' envelope (the model does not fit this valve: commission it), ``"unknown"`` when no
-    isolator is fitted or the signature is unlike every known fault, else by the most probable
-    isolability group.
+    A detection is named ``"mismatch"`` when its estimated change began while the inputs lay
+    outside the normal models' envelope (the model does not fit this valve: commission it),
+    ``"unknown"`` when no isolator is fitted or the signature is unlike every known fault, else
+    by the most probable isolability group.
     """
     n = channels["CV"].size
     blind = np.zeros(n, dtype=bool)
