@@ -127,12 +127,33 @@ def test_bad_change_ages_and_lookbacks_are_named():
             InputEnvelope.from_bounds(LOW, HIGH, change_lookback=bad).init_state()
 
 
-def test_change_ages_take_the_age_of_the_statistic_above_the_threshold():
-    stats = np.array([[1.0, 12.0], [11.0, 12.0], [np.nan, 3.0], [2.0, 3.0]])
-    since = np.array([[3.0, 7.0], [9.0, 2.0], [-1.0, 4.0], [5.0, 6.0]])
-    np.testing.assert_array_equal(change_ages(stats, since, 10.0), [7, 9, 0, 0])
-    with pytest.raises(ValueError, match="differ in shape"):
-        change_ages(stats, since[:2], 10.0)
+def test_change_ages_take_the_excursion_of_the_statistic_above_the_threshold():
+    # output 0: above clear (0) from second 1 on, above the threshold 10 at seconds 4 and 5;
+    # output 1: at 0 at second 3, above the threshold at second 5 with a GLR-like since of 4
+    stats = np.array([[0, 0], [2, 1], [1, 1], [3, 0], [11, 2], [12, 12.0]])
+    since = np.array([[0, 0], [1, 1], [2, 2], [1, 0], [1, 1], [2, 4.0]])
+    ages, end = change_ages(stats, since, 10.0, 0.0)
+    # by hand: second 4, output 0 above since second 1: 4 seconds (1..4); second 5: output 0's
+    # 5 seconds against output 1's max(2 seconds since 3, since 4) = 4: the older, 5
+    np.testing.assert_array_equal(ages, [0, 0, 0, 0, 4, 5])
+    np.testing.assert_array_equal(end, [5, 2])
+    # in two chunks, carrying the excursions: the same
+    a1, carry = change_ages(stats[:3], since[:3], 10.0, 0.0)
+    a2, end2 = change_ages(stats[3:], since[3:], 10.0, 0.0, carry)
+    np.testing.assert_array_equal(np.concatenate([a1, a2]), ages)
+    np.testing.assert_array_equal(end2, end)
+    # a gap (NaN) continues an excursion; a clear level of 1.5 ends output 0's at second 2
+    gap = stats.copy()
+    gap[3, 0] = np.nan
+    np.testing.assert_array_equal(change_ages(gap, since, 10.0, 0.0)[0], [0, 0, 0, 0, 4, 5])
+    np.testing.assert_array_equal(change_ages(stats, since, 10.0, 1.5)[0], [0, 0, 0, 0, 2, 4])
+    # stacked runs: each run as alone
+    both, _ = change_ages(np.stack([stats, gap]), np.stack([since, since]), 10.0, 0.0)
+    np.testing.assert_array_equal(both[0], ages)
+    with pytest.raises(ValueError, match="must be"):
+        change_ages(stats, since[:2], 10.0, 0.0)
+    with pytest.raises(ValueError, match="excursion must have shape"):
+        change_ages(stats, since, 10.0, 0.0, np.zeros(3, np.int64))
 
 
 @pytest.mark.parametrize("detector", [CUSUM(k=0.5), GLR(window=60)])
@@ -142,12 +163,28 @@ def test_the_detectors_change_age_points_at_a_step_in_the_mean(detector):
     e = np.zeros(120)
     e[50:] = 2.0
     out, _ = detector.run(e)
-    ages = change_ages(out.statistic[:, None], out.since[:, None], 10.0)
+    ages, _ = change_ages(out.statistic[:, None], out.since[:, None], 10.0, 1e9)
     crossing = np.flatnonzero(out.statistic > 10.0)
     assert crossing.size and crossing[0] > 50
     for t in crossing[crossing < 110]:
         assert ages[t] == t - 49  # seconds 50 .. t
         assert t - ages[t] + 1 == 50
+
+
+def test_a_cusum_whose_sums_take_turns_dates_the_change_to_its_first_excursion():
+    """A fault seen through the whitening as one positive innovation, five negative ones, then
+    a growing positive drift (what the default model's X innovations do under f17): the sum
+    that crosses the threshold started at second 56, but the statistic never returned to 0
+    since the step at 50, so the change is dated to 50."""
+    e = np.zeros(90)
+    e[50], e[51:56], e[56:] = 6.4, -2.0, 1.0 + 0.5 * np.arange(34)
+    out, _ = CUSUM(k=0.5).run(e)
+    t = int(np.flatnonzero(out.statistic > 10.0)[0])
+    assert t > 56
+    assert out.since[t] == t - 55  # the larger sum's own excursion, from 56
+    assert (out.statistic[50 : t + 1] > 0).all()
+    ages, _ = change_ages(out.statistic[:, None], out.since[:, None], 10.0, 0.0)
+    assert ages[t] == t - 49
 
 
 def test_files_saved_before_the_change_point_keep_their_onset_check():

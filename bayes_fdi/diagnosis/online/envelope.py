@@ -91,6 +91,7 @@ class EnvelopeState(NamedTuple):
     history: np.ndarray  #: ``(change_lookback, 4)`` the average after each recent second, a ring
     stored: np.ndarray  #: ``(1,)`` int64: averages in the ring (at most ``change_lookback``)
     slot: np.ndarray  #: ``(1,)`` int64: where the next average goes
+    excursion: np.ndarray  #: ``(2,)`` int64: seconds each statistic has stood above clear
 
     @classmethod
     def upgrade_model_file(cls, fields: dict, format_version: int) -> dict:
@@ -105,33 +106,59 @@ class EnvelopeState(NamedTuple):
         fields.setdefault("history", np.zeros((*runs, 0, 4)))
         fields.setdefault("stored", np.zeros((*runs, 1), dtype=np.int64))
         fields.setdefault("slot", np.zeros((*runs, 1), dtype=np.int64))
+        fields.setdefault("excursion", np.zeros((*runs, 2), dtype=np.int64))
         return fields
 
 
-def change_ages(statistics: Any, since: Any, threshold: float) -> np.ndarray:
-    """Per second, the age of the estimated change behind the detection: the largest
-    ``since`` (samples since the estimated change, as `DetectorOutput` gives it) among the
-    outputs whose statistic exceeds ``threshold``, 0 where none does.
+def change_ages(
+    statistics: Any, since: Any, threshold: float, clear: float, excursion: Any = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per second, the age (seconds, counting that second) of the estimated change behind a
+    detection raised then, and the excursion counters after the last second.
+
+    A statistic's *excursion* is the run of seconds in which it stands above the clear level
+    (where the detection decision counts the evidence as gone; a NaN statistic, a gap, continues
+    it): for the CUSUM, whose clear level is 0, the seconds since both its sums were last at 0,
+    also where the whitened residuals of a fault alternate in sign and the sums take turns. The
+    age is, over the outputs whose statistic exceeds ``threshold``, the largest of the
+    excursion's length and the detector's own ``since`` (the GLR's best window); 0 where no
+    statistic exceeds the threshold.
 
     Parameters
     ----------
     statistics, since
-        ``(..., outputs)`` the detectors' statistics and change ages (NaN and -1 in a gap).
-    threshold
-        The detection threshold (a statistic above it raises DD).
+        ``(..., n, outputs)`` the detectors' statistics and change ages (NaN and -1 in a gap)
+        of consecutive seconds.
+    threshold, clear
+        The detection decision's threshold and clear level.
+    excursion
+        ``(..., outputs)`` the excursions' lengths before the first second (default 0).
 
     Returns
     -------
-    numpy.ndarray
-        ``(...)`` int64.
+    ages : numpy.ndarray
+        ``(..., n)`` int64.
+    excursion : numpy.ndarray
+        ``(..., outputs)`` int64, the lengths after the last second.
     """
     stats = np.asarray(statistics, dtype=np.float64)
     ages = np.asarray(since, dtype=np.float64)
-    if stats.shape != ages.shape:
-        raise ValueError(f"statistics {stats.shape} and since {ages.shape} differ in shape")
+    if stats.shape != ages.shape or stats.ndim < 2:
+        raise ValueError(f"statistics {stats.shape} and since {ages.shape} must be (..., n, c)")
+    carry_shape = stats.shape[:-2] + stats.shape[-1:]
+    carry = np.zeros(carry_shape, np.int64) if excursion is None else np.asarray(excursion)
+    if carry.shape != carry_shape:
+        raise ValueError(f"excursion must have shape {carry_shape}, got {carry.shape}")
+    n = stats.shape[-2]
+    t = np.arange(n).reshape(n, 1)
     with np.errstate(invalid="ignore"):
-        raising = np.isfinite(stats) & (stats > threshold) & (ages > 0)
-    return np.where(raising, ages, 0.0).max(axis=-1, initial=0.0).astype(np.int64)
+        reset = np.isfinite(stats) & (stats <= clear)
+        raising = np.isfinite(stats) & (stats > threshold)
+    last_reset = np.maximum.accumulate(np.where(reset, t, -1), axis=-2)
+    length = np.where(last_reset >= 0, t - last_reset, np.expand_dims(carry, -2) + t + 1)
+    age = np.where(raising, np.maximum(length, ages), 0.0).max(axis=-1, initial=0.0)
+    end = length[..., -1, :] if n else carry
+    return age.astype(np.int64), np.asarray(end, dtype=np.int64)
 
 
 @njit(cache=True, error_model="numpy")
@@ -232,6 +259,7 @@ def _onset_runs(
         run_state = EnvelopeState(
             state.average[r], state.average_set[r], state.novel_at_onset[r], state.detected[r],
             state.previous[r], state.rate[r], state.history[r], state.stored[r], state.slot[r],
+            state.excursion[r],
         )  # fmt: skip
         _onset_kernel(
             dd[r], ages[r], inputs[r], low, high, alpha, columns, rate_high, beta, run_state,
@@ -386,7 +414,7 @@ class InputEnvelope:
         count = np.zeros(1, dtype=np.int64)
         return EnvelopeState(
             np.zeros(4), flag, flag.copy(), flag.copy(), np.full(n, np.nan), np.zeros(n),
-            np.zeros((int(self.change_lookback), 4)), count, count.copy(),
+            np.zeros((int(self.change_lookback), 4)), count, count.copy(), np.zeros(2, np.int64),
         )  # fmt: skip
 
     def check_state(self, state: Any) -> None:

@@ -106,6 +106,7 @@ def _nested(
             np.zeros((*np.shape(onset)[:-1], 0, 4)),  # no ring: judged before the detection
             np.zeros((*np.shape(onset)[:-1], 1), dtype=np.int64),
             np.zeros((*np.shape(onset)[:-1], 1), dtype=np.int64),
+            np.zeros((*np.shape(onset)[:-1], 2), dtype=np.int64),
         ),
     }
 

@@ -148,10 +148,12 @@ def step_runs(
     inputs = np.stack([c[k] for k in ENVELOPE_CHANNELS], axis=-1)
     novel_levels = components.envelope.outside(inputs.reshape(-1, 4)).reshape(dd.shape)
     since = np.stack([test_x.since, test_f.since], axis=-1)
-    ages = change_ages(stats, since, components.decision.threshold)
+    decision_levels = (components.decision.threshold, components.decision.clear)
+    ages, excursion = change_ages(stats, since, *decision_levels, state.onset.excursion)
     out["novel_onset"], fast, onset = components.envelope.run_stacked_flags(
         inputs, dd, state.onset, ages
     )
+    onset = onset._replace(excursion=excursion)
     out["novel_inputs"] = novel_levels | fast
     out.update(_isolate(components.isolator, out["features"]))
     end = StreamState(
