@@ -13,8 +13,9 @@ inputs were outside it is not trusted for isolation (``run``/``update``, an onli
 with its `EnvelopeState`): the inputs are averaged over the seconds without detection, and at
 each rising edge of DD the average as it stood *before the detector's estimated change point*
 is checked against the envelope and the answer held until DD falls. The change point is the
-start of the excursion of the statistic that raised the detection (`change_ages`: the CUSUM's
-sum last at 0, the GLR's best window); the state keeps the averages of the last
+start of the excursion above the decision's clear level of the statistic that raised the
+detection (`change_ages`: for the CUSUM the last second both its sums were at 0; the GLR's best
+window where it reaches further back); the state keeps the averages of the last
 ``change_lookback`` seconds to look it up (a change older than that is judged on the oldest one
 kept). So a fault that itself moves an input (f7 makes T1 jump, f17 drops P2) is judged on the
 inputs before its own effect, however many seconds the detector took, while a plant running
