@@ -18,7 +18,8 @@ from bayes_fdi import model_files
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.detection.detectors import CUSUM, GLR
 from bayes_fdi.diagnosis.online import InputEnvelope
-from bayes_fdi.diagnosis.online.envelope import CHANGE_LOOKBACK, EnvelopeState, change_ages
+from bayes_fdi.diagnosis.online.change_point import change_ages
+from bayes_fdi.diagnosis.online.envelope import CHANGE_LOOKBACK, EnvelopeState
 
 FORMAT3 = Path(__file__).parent / "data" / "model_files_format3"
 

@@ -7,6 +7,8 @@ trust X and F.
   the seconds before it (the online components' states, nested).
 - `bayes_fdi.diagnosis.online.envelope`: `InputEnvelope`, the inputs' training range and the
   check of a detection's onset against it.
+- `bayes_fdi.diagnosis.online.change_point`: `change_ages`, the detector's estimated change
+  point behind a detection, which that check looks up.
 - `bayes_fdi.diagnosis.online.stream`: the per-second decisions and the stream dataset.
 - `bayes_fdi.diagnosis.online.records`: the SEVA record of one second and its reasons.
 - `bayes_fdi.diagnosis.online.training`: the training data of the fit (stacked runs, split

@@ -11,21 +11,21 @@ its range. A second without detection whose inputs lie outside the envelope (lev
 ``outside``; or rates, ``run_flags``) is DAZZLED, and a detection whose change began while the
 inputs were outside it is not trusted for isolation (``run``/``update``, an online component
 with its `EnvelopeState`): the inputs are averaged over the seconds without detection, and at
-each rising edge of DD the average as it stood *before the detector's estimated change point*
-is checked against the envelope and the answer held until DD falls. The change point is the
-start of the excursion above the decision's clear level of the statistic that raised the
-detection (`change_ages`: for the CUSUM the last second both its sums were at 0; the GLR's best
-window where it reaches further back); the state keeps the averages of the last
-``change_lookback`` seconds to look it up (a change older than that is judged on the oldest one
-kept). So a fault that itself moves an input (f7 makes T1 jump, f17 drops P2) is judged on the
-inputs before its own effect, however many seconds the detector took, while a plant running
-outside the training range (another temperature, another pressure) is caught: its inputs were
-outside before any change point. ``change_lookback = 0`` judges the average before the
-detection's first second (model files saved before the change point was used). A detection from
-the stream's first second, before any second without one, is judged on the inputs of its first
-second. The rates are judged as they stood before the detection's first second (they are
-averaged over every second: CV is the command and P1 the supply pressure, which no fault of the
-benchmark moves).
+each rising edge of DD the average as it stood *before the detector's estimated change point* is
+checked against the envelope and the answer held until DD falls. The change point is the start
+of the excursion above the decision's clear level of the statistic that raised the detection
+(`bayes_fdi.diagnosis.online.change_point.change_ages`: for the CUSUM the last second both its
+sums were at 0; the GLR's best window where it reaches further back); the state keeps the
+averages of the last ``change_lookback`` seconds to look it up (a change older than that is
+judged on the oldest one kept). So a fault that itself moves an input (f7 makes T1 jump, f17
+drops P2) is judged on the inputs before its own effect, however many seconds the detector took,
+while a plant running outside the training range (another temperature, another pressure) is
+caught: its inputs were outside before any change point. ``change_lookback = 0`` judges the
+average before the detection's first second (model files saved before the change point was
+used). A detection from the stream's first second, before any second without one, is judged on
+the inputs of its first second. The rates are judged as they stood before the detection's first
+second (they are averaged over every second: CV is the command and P1 the supply pressure, which
+no fault of the benchmark moves).
 
 Written by hand: a training range, a compiled exponential average and a ring of its past values.
 """
@@ -56,7 +56,6 @@ __all__ = [
     "RATE_SECONDS",
     "EnvelopeState",
     "InputEnvelope",
-    "change_ages",
 ]
 
 #: The inputs the envelope covers, in column order.
@@ -109,57 +108,6 @@ class EnvelopeState(NamedTuple):
         fields.setdefault("slot", np.zeros((*runs, 1), dtype=np.int64))
         fields.setdefault("excursion", np.zeros((*runs, 2), dtype=np.int64))
         return fields
-
-
-def change_ages(
-    statistics: Any, since: Any, threshold: float, clear: float, excursion: Any = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per second, the age (seconds, counting that second) of the estimated change behind a
-    detection raised then, and the excursion counters after the last second.
-
-    A statistic's *excursion* is the run of seconds in which it stands above the clear level
-    (where the detection decision counts the evidence as gone; a NaN statistic, a gap, continues
-    it): for the CUSUM, whose clear level is 0, the seconds since both its sums were last at 0,
-    also where the whitened residuals of a fault alternate in sign and the sums take turns. The
-    age is, over the outputs whose statistic exceeds ``threshold``, the largest of the
-    excursion's length and the detector's own ``since`` (the GLR's best window); 0 where no
-    statistic exceeds the threshold.
-
-    Parameters
-    ----------
-    statistics, since
-        ``(..., n, outputs)`` the detectors' statistics and change ages (NaN and -1 in a gap)
-        of consecutive seconds.
-    threshold, clear
-        The detection decision's threshold and clear level.
-    excursion
-        ``(..., outputs)`` the excursions' lengths before the first second (default 0).
-
-    Returns
-    -------
-    ages : numpy.ndarray
-        ``(..., n)`` int64.
-    excursion : numpy.ndarray
-        ``(..., outputs)`` int64, the lengths after the last second.
-    """
-    stats = np.asarray(statistics, dtype=np.float64)
-    ages = np.asarray(since, dtype=np.float64)
-    if stats.shape != ages.shape or stats.ndim < 2:
-        raise ValueError(f"statistics {stats.shape} and since {ages.shape} must be (..., n, c)")
-    carry_shape = stats.shape[:-2] + stats.shape[-1:]
-    carry = np.zeros(carry_shape, np.int64) if excursion is None else np.asarray(excursion)
-    if carry.shape != carry_shape:
-        raise ValueError(f"excursion must have shape {carry_shape}, got {carry.shape}")
-    n = stats.shape[-2]
-    t = np.arange(n).reshape(n, 1)
-    with np.errstate(invalid="ignore"):
-        reset = np.isfinite(stats) & (stats <= clear)
-        raising = np.isfinite(stats) & (stats > threshold)
-    last_reset = np.maximum.accumulate(np.where(reset, t, -1), axis=-2)
-    length = np.where(last_reset >= 0, t - last_reset, np.expand_dims(carry, -2) + t + 1)
-    age = np.where(raising, np.maximum(length, ages), 0.0).max(axis=-1, initial=0.0)
-    end = length[..., -1, :] if n else carry
-    return age.astype(np.int64), np.asarray(end, dtype=np.int64)
 
 
 @njit(cache=True, error_model="numpy")

@@ -25,7 +25,8 @@ from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
 from bayes_fdi.diagnosis.isolation.signatures import SignatureInputs, SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic import standardised_residuals
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import signed_root
-from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, InputEnvelope, change_ages
+from bayes_fdi.diagnosis.online.change_point import change_ages
+from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, InputEnvelope
 from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
 from bayes_fdi.diagnosis.online.stream import MODEL_OUTPUTS
 
