@@ -52,6 +52,8 @@ PERSISTED: dict[str, str] = {
     "CUSUMState": "bayes_fdi.diagnosis.detection:CUSUMState",
     "GLR": "bayes_fdi.diagnosis.detection:GLR",
     "GLRState": "bayes_fdi.diagnosis.detection:GLRState",
+    "TwoSpeedCUSUM": "bayes_fdi.diagnosis.detection:TwoSpeedCUSUM",
+    "TwoSpeedCUSUMState": "bayes_fdi.diagnosis.detection:TwoSpeedCUSUMState",
     "DetectionDecision": "bayes_fdi.diagnosis.detection:DetectionDecision",
     "DecisionState": "bayes_fdi.diagnosis.detection:DecisionState",
     "HierarchicalClassifier": "bayes_fdi.diagnosis.isolation:HierarchicalClassifier",
