@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from bayes_fdi import model_files
+from bayes_fdi.diagnosis.component_state import stack_states
 from bayes_fdi.diagnosis.detection import (
     CUSUM,
     ARWhitener,
     TwoSpeedCUSUM,
     TwoSpeedCUSUMState,
 )
-from bayes_fdi.diagnosis.component_state import stack_states
 from bayes_fdi.diagnosis.detection.thresholds import cusum_threshold, empirical_arl
 from bayes_fdi.diagnosis.detection.two_speed import REFERENCE_ARL
 
