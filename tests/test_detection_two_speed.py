@@ -141,3 +141,18 @@ def test_bad_parameters_are_named_and_the_model_file_round_trips(tmp_path, rng):
         back.run(e[100:], back_state)[0].statistic,
         test.run(e[100:], state)[0].statistic,
     )
+
+
+def test_short_data_calibrate_on_thresholds_with_a_few_alarms(rng):
+    """Where fewer than two thresholds give ``min_alarms`` alarms (short data, or the slow
+    branch's merged alarms), the log-ARL line is fitted on those with at least FEW_ALARMS."""
+    from bayes_fdi.diagnosis.detection.thresholds import FEW_ALARMS, calibrate_threshold
+
+    e = rng.standard_normal((700, 2))
+    got = calibrate_threshold(TwoSpeedCUSUM(), [e], 8 * 3600.0, min_alarms=10)
+    counts, arl = np.array(got["alarms"]), np.array(got["arl"])
+    assert (counts >= 10).sum() < 2 <= (counts >= FEW_ALARMS).sum()
+    used = counts >= FEW_ALARMS
+    slope, intercept = np.polyfit(np.array(got["grid"])[used], np.log(arl[used]), 1)
+    assert got["fit"] == pytest.approx((intercept, slope))
+    assert got["threshold"] == pytest.approx((math.log(8 * 3600.0) - intercept) / slope)
