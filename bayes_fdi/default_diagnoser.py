@@ -15,9 +15,13 @@ declared in ``sim/``, in one of two trainings (`TRAININGS`):
   ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all.
 
 Each fault file is simulated with three seeds for the training, validation (isolability groups)
-and calibration (group probabilities) sets. Every seed is below 1000, apart from the
-benchmark's evaluation seeds (>= 10 000, see ``bayes_fdi.benchmark.scenarios``). The group
-probabilities are recalibrated with a `~bayes_fdi.calibration.TemperatureScaler`.
+and calibration (group probabilities) sets (`simulation_plan`). The calibration runs of the
+abrupt file last `CALIBRATION_AFTER_ONSET` (1500 s) after the onset instead of 480 s, so that
+settled faults weigh as they do in a fault that lasts, and ``online-calibration-incipient-slow``
+(faults ramping over an hour) joins the calibration set only. Every seed is below 1000, apart
+from the benchmark's evaluation seeds (>= 10 000, see ``bayes_fdi.benchmark.scenarios``). The
+group probabilities are recalibrated with a `~bayes_fdi.calibration.TopLabelScaler` (a
+temperature, then a beta map of the top group's probability).
 
 ``small=True`` is a quick version for tests, notebooks and ``make demo``: fewer and shorter
 runs, and lighter normal-model fits.
@@ -35,12 +39,14 @@ from bayes_fdi.campaigns.simulation import simulate_campaign
 from bayes_fdi.campaigns.spec import Campaign
 
 __all__ = [
+    "CALIBRATION_AFTER_ONSET",
     "CAMPAIGNS",
     "SET_SEED_OFFSETS",
     "TRAININGS",
     "fit_online_diagnoser",
     "online_campaigns",
     "simulate_online_campaigns",
+    "simulation_plan",
 ]
 
 #: The campaign files (names in ``sim/``) of each set of each training, with the overrides
@@ -50,6 +56,7 @@ TRAININGS: dict[str, dict[str, tuple[tuple[str, dict[str, Any]], ...]]] = {
         "normal": (("online-normal", {}),),
         "abrupt": (("online-faults-abrupt", {}),),
         "incipient": (("online-faults-incipient", {}),),
+        "calibration": (("online-calibration-incipient-slow", {}),),
     },
     "excitation-mix": {
         "normal": (("online-normal", {"runs_per_state": 18, "batch_size": 18}),
@@ -61,6 +68,7 @@ TRAININGS: dict[str, dict[str, tuple[tuple[str, dict[str, Any]], ...]]] = {
         "incipient": (("online-faults-incipient", {"runs_per_state": 2, "batch_size": 38}),
                       ("online-faults-incipient-sine-sum", {}),
                       ("online-faults-incipient-level-loop", {})),
+        "calibration": (("online-calibration-incipient-slow", {}),),
     },
 }  # fmt: skip
 #: The campaign files of each set of the default training (``"dgen"``).
@@ -70,6 +78,10 @@ CAMPAIGNS: dict[str, tuple[str, ...]] = {
 #: The parts each fault campaign is simulated for, and what they add to the file's seed (plus
 #: the ``seed`` argument): every seed stays below 1000.
 SET_SEED_OFFSETS: dict[str, int] = {"train": 0, "validation": 100, "calibration": 200}
+#: The calibration runs of the abrupt fault campaigns last this long after the fault's onset (s),
+#: so that the recalibration meets settled faults as often as a fault that lasts shows them,
+#: not only their first minutes (except with ``small=True``).
+CALIBRATION_AFTER_ONSET = 1500
 #: Overrides of the quick version (``small=True``), per set, applied to each of its files (the
 #: runs per state of the DGen-only training; a mix takes one run per file fewer in all).
 SMALL: dict[str, dict[str, Any]] = {
@@ -99,6 +111,8 @@ def online_campaigns(
     out = {}
     files_of = TRAININGS[_check_training(training)]
     for key, files in files_of.items():
+        if small and key not in SMALL:  # the calibration-only files
+            continue
         loaded = []
         for name, overrides in files:
             overrides = dict(overrides)
@@ -117,24 +131,46 @@ def _max_seed(campaigns: dict[str, tuple[Campaign, ...]]) -> int:
     return _SEED_CEILING - top
 
 
-def simulate_online_campaigns(
-    *, seed: int = 0, small: bool = False, progress: bool = True, training: str = "dgen"
-) -> dict[str, list[xr.Dataset]]:
-    """Simulate the training data of ``training``: ``{"normal": [...], "train": [...],
-    "validation": [...], "calibration": [...]}`` (lists of datasets, one per campaign file)."""
+def simulation_plan(
+    *, seed: int = 0, small: bool = False, training: str = "dgen"
+) -> list[tuple[str, Campaign, int]]:
+    """What `simulate_online_campaigns` simulates, in order: ``(part, campaign, seed)`` with part
+    ``"normal"``, ``"train"``, ``"validation"`` or ``"calibration"``.
+
+    Each fault file is simulated once per part, its seed plus the part's `SET_SEED_OFFSETS`; the
+    calibration part of an abrupt file runs `CALIBRATION_AFTER_ONSET` s after the onset (not
+    with ``small``); a calibration-only file gives the calibration part alone.
+    """
     campaigns = online_campaigns(small=small, training=training)
     max_seed = _max_seed(campaigns)
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < max_seed:
         raise ValueError(f"seed must be an integer in [0, {max_seed}), got {seed!r}")
+    parts_of = {"normal": {"normal": 0}, "calibration": {"calibration": SET_SEED_OFFSETS[
+        "calibration"]}}  # fmt: skip
+    plan = []
+    for key, files in campaigns.items():
+        for campaign in files:
+            for part, offset in parts_of.get(key, SET_SEED_OFFSETS).items():
+                run = campaign
+                if key == "abrupt" and part == "calibration" and not small:
+                    onset = max(int(f.onset) for f in campaign.faults.values())
+                    run = campaign.replace(
+                        duration=max(campaign.duration, onset + CALIBRATION_AFTER_ONSET)
+                    )
+                plan.append((part, run, campaign.seed + offset + seed))
+    return plan
+
+
+def simulate_online_campaigns(
+    *, seed: int = 0, small: bool = False, progress: bool = True, training: str = "dgen"
+) -> dict[str, list[xr.Dataset]]:
+    """Simulate the training data of ``training`` (`simulation_plan`): ``{"normal": [...],
+    "train": [...], "validation": [...], "calibration": [...]}`` (lists of datasets, one per
+    campaign file)."""
     out: dict[str, list[xr.Dataset]] = {"normal": [], "train": [], "validation": [],
                                         "calibration": []}  # fmt: skip
-    for key, files in campaigns.items():
-        parts = {"normal": 0} if key == "normal" else SET_SEED_OFFSETS
-        for campaign in files:
-            for part, offset in parts.items():
-                ds = simulate_campaign(campaign, seed=campaign.seed + offset + seed,
-                                       progress=progress)  # fmt: skip
-                out[part].append(ds)
+    for part, campaign, run_seed in simulation_plan(seed=seed, small=small, training=training):
+        out[part].append(simulate_campaign(campaign, seed=run_seed, progress=progress))
     return out
 
 
@@ -160,7 +196,7 @@ def fit_online_diagnoser(
     training
         ``"dgen"`` (default) or ``"excitation-mix"`` (`TRAININGS`).
     **params
-        Parameters of `OnlineDiagnoser` (default: ``calibrator=TemperatureScaler()``,
+        Parameters of `OnlineDiagnoser` (default: ``calibrator=TopLabelScaler()``,
         ``random_state=seed``; with ``small``, lighter normal models).
 
     Returns
@@ -170,7 +206,7 @@ def fit_online_diagnoser(
     """
     import sys
 
-    from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.calibration import TopLabelScaler
     from bayes_fdi.diagnosis import OnlineDiagnoser
     from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 
@@ -178,7 +214,7 @@ def fit_online_diagnoser(
     mix = _check_training(training) != "dgen"
     data = simulate_online_campaigns(seed=seed, small=small, progress=progress, training=training)
     simulated = time.perf_counter() - t0
-    params.setdefault("calibrator", TemperatureScaler())
+    params.setdefault("calibrator", TopLabelScaler())
     params.setdefault("random_state", seed)
     coverage = 0.9 if mix else None
     if small:

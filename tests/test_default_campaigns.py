@@ -12,11 +12,13 @@ import pytest
 
 from bayes_fdi.campaigns.simulation import simulate_campaign
 from bayes_fdi.default_diagnoser import (
+    CALIBRATION_AFTER_ONSET,
     CAMPAIGNS,
     SET_SEED_OFFSETS,
     TRAININGS,
     online_campaigns,
     simulate_online_campaigns,
+    simulation_plan,
 )
 
 MIX = "excitation-mix"
@@ -32,8 +34,13 @@ def _family(campaign) -> str:
 @pytest.mark.parametrize("small", [False, True])
 def test_every_set_of_the_mix_spans_dgen_and_the_training_families(small):
     campaigns = online_campaigns(small=small, training=MIX)
-    assert set(campaigns) == {"normal", "abrupt", "incipient"}
+    # the calibration-only files are left out of the quick version
+    assert set(campaigns) == {"normal", "abrupt", "incipient"} | (
+        set() if small else {"calibration"}
+    )
     for key, files in campaigns.items():
+        if key == "calibration":
+            continue
         families = [_family(c) for c in files]
         assert families[0] == "dgen"  # the benchmark's excitation first
         assert not set(families) & SHIFT_FAMILIES
@@ -45,8 +52,8 @@ def test_every_set_of_the_mix_spans_dgen_and_the_training_families(small):
                 assert not c.excitation["operating"]
     normal = campaigns["normal"]
     assert all(set(c.run_specs(c.seed).state) == {"fn"} for c in normal)
-    for key in ("abrupt", "incipient"):
-        for c in campaigns[key]:
+    for key in ("abrupt", "incipient", "calibration"):
+        for c in campaigns.get(key, ()):
             assert set(c.run_specs(c.seed).state) == {f"f{i}" for i in range(1, 20)}
     if not small:  # 12 h of fault-free training, as before the families were added
         assert sum(c.n_runs * c.duration for c in normal) == 48 * 900
@@ -61,6 +68,7 @@ def test_the_default_training_is_the_dgen_sines_as_declared():
         (48, 900),
         (190, 600),
         (76, 900),
+        (76, 3720),
     ]
     assert all(c.source == "benchmark-inputs" for cs in campaigns.values() for c in cs)
 
@@ -69,9 +77,11 @@ def test_the_seeds_are_below_1000_and_distinct():
     campaigns = online_campaigns(training=MIX)
     seeds = []
     for key, files in campaigns.items():
-        offsets = [0] if key == "normal" else SET_SEED_OFFSETS.values()
+        offsets = {"normal": [0], "calibration": [SET_SEED_OFFSETS["calibration"]]}.get(
+            key, SET_SEED_OFFSETS.values()
+        )
         seeds += [c.seed + o for c in files for o in offsets]
-    assert len(set(seeds)) == len(seeds) == 4 + 3 * (4 + 3)
+    assert len(set(seeds)) == len(seeds) == 4 + 3 * (4 + 3) + 1
     assert max(seeds) < 1000 and min(seeds) >= 0
     assert [c.name for cs in campaigns.values() for c in cs] == [
         name for files in TRAININGS[MIX].values() for name, _ in files
@@ -97,3 +107,22 @@ def test_a_seed_beyond_the_last_allowed_or_an_unknown_training_is_refused_by_nam
         simulate_online_campaigns(seed=549, small=True, progress=False)
     with pytest.raises(ValueError, match="training must be one of dgen, excitation-mix"):
         online_campaigns(training="chirp")
+
+
+def test_the_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones():
+    # the calibration part of the abrupt file runs CALIBRATION_AFTER_ONSET s after the onset;
+    # the slow incipient file is simulated for the calibration set only, with its offset
+    plan = [(part, c.name, c.duration, s) for part, c, s in simulation_plan(seed=3)]
+    assert plan == [
+        ("normal", "online-normal", 900, 104),
+        ("train", "online-faults-abrupt", 600, 204),
+        ("validation", "online-faults-abrupt", 600, 304),
+        ("calibration", "online-faults-abrupt", 120 + CALIBRATION_AFTER_ONSET, 404),
+        ("train", "online-faults-incipient", 900, 254),
+        ("validation", "online-faults-incipient", 900, 354),
+        ("calibration", "online-faults-incipient", 900, 454),
+        ("calibration", "online-calibration-incipient-slow", 3720, 444),
+    ]
+    small = [(part, c.name, c.duration) for part, c, _ in simulation_plan(small=True)]
+    assert ("calibration", "online-faults-abrupt", 400) in small
+    assert all(name != "online-calibration-incipient-slow" for _, name, _ in small)
