@@ -95,3 +95,18 @@ def test_the_scaler_survives_a_model_file_and_an_unfitted_one_says_so(tmp_path):
         TopLabelScaler().transform(proba)
     # the temperature alone is TemperatureScaler's
     assert scaler.temperature_ == TemperatureScaler(classes=[0, 1, 2]).fit(proba, y).temperature_
+
+
+def test_an_older_model_file_loads_with_its_temperature_alone():
+    # a format-3 file (tests/data/model_files_format3) recalibrates by a temperature: no top map,
+    # and the isolation keeps its compiled path (its stream is checked in test_envelope_rates)
+    from pathlib import Path
+
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+
+    path = Path(__file__).parent / "data" / "model_files_format3" / "online.npz"
+    assert model_files.read_metadata(path)["format_version"] < model_files.FORMAT_VERSION
+    isolator = OnlineDiagnoser.load(path).isolator_
+    assert type(isolator.calibrator_) is TemperatureScaler
+    assert isolator.top_map().size == 0 and isolator.temperature() > 0
+    assert isolator.rows_independent
