@@ -34,13 +34,8 @@ def _family(campaign) -> str:
 @pytest.mark.parametrize("small", [False, True])
 def test_every_set_of_the_mix_spans_dgen_and_the_training_families(small):
     campaigns = online_campaigns(small=small, training=MIX)
-    # the calibration-only files are left out of the quick version
-    assert set(campaigns) == {"normal", "abrupt", "incipient"} | (
-        set() if small else {"calibration"}
-    )
+    assert set(campaigns) == {"normal", "abrupt", "incipient"}
     for key, files in campaigns.items():
-        if key == "calibration":
-            continue
         families = [_family(c) for c in files]
         assert families[0] == "dgen"  # the benchmark's excitation first
         assert not set(families) & SHIFT_FAMILIES
@@ -52,8 +47,8 @@ def test_every_set_of_the_mix_spans_dgen_and_the_training_families(small):
                 assert not c.excitation["operating"]
     normal = campaigns["normal"]
     assert all(set(c.run_specs(c.seed).state) == {"fn"} for c in normal)
-    for key in ("abrupt", "incipient", "calibration"):
-        for c in campaigns.get(key, ()):
+    for key in ("abrupt", "incipient"):
+        for c in campaigns[key]:
             assert set(c.run_specs(c.seed).state) == {f"f{i}" for i in range(1, 20)}
     if not small:  # 12 h of fault-free training, as before the families were added
         assert sum(c.n_runs * c.duration for c in normal) == 48 * 900
@@ -68,7 +63,6 @@ def test_the_default_training_is_the_dgen_sines_as_declared():
         (48, 900),
         (190, 600),
         (76, 900),
-        (76, 3720),
     ]
     assert all(c.source == "benchmark-inputs" for cs in campaigns.values() for c in cs)
 
@@ -77,11 +71,9 @@ def test_the_seeds_are_below_1000_and_distinct():
     campaigns = online_campaigns(training=MIX)
     seeds = []
     for key, files in campaigns.items():
-        offsets = {"normal": [0], "calibration": [SET_SEED_OFFSETS["calibration"]]}.get(
-            key, SET_SEED_OFFSETS.values()
-        )
+        offsets = [0] if key == "normal" else SET_SEED_OFFSETS.values()
         seeds += [c.seed + o for c in files for o in offsets]
-    assert len(set(seeds)) == len(seeds) == 4 + 3 * (4 + 3) + 1
+    assert len(set(seeds)) == len(seeds) == 4 + 3 * (4 + 3)
     assert max(seeds) < 1000 and min(seeds) >= 0
     assert [c.name for cs in campaigns.values() for c in cs] == [
         name for files in TRAININGS[MIX].values() for name, _ in files
@@ -109,20 +101,37 @@ def test_a_seed_beyond_the_last_allowed_or_an_unknown_training_is_refused_by_nam
         online_campaigns(training="chirp")
 
 
-def test_the_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones():
-    # the calibration part of the abrupt file runs CALIBRATION_AFTER_ONSET s after the onset;
-    # the slow incipient file is simulated for the calibration set only, with its offset
-    plan = [(part, c.name, c.duration, s) for part, c, s in simulation_plan(seed=3)]
-    assert plan == [
+def test_the_long_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones():
+    # by default the calibration parts are the fault files' own runs; with "top-label-long" the
+    # abrupt calibration runs last CALIBRATION_AFTER_ONSET s after the onset and the slow
+    # incipient file gives the calibration set alone, with the calibration offset
+    default = [(part, c.name, c.duration, s) for part, c, s in simulation_plan(seed=3)]
+    assert default == [
         ("normal", "online-normal", 900, 104),
         ("train", "online-faults-abrupt", 600, 204),
         ("validation", "online-faults-abrupt", 600, 304),
-        ("calibration", "online-faults-abrupt", 120 + CALIBRATION_AFTER_ONSET, 404),
+        ("calibration", "online-faults-abrupt", 600, 404),
         ("train", "online-faults-incipient", 900, 254),
         ("validation", "online-faults-incipient", 900, 354),
         ("calibration", "online-faults-incipient", 900, 454),
+    ]
+    long = simulation_plan(seed=3, calibration="top-label-long")
+    assert [(part, c.name, c.duration, s) for part, c, s in long] == [
+        *default[:3],
+        ("calibration", "online-faults-abrupt", 120 + CALIBRATION_AFTER_ONSET, 404),
+        *default[4:],
         ("calibration", "online-calibration-incipient-slow", 3720, 444),
     ]
-    small = [(part, c.name, c.duration) for part, c, _ in simulation_plan(small=True)]
-    assert ("calibration", "online-faults-abrupt", 400) in small
-    assert all(name != "online-calibration-incipient-slow" for _, name, _ in small)
+    slow = long[-1][1]
+    assert slow.n_runs == 76 and set(slow.run_specs(slow.seed).state) == {
+        f"f{i}" for i in range(1, 20)
+    }
+    small = simulation_plan(small=True, calibration="top-label-long")
+    assert [(part, c.duration) for part, c, _ in small] == [
+        (part, c.duration) for part, c, _ in simulation_plan(small=True)
+    ]
+    with pytest.raises(ValueError, match="calibration must be one of temperature, top-label"):
+        simulation_plan(calibration="isotonic")
+    # the seeds of the long calibration stay below 1000 with the largest allowed seed
+    top = simulation_plan(seed=548, calibration="top-label-long")
+    assert max(s for _, _, s in top) < 1000

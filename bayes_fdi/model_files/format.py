@@ -109,8 +109,8 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
-#: 6: the default online diagnoser's group probabilities recalibrated by a
-#: `~bayes_fdi.calibration.TopLabelScaler` (older files load with their temperature scaling);
+#: 6: group probabilities may be recalibrated by a `~bayes_fdi.calibration.TopLabelScaler`
+#: (older files load with their temperature scaling);
 #: 5: the online diagnoser's input envelope checks the inputs' rates (its state holds them);
 #: 4: the detection decision's hold (``hold``, the state's ``quiet`` count); 3: the online
 #: diagnoser's components own their states; 2: classes named by their stable registered names;
