@@ -110,6 +110,7 @@ def commission(
     sizes: Sequence[float] = (0.25, 0.5, 0.75),
     evaluation_runs: int = 2,
     normal_models: Any = None,
+    normal_samples: int | str = 2000,
     twin: Any = None,
     seed: int = 0,
     progress: bool = True,
@@ -129,9 +130,11 @@ def commission(
     sizes, evaluation_runs
         Fault sizes of the held-out check, and runs per fault and size.
     normal_models
-        Unfitted normal models (default: `DynamicNormalModels` with ``max_train_samples=
-        "auto"``: the samples they are fitted on chosen by a learning curve on held-out time,
-        reported).
+        Unfitted normal models (default: `DynamicNormalModels` fitted on ``normal_samples``).
+    normal_samples
+        Samples the default normal models are fitted on (a seeded subset), or ``"auto"``:
+        chosen by a learning curve on held-out minutes (up to 4000; costlier, see
+        `~bayes_fdi.diagnosis.normal_models.training_size`). The report says which.
     twin
         Unfitted digital twin, cloned before fitting (default:
         ``ActuatorTwin(random_state=seed)``; e.g. fewer fitted parameters for a quick check).
@@ -179,7 +182,7 @@ def commission(
     seconds["library"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if normal_models is None:
-        normal_models = DynamicNormalModels(max_train_samples="auto", random_state=seed)
+        normal_models = DynamicNormalModels(max_train_samples=normal_samples, random_state=seed)
     with busy("commissioning: fitting the normal models, detector and isolation", enabled=progress):
         diagnoser = OnlineDiagnoser(
             normal_models,
