@@ -1,7 +1,9 @@
 """The compiled (numba) engine of the fast Gaussian solver against the torch rules it replaces:
 the best action on exact factors (ties, deletions, the gain floor), the rounds of the lazy
 verification (against the public bound functions), the carried factors' re-estimation update
-(against its formulas in NumPy), and whole fits, which take the same actions either way."""
+(against its formulas in NumPy), the posterior's terms and the re-estimation update of the
+Cholesky factor (against NumPy and a fresh factorisation), and whole fits, which take the same
+actions either way."""
 
 from __future__ import annotations
 
@@ -12,6 +14,9 @@ import pytest
 import torch
 
 import bayes_fdi.rvm.sbl.action_kernels as action_kernels
+import bayes_fdi.rvm.sbl.factor_kernels as factor_kernels
+import bayes_fdi.rvm.sbl.gaussian as gaussian_module
+import bayes_fdi.rvm.sbl.posterior_bounds as posterior_module
 import bayes_fdi.rvm.sbl.tracked_factors as tracked_module
 import bayes_fdi.rvm.sbl.tracked_kernels as tracked_kernels
 import bayes_fdi.rvm.sbl.verification as verification_module
@@ -154,9 +159,50 @@ def test_compiled_engine_takes_the_torch_engines_actions(seed, n, width, monkeyp
         fast = fast_gaussian(design, t)
         monkeypatch.setattr(verification_module, "COMPILED_RULES", False)
         monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", False)
+        monkeypatch.setattr(posterior_module, "COMPILED_POSTERIOR", False)
+        monkeypatch.setattr(gaussian_module, "UPDATED_FACTOR", False)
         slow = fast_gaussian(design, t)
     assert torch.equal(fast.active, slow.active)
     assert fast.n_iter == slow.n_iter and fast.converged == slow.converged
     assert torch.equal(fast.alpha.isfinite(), slow.alpha.isfinite())
     torch.testing.assert_close(fast.alpha, slow.alpha, rtol=1e-8, atol=0.0)
     assert fast.log_evidence == pytest.approx(slow.log_evidence, rel=1e-12, abs=1e-9)
+
+
+def _scaled_factor(G: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    d = alpha**-0.5
+    return np.linalg.cholesky(d[:, None] * G * d[None, :] + np.eye(alpha.size))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_factor_update_equals_a_fresh_factorisation(seed):
+    rng = np.random.default_rng(seed)
+    M = int(rng.integers(2, 40))
+    A = rng.standard_normal((M, 3 * M))
+    G = A @ A.T / M
+    alpha = np.exp(rng.uniform(-4.0, 4.0, M))
+    k = int(rng.integers(0, M))
+    new = alpha.copy()
+    new[k] = alpha[k] * np.exp(rng.uniform(-6.0, 6.0))  # updates and downdates
+    L = _scaled_factor(G, alpha)
+    amp = factor_kernels.reestimate_factor(L, k, math.sqrt(alpha[k] / new[k]))
+    want = _scaled_factor(G, new)
+    assert amp >= 1.0 and (amp == 1.0) == (new[k] >= alpha[k])
+    np.testing.assert_allclose(L, want, rtol=0.0, atol=1e-12 * amp * np.abs(want).max())
+    assert np.all(np.triu(L, 1) == 0.0)  # still lower triangular
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_posterior_terms_match_numpy(seed):
+    rng = np.random.default_rng(seed)
+    M = int(rng.integers(1, 30))
+    G = rng.standard_normal((M, M))
+    abar = np.exp(rng.uniform(-3.0, 3.0, M))
+    mu, Phi_t = rng.standard_normal(M), rng.standard_normal(M)
+    Hb, grad, absp = np.empty((M, M)), np.empty(M), np.empty(M)
+    fro_sq = factor_kernels.posterior_terms(G, abar, mu, Phi_t, Hb, grad, absp)
+    want = 0.5 * (G + G.T) + np.diag(abar)
+    np.testing.assert_array_equal(Hb, want)
+    assert fro_sq == pytest.approx(np.linalg.norm(want) ** 2, rel=1e-13)
+    np.testing.assert_allclose(grad, want @ mu - Phi_t, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(absp, np.abs(want) @ np.abs(mu) + np.abs(Phi_t), rtol=1e-13)
