@@ -24,9 +24,13 @@ from bayes_fdi.rvm.kernels import RBF
 from bayes_fdi.rvm.sbl import (
     Design,
     best_action,
+    factor_precision,
     fast_gaussian,
+    gaussian_screened_Q,
     optimistic_ratio,
     reestimate_gain_bounds,
+    rounding_gamma,
+    screened_factors,
     useful_lower_bound,
 )
 from bayes_fdi.rvm.threads import fit_threads
@@ -206,3 +210,33 @@ def test_posterior_terms_match_numpy(seed):
     assert fro_sq == pytest.approx(np.linalg.norm(want) ** 2, rel=1e-13)
     np.testing.assert_allclose(grad, want @ mu - Phi_t, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(absp, np.abs(want) @ np.abs(mu) + np.abs(Phi_t), rtol=1e-13)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_screened_rows_match_the_torch_screening(seed):
+    g = torch.Generator().manual_seed(seed)
+    M, K, N = int(torch.randint(2, 25, (1,), generator=g)), 7, 80
+    B = torch.randn(N, M + K, generator=g, dtype=torch.float64)
+    B = B / torch.linalg.vector_norm(B, dim=0)
+    Phi, Bc = B[:, :M], B[:, M:]
+    t = torch.randn(N, generator=g, dtype=torch.float64)
+    alpha = torch.rand(M, generator=g, dtype=torch.float64) * 3.0 + 0.1
+    H = torch.diag(alpha) + Phi.T @ Phi
+    fac = factor_precision(alpha, Phi.T @ Phi)
+    mu = fac.solve(Phi.T @ t)
+    grad = H @ mu - Phi.T @ t
+    grad_err = rounding_gamma(M + 3, torch.float64) * (H.abs() @ mu.abs() + (Phi.T @ t).abs())
+    Z, diag, bt = Bc.T @ Phi, (Bc * Bc).sum(0), Bc.T @ t
+    trace = float(torch.linalg.eigvalsh(H).min()) ** -1
+    zero = Z.new_zeros(M)
+    scr = screened_factors(fac, H, Z, diag, z_error=zero, trace=trace)
+    Q, Q_err = gaussian_screened_Q(scr, Z, bt, 0.0, mu, grad, grad_err, zero)
+    H_F = float(torch.linalg.matrix_norm(H)) * (1.0 + rounding_gamma(M * M, torch.float64))
+    gammas = [rounding_gamma(n, torch.float64) for n in (M + 2, 2 * M + 4, M + 3)]
+    norms = [float(torch.linalg.vector_norm(v)) for v in (grad, grad_err, mu)]
+    C, out = np.empty((K, M)), np.empty((K, 5))
+    arrays = [v.numpy() for v in (fac.L, fac.d, H, Z, diag, bt, mu, grad)]
+    factor_kernels.screened_rows(*arrays, np.array([trace, H_F, *norms, *gammas]), C, out)
+    np.testing.assert_allclose(C, scr.C.numpy(), rtol=1e-10, atol=1e-13)
+    for col, want in enumerate((scr.S, scr.S_error, Q, Q_err, scr.residual)):
+        np.testing.assert_allclose(out[:, col], want.numpy(), rtol=1e-6, atol=1e-14)

@@ -24,8 +24,9 @@ from bayes_fdi.rvm.sbl.rounding import rounding_gamma
 
 __all__ = ["COMPILED_POSTERIOR", "Posterior", "posterior_context"]
 
-#: Compute the posterior's terms compiled (:func:`~bayes_fdi.rvm.sbl.factor_kernels.posterior_terms`)
-#: on CPU float64; tests clear it to compare with the torch operations.
+#: Compute the posterior's terms compiled
+#: (:func:`~bayes_fdi.rvm.sbl.factor_kernels.posterior_terms`) on CPU float64; tests clear it to
+#: compare with the torch operations.
 COMPILED_POSTERIOR = True
 
 
