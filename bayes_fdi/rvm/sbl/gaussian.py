@@ -82,7 +82,8 @@ def fast_gaussian(
 ) -> SBLResult:
     """Tipping & Faul fast marginal-likelihood maximisation, Gaussian noise.
 
-    Each iteration the posterior is refactorised (Cholesky of the scaled precision); the
+    The posterior is refactorised (Cholesky of the scaled precision) after each addition,
+    deletion and noise update and moved by a rank-one step after a re-estimation; the
     candidates' screening factors are carried by rank-one updates with rigorous error bounds
     (:mod:`~bayes_fdi.rvm.sbl.tracked_factors`) and the action is decided on exact factors of
     whatever could win (:func:`~bayes_fdi.rvm.sbl.verification.lazy_verified_action`), so the
