@@ -147,7 +147,13 @@ def _saved(model, tmp_path):
 
 
 def test_fit_from_recordings_and_diagnose_cli(tmp_path, rng, monkeypatch, capsys):
-    monkeypatch.setattr(model_fitting, "new_online_diagnoser", StreamDouble)
+    made = []  # the constructor arguments fit_from_recordings asks for
+
+    def double(**params):
+        made.append(params)
+        return StreamDouble()
+
+    monkeypatch.setattr(model_fitting, "new_online_diagnoser", double)
     paths = []
     for i in range(2):
         one = recording(rng, 600, faults=()).isel(run=0)
@@ -165,6 +171,8 @@ def test_fit_from_recordings_and_diagnose_cli(tmp_path, rng, monkeypatch, capsys
     assert "StreamDouble fitted on 2 fault-free and 1 fault recording(s)" in capsys.readouterr().out
     fitted = model_files.load(model_file)
     assert fitted.n_fault_runs_ == 1
+    # the user's recordings: normal models whose training size a learning curve chooses
+    assert made[0]["normal_models"].max_train_samples == "auto"
     out = tmp_path / "out"
     argv = ["diagnose", str(paths[1]), "--model", str(model_file), "--units", "physical",
             "--out", str(out), "--quiet"]  # fmt: skip

@@ -9,6 +9,7 @@ from bayes_fdi import model_files
 from bayes_fdi.actuator import simulate
 from bayes_fdi.actuator.excitation import level_loop_inputs
 from bayes_fdi.commissioning import check_healthy, commission, operating_range
+from bayes_fdi.commissioning.report import render_report
 from bayes_fdi.diagnosis import DynamicNormalModels, OnlineDiagnoser
 
 
@@ -75,6 +76,14 @@ def test_commissioning_gives_a_diagnoser_of_this_valve_with_its_report(commissio
     assert report["twin"]["heldout"]["n_samples"] > 0
     names = [p["name"] for p in report["twin"]["parameters"]]
     assert "kv" in names
+    # the normal models' training samples are reported (here a fixed subset of 400)
+    assert report["normal_models"] == {
+        "rows": 400,
+        "available": 1500,
+        "curve": [],
+        "text": "fitted on 400 of 1500 healthy samples (a fixed subset)",
+    }
+    assert "The normal models of X and F were fitted on 400 of 1500" in render_report(report)
 
 
 def test_the_commissioning_report_travels_with_the_model_file(commissioned, tmp_path):

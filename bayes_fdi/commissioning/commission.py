@@ -81,6 +81,19 @@ def _twin_report(twin: Any, check: Any) -> dict[str, Any]:
     return out
 
 
+def _training_size_report(models: Any) -> dict[str, Any]:
+    """The normal models' training samples and the learning curve that chose them."""
+    size = getattr(models, "training_size_", None)
+    if size is None:  # normal models of another kind
+        return {}
+    return {
+        "rows": int(size.rows),
+        "available": size.available,
+        "curve": [point._asdict() for point in size.curve],
+        "text": size.describe(),
+    }
+
+
 def commission(
     healthy: xr.Dataset | Sequence[xr.Dataset],
     *,
@@ -109,7 +122,9 @@ def commission(
     sizes, evaluation_runs
         Fault sizes of the held-out check, and runs per fault and size.
     normal_models
-        Unfitted normal models (default: `DynamicNormalModels`).
+        Unfitted normal models (default: `DynamicNormalModels` with ``max_train_samples=
+        "auto"``: the samples they are fitted on chosen by a learning curve on held-out time,
+        reported).
     twin
         Unfitted digital twin, cloned before fitting (default:
         ``ActuatorTwin(random_state=seed)``; e.g. fewer fitted parameters for a quick check).
@@ -126,6 +141,7 @@ def commission(
 
     from bayes_fdi.calibration import TemperatureScaler
     from bayes_fdi.diagnosis import OnlineDiagnoser
+    from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
     from bayes_fdi.diagnosis.online.training import stack_runs
     from bayes_fdi.twin import ActuatorTwin, transplant_library
 
@@ -154,6 +170,8 @@ def commission(
         ]
     seconds["library"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    if normal_models is None:
+        normal_models = DynamicNormalModels(max_train_samples="auto", random_state=seed)
     with busy("commissioning: fitting the normal models, detector and isolation", enabled=progress):
         diagnoser = OnlineDiagnoser(
             normal_models, calibrator=TemperatureScaler(), random_state=seed
@@ -182,6 +200,7 @@ def commission(
             "duration": int(duration),
             "seeds": [10 * seed + k for k in (1, 2, 3)],
         },
+        "normal_models": _training_size_report(diagnoser.normal_models_),
         "detection": {
             "threshold": float(diagnoser.threshold_),
             "false_alarm_hours": float(diagnoser.false_alarm_hours),

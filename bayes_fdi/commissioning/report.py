@@ -120,6 +120,11 @@ def _expected_section(report: Mapping[str, Any]) -> list[str]:
     ]
 
 
+def _normal_models_lines(report: Mapping[str, Any]) -> list[str]:
+    text = report.get("normal_models", {}).get("text")
+    return ["", f"The normal models of X and F were {text}."] if text else []
+
+
 def render_report(report: Mapping[str, Any]) -> str:
     """The Markdown commissioning report."""
     healthy = report["healthy"]
@@ -143,6 +148,7 @@ def render_report(report: Mapping[str, Any]) -> str:
         "units; 1st, 50th and 99th percentiles):",
         "",
         markdown_table(["channel", "1 %", "50 %", "99 %"], range_rows),
+        *_normal_models_lines(report),
         *_twin_section(report["twin"]),
         "## Isolability groups",
         "",

@@ -232,7 +232,9 @@ def fit_from_recordings(
         ``(state, onset, recording)`` for recordings of known faults (onset in the recording's
         own time; 0 or earlier: faulty throughout).
     estimator
-        The unfitted diagnoser (default `new_online_diagnoser`), cloned.
+        The unfitted diagnoser, cloned (default: `new_online_diagnoser` whose normal models
+        choose the samples they are fitted on by a learning curve on held-out time,
+        ``DynamicNormalModels(max_train_samples="auto")``).
     progress
         Say on stderr that the fit is running (after the checks).
     """
@@ -248,7 +250,13 @@ def fit_from_recordings(
     if faults:
         states, onsets, recs = zip(*faults, strict=True)
         fault_runs = recordings_as_runs(list(recs), list(states), list(onsets))
-    model = new_online_diagnoser() if estimator is None else clone(estimator)
+    if estimator is None:
+        from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
+
+        estimator = new_online_diagnoser(
+            normal_models=DynamicNormalModels(max_train_samples="auto")
+        )
+    model = clone(estimator)
     with busy("fitting the normal models, detector and isolation", enabled=progress):
         return model.fit(normal_runs, fault_runs)
 
@@ -442,6 +450,9 @@ def run_from_cli(args: argparse.Namespace) -> int:
     ranges = getattr(model, "training_ranges_", None)
     if ranges:
         print("  fitted on (1st to 99th percentile): " + covered_ranges(ranges))
+    size = getattr(getattr(model, "normal_models_", None), "training_size_", None)
+    if size is not None:
+        print("  normal models " + size.describe())
     if getattr(model, "isolator_", True) is None:
         print(
             "  detection only: no fault recordings, so every alarm is an 'unknown' fault; "

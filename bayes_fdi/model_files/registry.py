@@ -45,6 +45,8 @@ PERSISTED: dict[str, str] = {
     "LeanRVR": "bayes_fdi.diagnosis.normal_models.compiled:LeanRVR",
     "NormalModelsParams": "bayes_fdi.diagnosis.normal_models.dynamic_kernel:NormalModelsParams",
     "NormalModelsState": "bayes_fdi.diagnosis.normal_models.dynamic_kernel:NormalModelsState",
+    "TrainingCurvePoint": "bayes_fdi.diagnosis.normal_models:TrainingCurvePoint",
+    "TrainingSize": "bayes_fdi.diagnosis.normal_models:TrainingSize",
     "LeanTree": "bayes_fdi.diagnosis.isolation:LeanTree",
     "ARWhitener": "bayes_fdi.diagnosis.detection:ARWhitener",
     "WhitenState": "bayes_fdi.diagnosis.detection:WhitenState",

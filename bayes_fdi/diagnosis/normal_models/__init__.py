@@ -12,9 +12,12 @@
   models (position from the command's dynamics, flow from the predicted position), an online
   component with ``update``/``run`` and its own state;
   `bayes_fdi.diagnosis.normal_models.dynamic_kernel` their inputs and compiled per-second
-  predictor.
+  predictor; `bayes_fdi.diagnosis.normal_models.speed_factors` the calibration of their
+  predictive standard deviations by command speed;
+  `bayes_fdi.diagnosis.normal_models.training_size` the learning curve that chooses how many
+  samples they are fitted on.
 - `bayes_fdi.diagnosis.normal_models.interval_calibration` and `.std_scaler`: honest
-  predictive standard deviations (cross-fitted factors per command-speed bin).
+  predictive standard deviations of the static models (cross-fitted factors).
 - `bayes_fdi.diagnosis.normal_models.kernel_ridge`: the SVM baseline's kernel ridge models.
 - `bayes_fdi.diagnosis.normal_models.compiled`: the compiled one-sample predictor of a fitted
   RVR.
@@ -33,6 +36,11 @@ from bayes_fdi.diagnosis.normal_models.inputs import (
 from bayes_fdi.diagnosis.normal_models.kernel_ridge import KernelRidgeRegressor
 from bayes_fdi.diagnosis.normal_models.static import NormalModels
 from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
+from bayes_fdi.diagnosis.normal_models.training_size import (
+    TrainingCurvePoint,
+    TrainingSize,
+    choose_training_size,
+)
 from bayes_fdi.diagnosis.normal_models.width_search import (
     WIDTH_GRID,
     EvidenceGridResult,
@@ -51,6 +59,9 @@ __all__ = [
     "NegativePressureDropWarning",
     "NormalModels",
     "StdScaler",
+    "TrainingCurvePoint",
+    "TrainingSize",
+    "choose_training_size",
     "evidence_grid_search",
     "genetic_width_search",
     "input_names",

@@ -53,7 +53,6 @@ from typing import Any
 
 import numpy as np
 import xarray as xr
-from scipy import stats
 from sklearn.base import BaseEstimator
 
 from bayes_fdi.datasets import INPUT_CHANNELS, OUTPUT_CHANNELS, validate_dataset
@@ -70,6 +69,13 @@ from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     dynamic_inputs,
     predict_runs,
     predict_seconds,
+)
+from bayes_fdi.diagnosis.normal_models.speed_factors import cross_fit_folds, speed_bin_factors
+from bayes_fdi.diagnosis.normal_models.training_size import (
+    TrainingSize,
+    choose_training_size,
+    held_out_split,
+    log_predictive_density,
 )
 
 __all__ = ["DynamicNormalModels", "standardised_residuals"]
@@ -115,7 +121,10 @@ class DynamicNormalModels(BaseEstimator):
     evidence_max_samples
         Rows of the width search.
     max_train_samples
-        Rows of each fit (a seeded random subset of the fault-free samples).
+        Rows of each fit (a seeded random subset of the fault-free samples), or ``"auto"``:
+        chosen by a learning curve on held-out time (`choose_training_size`: from 2000 rows,
+        doubled while a doubling raises the held-out log predictive density by at least
+        0.005 nats per sample, at most 8000).
     calibration_folds
         Folds of the cross-fit that calibrates the predictive standard deviations (>= 2).
     calibration_bins
@@ -147,6 +156,11 @@ class DynamicNormalModels(BaseEstimator):
         (NaN where not available), after calibration.
     params_ : NormalModelsParams
         The fitted values the compiled per-second predictor takes.
+    n_train_samples_ : int
+        Rows of the fits.
+    training_size_ : TrainingSize
+        Those rows, the samples available and the learning curve that chose them
+        (``max_train_samples="auto"``); ``training_size_.describe()`` says it in a line.
     fit_seconds_ : dict
     """
 
@@ -157,7 +171,7 @@ class DynamicNormalModels(BaseEstimator):
         x_widths: tuple[float, ...] = (4.0, 8.0),
         f_widths: tuple[float, ...] = (0.05, 0.1, 0.2),
         evidence_max_samples: int = 600,
-        max_train_samples: int = 2000,
+        max_train_samples: int | str = 2000,
         calibration_folds: int = 4,
         calibration_bins: int = 5,
         std_coverage: float | None = None,
@@ -183,9 +197,11 @@ class DynamicNormalModels(BaseEstimator):
             "max_train_samples": 10,
         }
         for name, low in lows.items():
-            v = getattr(self, name)
+            if (v := getattr(self, name)) == "auto" and name == "max_train_samples":
+                continue
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < low:
-                raise ValueError(f"{name} must be an integer >= {low}, got {v!r}")
+                extra = ' or "auto"' if name == "max_train_samples" else ""
+                raise ValueError(f"{name} must be an integer >= {low}{extra}, got {v!r}")
         for name in ("x_widths", "f_widths"):
             grid = tuple(getattr(self, name))
             if not grid or not all(math.isfinite(float(w)) and float(w) > 0 for w in grid):
@@ -244,10 +260,11 @@ class DynamicNormalModels(BaseEstimator):
             return mx, mf
 
         t0 = time.perf_counter()
-        mx, mf = fit_pair(subset(idx, int(self.max_train_samples)))
+        size = self._training_size(normal_runs, y, finite, lambda r, n: fit_pair(subset(r, n)))
+        self.n_train_samples_ = int(min(idx.size, size))
+        mx, mf = fit_pair(subset(idx, size))
         self.regressors_ = {"X": mx, "F": mf}
         self.fit_seconds_["fit"] = time.perf_counter() - t0
-        self.n_train_samples_ = int(min(idx.size, int(self.max_train_samples)))
         self._set_identity_scales(D)
         t0 = time.perf_counter()
         speed = np.abs(U[:, 2]) if D > 0 else np.full(U.shape[0], np.nan)
@@ -256,6 +273,24 @@ class DynamicNormalModels(BaseEstimator):
         self.fit_seconds_["calibration"] = time.perf_counter() - t0
         self.fit_seconds_["total"] = time.perf_counter() - t_start
         return self
+
+    def _training_size(self, runs: xr.Dataset, y: dict, finite: np.ndarray, fit_rows) -> int:
+        """Rows of the fits: ``max_train_samples``, or (``"auto"``) `choose_training_size`'s."""
+        n_all = int(finite.sum())
+        if self.max_train_samples != "auto":
+            self.training_size_ = TrainingSize(min(n_all, int(self.max_train_samples)), n_all)
+            return int(self.max_train_samples)
+        fit, held = held_out_split(finite, runs.sizes["run"], runs.sizes["time"])
+
+        def score(n: int) -> tuple[float, float]:
+            mx, mf = fit_rows(fit, n)
+            out = self._stream_runs(runs, self._kernel_params(mx, mf, calibrated=False))
+            out = out.reshape(-1, out.shape[-1])[held]
+            lpd = log_predictive_density
+            return lpd(y["X"][held], out[:, 0], out[:, 1]), lpd(y["F"][held], out[:, 2], out[:, 3])
+
+        self.training_size_ = choose_training_size(score, fit.size, n_all)
+        return self.training_size_.rows
 
     def _search_widths(
         self, Z: np.ndarray, y: dict[str, np.ndarray], s: np.ndarray, rows: np.ndarray
@@ -284,27 +319,17 @@ class DynamicNormalModels(BaseEstimator):
         self.std_scale_all_ = {"X": 1.0, "F": 1.0}
         self.std_scale_edges_ = np.empty(0)
 
-    def _folds(self, n_runs: int, n_times: int, rng: np.random.Generator) -> np.ndarray:
-        k = int(self.calibration_folds)
-        blocks = 1 if n_runs >= k else min(n_times, -(-k // n_runs))
-        block_of_time = (np.arange(n_times) * blocks) // n_times
-        segment = np.arange(n_runs)[:, None] * blocks + block_of_time[None, :]
-        n_seg = n_runs * blocks
-        fold_of_segment = np.empty(n_seg, dtype=np.int64)
-        fold_of_segment[rng.permutation(n_seg)] = np.arange(n_seg) % k
-        return fold_of_segment[segment]
-
     def _cross_fit(self, runs, Z, y, finite, speed, fit_pair, rng) -> None:
         """Out-of-fold predictions of every training sample -> std factors and ``oof_z_``."""
         n_runs, n_times = runs.sizes["run"], runs.sizes["time"]
-        fold = self._folds(n_runs, n_times, rng).ravel()
+        fold = cross_fit_folds(n_runs, n_times, int(self.calibration_folds), rng).ravel()
         pred = np.full((Z.shape[0], 4), np.nan)
         for f in range(int(self.calibration_folds)):
             held = fold == f
             train = np.flatnonzero(finite & ~held)
             if train.size < 10 or not held.any():
                 continue
-            size = min(train.size, int(self.max_train_samples))
+            size = min(train.size, self.n_train_samples_)
             rows = np.sort(rng.choice(train, size=size, replace=False))
             mx, mf = fit_pair(rows)
             held_runs = np.unique(np.flatnonzero(held) // n_times)
@@ -319,22 +344,6 @@ class DynamicNormalModels(BaseEstimator):
             _, z[c] = standardised_residuals(y[c], pred[:, j], pred[:, j + 1])
             censored[c] = (z[c] == 0.0) & (y[c] != pred[:, j])
         used = finite & np.isfinite(z["X"]) & np.isfinite(z["F"])
-        nb = int(self.calibration_bins)
-        fast = speed[used & np.isfinite(speed)]
-        edges = np.quantile(fast, np.arange(1, nb) / nb) if (nb > 1 and fast.size) else []
-        self.std_scale_edges_ = np.unique(np.asarray(edges, dtype=np.float64))
-        nb = self.std_scale_edges_.size + 1
-        bins = np.where(
-            np.isfinite(speed), np.searchsorted(self.std_scale_edges_, speed, "right"), -1
-        )
-
-        def mle(zz: np.ndarray, fallback: float) -> float:
-            if zz.size < 10 or not np.any(zz != 0):
-                return fallback
-            if (q := self.std_coverage) is None:
-                return float(np.sqrt(np.mean(zz**2)))
-            return float(np.quantile(np.abs(zz), q) / stats.norm.ppf(0.5 + q / 2)) or fallback
-
         if used.sum() < 10:
             warnings.warn(
                 "too few out-of-fold residuals: predictive stds not calibrated",
@@ -343,21 +352,10 @@ class DynamicNormalModels(BaseEstimator):
             )
             self.oof_z_ = np.full((n_runs, n_times, 2), np.nan)
             return
-        # censored samples (z = 0 by construction) say nothing about the scale
-        fit_rows = {c: used & ~censored[c] for c in ("X", "F")}
-        self.std_scale_all_ = {c: mle(z[c][fit_rows[c]], 1.0) for c in ("X", "F")}
-        self.std_scale_ = {
-            c: np.array(
-                [mle(z[c][fit_rows[c] & (bins == b)], self.std_scale_all_[c]) for b in range(nb)]
-            )
-            for c in ("X", "F")
-        }
-        factor = {
-            c: np.where(
-                bins >= 0, self.std_scale_[c][np.clip(bins, 0, nb - 1)], self.std_scale_all_[c]
-            )
-            for c in ("X", "F")
-        }
+        fitted = speed_bin_factors(
+            z, censored, used, speed, int(self.calibration_bins), self.std_coverage
+        )
+        self.std_scale_edges_, self.std_scale_, self.std_scale_all_, factor = fitted
         oof = np.stack([z["X"] / factor["X"], z["F"] / factor["F"]], axis=-1)
         oof[~used] = np.nan
         self.oof_z_ = oof.reshape(n_runs, n_times, 2)
@@ -485,6 +483,8 @@ class DynamicNormalModels(BaseEstimator):
         of format <= 4 fitted the std factors by maximum likelihood (``std_coverage=None``)."""
         data = {k: v for k, v in data.items() if k not in ("_lean", "_kernel_args")}
         data.setdefault("std_coverage", None)  # before the parameter: maximum likelihood
+        if "regressors_" in data and "training_size_" not in data:  # before the curve
+            data["training_size_"] = TrainingSize(int(data.get("n_train_samples_", 0)), None)
         if "regressors_" in data and "params_" not in data:
             models = cls.__new__(cls)
             models.__dict__.update(data)

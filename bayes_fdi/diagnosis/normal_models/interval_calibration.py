@@ -5,7 +5,8 @@ its regressors honest out of sample with `cross_fit_std_scales`: the fault-free 
 folds by run (by contiguous time block when there are fewer runs than folds), each output's
 regressor is refitted without each fold, and the held-out standardised residuals fit one
 `~bayes_fdi.diagnosis.normal_models.std_scaler.StdScaler` factor per bin of the command speed
-``|dCV/dt|`` (`command_speed`, `speed_bins`). The rules in full are the Notes of
+``|dCV/dt|`` (`command_speed`,
+`~bayes_fdi.diagnosis.normal_models.speed_factors.speed_bins`). The rules in full are the Notes of
 `~bayes_fdi.diagnosis.normal_models.static.NormalModels`.
 """
 
@@ -19,6 +20,7 @@ import xarray as xr
 from sklearn.base import clone
 
 from bayes_fdi.datasets import OUTPUT_CHANNELS
+from bayes_fdi.diagnosis.normal_models.speed_factors import cross_fit_folds, speed_bins
 from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
 
 __all__ = [
@@ -26,7 +28,6 @@ __all__ = [
     "command_speed",
     "cross_fit_std_scales",
     "predict_with_std",
-    "speed_bins",
 ]
 
 
@@ -83,12 +84,6 @@ def command_speed(runs: xr.Dataset) -> np.ndarray:
     return np.abs(np.gradient(cv, t, axis=1)).ravel()
 
 
-def speed_bins(edges: np.ndarray, speed: np.ndarray) -> np.ndarray:
-    """Bin index of each ``|dCV/dt|`` given the inner bin ``edges`` (-1 where it is not finite)."""
-    bins = np.searchsorted(edges, speed, side="right")
-    return np.where(np.isfinite(speed), bins, -1)
-
-
 def cross_fit_std_scales(
     runs: xr.Dataset,
     U: np.ndarray,
@@ -138,13 +133,7 @@ def cross_fit_std_scales(
     n_runs, n_times = runs.sizes["run"], runs.sizes["time"]
     rng = np.random.default_rng(None if random_state is None else [int(random_state), 7919])
     # segments: whole runs, or contiguous time blocks when there are fewer runs than folds
-    blocks = 1 if n_runs >= k else min(n_times, -(-k // n_runs))
-    block_of_time = (np.arange(n_times) * blocks) // n_times
-    segment = (np.arange(n_runs)[:, None] * blocks + block_of_time[None, :]).ravel()
-    n_seg = n_runs * blocks
-    fold_of_segment = np.empty(n_seg, dtype=np.int64)
-    fold_of_segment[rng.permutation(n_seg)] = np.arange(n_seg) % k
-    fold = np.where(finite, fold_of_segment[segment], -1)
+    fold = np.where(finite, cross_fit_folds(n_runs, n_times, k, rng).ravel(), -1)
     speed = command_speed(runs)
     t0 = time.perf_counter()
     z = {name: np.full(U.shape[0], np.nan) for name in OUTPUT_CHANNELS}

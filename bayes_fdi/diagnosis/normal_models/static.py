@@ -48,8 +48,8 @@ from bayes_fdi.diagnosis.normal_models.interval_calibration import (
     command_speed,
     cross_fit_std_scales,
     predict_with_std,
-    speed_bins,
 )
+from bayes_fdi.diagnosis.normal_models.speed_factors import speed_bins
 from bayes_fdi.diagnosis.normal_models.width_search import WIDTH_GRID, GAResult
 from bayes_fdi.rvm.threads import limit_fit_threads
 
