@@ -166,13 +166,18 @@ def test_fit_from_recordings_and_diagnose_cli(tmp_path, rng, monkeypatch, capsys
     pd.read_csv(paths[0]).to_csv(fault, index=False)
     model_file = tmp_path / "mine.npz"
     argv = ["fit", "--normal", *map(str, paths), "--fault", f"f18@100={fault}", "--units",
-            "physical", "--out", str(model_file), "--quiet"]  # fmt: skip
+            "physical", "--normal-samples", "auto", "--out", str(model_file),
+            "--quiet"]  # fmt: skip
     assert main(argv) == 0
     assert "StreamDouble fitted on 2 fault-free and 1 fault recording(s)" in capsys.readouterr().out
     fitted = model_files.load(model_file)
     assert fitted.n_fault_runs_ == 1
-    # the user's recordings: normal models whose training size a learning curve chooses
+    # --normal-samples reaches the normal models (auto: a learning curve chooses the size)
     assert made[0]["normal_models"].max_train_samples == "auto"
+    assert main(["fit", "--default", "--normal-samples", "3000", "--out", str(model_file)]) == 2
+    assert "--normal-samples needs --normal" in capsys.readouterr().err
+    assert main(["commission", str(paths[0]), "--normal-samples", "5", "--out", "x.npz"]) == 2
+    assert "expected a whole number >= 10 or 'auto', got '5'" in capsys.readouterr().err
     out = tmp_path / "out"
     argv = ["diagnose", str(paths[1]), "--model", str(model_file), "--units", "physical",
             "--out", str(out), "--quiet"]  # fmt: skip

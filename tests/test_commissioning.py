@@ -92,3 +92,25 @@ def test_the_commissioning_report_travels_with_the_model_file(commissioned, tmp_
     back = OnlineDiagnoser.load(tmp_path / "plant.npz")
     assert back.commissioning_ == diag.commissioning_
     assert model_files.read_metadata(tmp_path / "plant.npz")["root_class"] == "OnlineDiagnoser"
+
+
+def test_commissioned_diagnosers_detect_with_the_two_speed_cusum(commissioned, tmp_path):
+    from bayes_fdi.diagnosis.detection import TwoSpeedCUSUM
+
+    diag, _, report = commissioned
+    assert isinstance(diag.detector_, TwoSpeedCUSUM)
+    assert report["detection"]["detector"] == "TwoSpeedCUSUM"
+    assert report["detection"]["k_slow"] == diag.detector_.k_slow == 0.1
+    diag.save(tmp_path / "plant.npz")
+    back = OnlineDiagnoser.load(tmp_path / "plant.npz")
+    assert repr(back.detector_) == repr(diag.detector_)
+
+
+def test_the_report_says_what_the_undetectable_rule_measured(commissioned):
+    from bayes_fdi.commissioning.report import render_report
+
+    report = dict(commissioned.report, undetectable=["bias_X"])
+    report["detection_rates"] = dict(report["detection_rates"], bias_X=0.25)
+    text = render_report(report)
+    assert "fewer than half of their training transplants" in text
+    assert "bias_X (1 of 4)" in text  # 4 training runs per fault in this commissioning

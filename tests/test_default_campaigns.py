@@ -12,11 +12,13 @@ import pytest
 
 from bayes_fdi.campaigns.simulation import simulate_campaign
 from bayes_fdi.default_diagnoser import (
+    CALIBRATION_AFTER_ONSET,
     CAMPAIGNS,
     SET_SEED_OFFSETS,
     TRAININGS,
     online_campaigns,
     simulate_online_campaigns,
+    simulation_plan,
 )
 
 MIX = "excitation-mix"
@@ -97,3 +99,39 @@ def test_a_seed_beyond_the_last_allowed_or_an_unknown_training_is_refused_by_nam
         simulate_online_campaigns(seed=549, small=True, progress=False)
     with pytest.raises(ValueError, match="training must be one of dgen, excitation-mix"):
         online_campaigns(training="chirp")
+
+
+def test_the_long_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones():
+    # by default the calibration parts are the fault files' own runs; with "top-label-long" the
+    # abrupt calibration runs last CALIBRATION_AFTER_ONSET s after the onset and the slow
+    # incipient file gives the calibration set alone, with the calibration offset
+    default = [(part, c.name, c.duration, s) for part, c, s in simulation_plan(seed=3)]
+    assert default == [
+        ("normal", "online-normal", 900, 104),
+        ("train", "online-faults-abrupt", 600, 204),
+        ("validation", "online-faults-abrupt", 600, 304),
+        ("calibration", "online-faults-abrupt", 600, 404),
+        ("train", "online-faults-incipient", 900, 254),
+        ("validation", "online-faults-incipient", 900, 354),
+        ("calibration", "online-faults-incipient", 900, 454),
+    ]
+    long = simulation_plan(seed=3, calibration="top-label-long")
+    assert [(part, c.name, c.duration, s) for part, c, s in long] == [
+        *default[:3],
+        ("calibration", "online-faults-abrupt", 120 + CALIBRATION_AFTER_ONSET, 404),
+        *default[4:],
+        ("calibration", "online-calibration-incipient-slow", 3720, 444),
+    ]
+    slow = long[-1][1]
+    assert slow.n_runs == 76 and set(slow.run_specs(slow.seed).state) == {
+        f"f{i}" for i in range(1, 20)
+    }
+    small = simulation_plan(small=True, calibration="top-label-long")
+    assert [(part, c.duration) for part, c, _ in small] == [
+        (part, c.duration) for part, c, _ in simulation_plan(small=True)
+    ]
+    with pytest.raises(ValueError, match="calibration must be one of temperature, top-label"):
+        simulation_plan(calibration="isotonic")
+    # the seeds of the long calibration stay below 1000 with the largest allowed seed
+    top = simulation_plan(seed=548, calibration="top-label-long")
+    assert max(s for _, _, s in top) < 1000

@@ -196,10 +196,10 @@ def test_files_saved_before_the_change_point_keep_their_onset_check():
     assert InputEnvelope().change_lookback == CHANGE_LOOKBACK
 
 
-def test_an_envelope_state_of_format_5_gains_an_empty_ring_with_or_without_runs():
+def test_an_envelope_state_of_format_7_gains_an_empty_ring_with_or_without_runs():
     one = {"average": np.zeros(4), "previous": np.zeros(2), "rate": np.zeros(2)}
-    got = EnvelopeState.upgrade_model_file(one, 5)
+    got = EnvelopeState.upgrade_model_file(one, 7)
     assert got["history"].shape == (0, 4) and got["stored"].shape == (1,)
     stacked = {"average": np.zeros((3, 4)), "previous": np.zeros((3, 2)), "rate": np.zeros((3, 2))}
-    got = EnvelopeState.upgrade_model_file(stacked, 5)
+    got = EnvelopeState.upgrade_model_file(stacked, 7)
     assert got["history"].shape == (3, 0, 4) and got["slot"].shape == (3, 1)

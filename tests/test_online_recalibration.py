@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
-from bayes_fdi.calibration import TemperatureScaler, expected_calibration_error
+from bayes_fdi.calibration import TemperatureScaler, TopLabelScaler, expected_calibration_error
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 from bayes_fdi.diagnosis.online.training import CALIBRATION_SECONDS_PER_RUN, detected_seconds
@@ -30,8 +30,8 @@ def test_detected_seconds_by_hand():
     assert not hit  # DD on from 5: no rise at or after 6
 
 
-@pytest.fixture(scope="module")
-def fitted():
+@pytest.fixture(scope="module", params=[TemperatureScaler, TopLabelScaler])
+def fitted(request):
     models = DynamicNormalModels(
         x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
         calibration_folds=2, random_state=0,
@@ -43,7 +43,7 @@ def fitted():
     held = [Fault(f, s, 80.0) for f in kinds for s in (0.5, 0.9)]
     validation = simulate(benchmark_inputs(len(held), 300, seed=4, vary=True), held, seed=4)
     calibration = simulate(benchmark_inputs(len(held), 300, seed=5, vary=True), held, seed=5)
-    diag = OnlineDiagnoser(models, calibrator=TemperatureScaler(), max_signatures_per_fault=20).fit(
+    diag = OnlineDiagnoser(models, calibrator=request.param(), max_signatures_per_fault=20).fit(
         normal, faults, validation_runs=validation, calibration_runs=calibration
     )
     return diag, calibration
@@ -83,9 +83,12 @@ def test_recalibration_is_fitted_on_the_streams_per_second_probabilities(fitted)
     group = {f: g for g, members in zip(iso.group_labels_, iso.groups_, strict=True)
              for f in members}  # fmt: skip
     y = [group[str(calibration["state"].values[r])] for r, _ in picks]
-    again = TemperatureScaler(classes=list(iso.group_labels_)).fit(gp, y)
+    again = type(fitted_cal)(classes=list(iso.group_labels_)).fit(gp, y)
     assert fitted_cal.temperature_ == pytest.approx(again.temperature_, rel=1e-9)
-    # and the calibrated stream is those probabilities at that temperature
+    if isinstance(again, TopLabelScaler):
+        np.testing.assert_allclose(fitted_cal.top_map_, again.top_map_, rtol=1e-6, atol=1e-9)
+        assert iso.rows_independent  # the compiled path applies the top map
+    # and the calibrated stream (compiled) is those probabilities recalibrated (numpy)
     stream = diag.run(calibration)
     got = np.array([stream["group_proba"].values[r, k] for r, k in picks])
     np.testing.assert_allclose(got, again.transform(gp), rtol=1e-9, atol=1e-12)
@@ -96,6 +99,7 @@ def test_the_recalibration_survives_a_model_file(fitted, tmp_path):
     path = diag.save(tmp_path / "diag.bfdi")
     back = OnlineDiagnoser.load(path)
     assert back.isolator_.temperature() == diag.isolator_.temperature()
+    np.testing.assert_array_equal(back.isolator_.top_map(), diag.isolator_.top_map())
     a, b = diag.run(calibration), back.run(calibration)
     np.testing.assert_array_equal(a["group_proba"].values, b["group_proba"].values)
 

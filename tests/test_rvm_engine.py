@@ -1,7 +1,9 @@
 """The compiled (numba) engine of the fast Gaussian solver against the torch rules it replaces:
 the best action on exact factors (ties, deletions, the gain floor), the rounds of the lazy
 verification (against the public bound functions), the carried factors' re-estimation update
-(against its formulas in NumPy), and whole fits, which take the same actions either way."""
+(against its formulas in NumPy), the posterior's terms and the re-estimation update of the
+Cholesky factor (against NumPy and a fresh factorisation), and whole fits, which take the same
+actions either way."""
 
 from __future__ import annotations
 
@@ -12,6 +14,9 @@ import pytest
 import torch
 
 import bayes_fdi.rvm.sbl.action_kernels as action_kernels
+import bayes_fdi.rvm.sbl.factor_kernels as factor_kernels
+import bayes_fdi.rvm.sbl.gaussian as gaussian_module
+import bayes_fdi.rvm.sbl.posterior_bounds as posterior_module
 import bayes_fdi.rvm.sbl.tracked_factors as tracked_module
 import bayes_fdi.rvm.sbl.tracked_kernels as tracked_kernels
 import bayes_fdi.rvm.sbl.verification as verification_module
@@ -19,9 +24,13 @@ from bayes_fdi.rvm.kernels import RBF
 from bayes_fdi.rvm.sbl import (
     Design,
     best_action,
+    factor_precision,
     fast_gaussian,
+    gaussian_screened_Q,
     optimistic_ratio,
     reestimate_gain_bounds,
+    rounding_gamma,
+    screened_factors,
     useful_lower_bound,
 )
 from bayes_fdi.rvm.threads import fit_threads
@@ -154,9 +163,80 @@ def test_compiled_engine_takes_the_torch_engines_actions(seed, n, width, monkeyp
         fast = fast_gaussian(design, t)
         monkeypatch.setattr(verification_module, "COMPILED_RULES", False)
         monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", False)
+        monkeypatch.setattr(posterior_module, "COMPILED_POSTERIOR", False)
+        monkeypatch.setattr(gaussian_module, "UPDATED_FACTOR", False)
         slow = fast_gaussian(design, t)
     assert torch.equal(fast.active, slow.active)
     assert fast.n_iter == slow.n_iter and fast.converged == slow.converged
     assert torch.equal(fast.alpha.isfinite(), slow.alpha.isfinite())
     torch.testing.assert_close(fast.alpha, slow.alpha, rtol=1e-8, atol=0.0)
     assert fast.log_evidence == pytest.approx(slow.log_evidence, rel=1e-12, abs=1e-9)
+
+
+def _scaled_factor(G: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    d = alpha**-0.5
+    return np.linalg.cholesky(d[:, None] * G * d[None, :] + np.eye(alpha.size))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_factor_update_equals_a_fresh_factorisation(seed):
+    rng = np.random.default_rng(seed)
+    M = int(rng.integers(2, 40))
+    A = rng.standard_normal((M, 3 * M))
+    G = A @ A.T / M
+    alpha = np.exp(rng.uniform(-4.0, 4.0, M))
+    k = int(rng.integers(0, M))
+    new = alpha.copy()
+    new[k] = alpha[k] * np.exp(rng.uniform(-6.0, 6.0))  # updates and downdates
+    L = _scaled_factor(G, alpha)
+    amp = factor_kernels.reestimate_factor(L, k, math.sqrt(alpha[k] / new[k]))
+    want = _scaled_factor(G, new)
+    assert amp >= 1.0 and (amp == 1.0) == (new[k] >= alpha[k])
+    np.testing.assert_allclose(L, want, rtol=0.0, atol=1e-12 * amp * np.abs(want).max())
+    assert np.all(np.triu(L, 1) == 0.0)  # still lower triangular
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_posterior_terms_match_numpy(seed):
+    rng = np.random.default_rng(seed)
+    M = int(rng.integers(1, 30))
+    G = rng.standard_normal((M, M))
+    abar = np.exp(rng.uniform(-3.0, 3.0, M))
+    mu, Phi_t = rng.standard_normal(M), rng.standard_normal(M)
+    Hb, grad, absp = np.empty((M, M)), np.empty(M), np.empty(M)
+    fro_sq = factor_kernels.posterior_terms(G, abar, mu, Phi_t, Hb, grad, absp)
+    want = 0.5 * (G + G.T) + np.diag(abar)
+    np.testing.assert_array_equal(Hb, want)
+    assert fro_sq == pytest.approx(np.linalg.norm(want) ** 2, rel=1e-13)
+    np.testing.assert_allclose(grad, want @ mu - Phi_t, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(absp, np.abs(want) @ np.abs(mu) + np.abs(Phi_t), rtol=1e-13)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_screened_rows_match_the_torch_screening(seed):
+    g = torch.Generator().manual_seed(seed)
+    M, K, N = int(torch.randint(2, 25, (1,), generator=g)), 7, 80
+    B = torch.randn(N, M + K, generator=g, dtype=torch.float64)
+    B = B / torch.linalg.vector_norm(B, dim=0)
+    Phi, Bc = B[:, :M], B[:, M:]
+    t = torch.randn(N, generator=g, dtype=torch.float64)
+    alpha = torch.rand(M, generator=g, dtype=torch.float64) * 3.0 + 0.1
+    H = torch.diag(alpha) + Phi.T @ Phi
+    fac = factor_precision(alpha, Phi.T @ Phi)
+    mu = fac.solve(Phi.T @ t)
+    grad = H @ mu - Phi.T @ t
+    grad_err = rounding_gamma(M + 3, torch.float64) * (H.abs() @ mu.abs() + (Phi.T @ t).abs())
+    Z, diag, bt = Bc.T @ Phi, (Bc * Bc).sum(0), Bc.T @ t
+    trace = float(torch.linalg.eigvalsh(H).min()) ** -1
+    zero = Z.new_zeros(M)
+    scr = screened_factors(fac, H, Z, diag, z_error=zero, trace=trace)
+    Q, Q_err = gaussian_screened_Q(scr, Z, bt, 0.0, mu, grad, grad_err, zero)
+    H_F = float(torch.linalg.matrix_norm(H)) * (1.0 + rounding_gamma(M * M, torch.float64))
+    gammas = [rounding_gamma(n, torch.float64) for n in (M + 2, 2 * M + 4, M + 3)]
+    norms = [float(torch.linalg.vector_norm(v)) for v in (grad, grad_err, mu)]
+    C, out = np.empty((K, M)), np.empty((K, 5))
+    arrays = [v.numpy() for v in (fac.L, fac.d, H, Z, diag, bt, mu, grad)]
+    factor_kernels.screened_rows(*arrays, np.array([trace, H_F, *norms, *gammas]), C, out)
+    np.testing.assert_allclose(C, scr.C.numpy(), rtol=1e-10, atol=1e-13)
+    for col, want in enumerate((scr.S, scr.S_error, Q, Q_err, scr.residual)):
+        np.testing.assert_allclose(out[:, col], want.numpy(), rtol=1e-6, atol=1e-14)

@@ -25,6 +25,7 @@ FACE = "bayes_fdi.rvm.sbl"
 LAYERS: dict[str, int] = {
     "screening_copy": 0,
     "action_kernels": 0,
+    "factor_kernels": 0,
     "tracked_kernels": 0,
     "design": 1,
     "precision_factor": 0,

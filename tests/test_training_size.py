@@ -40,7 +40,7 @@ def test_small_data_take_every_row_without_a_curve():
 def test_the_curve_stops_at_the_first_doubling_that_gains_too_little():
     table = {2000: (1.0, 2.0), 4000: (1.0, 2.02), 8000: (1.001, 2.021)}
     score, calls = table_score(table)
-    size = choose_training_size(score, 20_000, 25_000)
+    size = choose_training_size(score, 20_000, 25_000, max_rows=8000)
     # 2000 -> 4000 gains 0.02 nats in F (>= 0.005): kept; 4000 -> 8000 gains 0.001: stop
     assert calls == [2000, 4000, 8000]
     assert size.rows == 4000 and size.available == 25_000
@@ -58,18 +58,19 @@ def test_the_curve_takes_all_the_data_when_its_last_point_still_gains():
 
 def test_the_curve_is_bounded_and_a_nan_score_stops_it():
     gains = {2000: (0.0, 0.0), 4000: (1.0, 0.0), 6000: (1.5, 0.0), 8000: (2.0, 0.0)}
-    assert choose_training_size(table_score(gains)[0], 50_000, 60_000).rows == 8000
+    assert choose_training_size(table_score(gains)[0], 50_000, 60_000).rows == 4000  # MAX_ROWS
+    assert choose_training_size(table_score(gains)[0], 50_000, 60_000, max_rows=8000).rows == 8000
     assert choose_training_size(table_score(gains)[0], 50_000, 60_000, max_rows=6000).rows == 6000
     nan = {2000: (0.0, 0.0), 4000: (np.nan, np.nan), 8000: (5.0, 5.0)}
     score, calls = table_score(nan)
-    assert choose_training_size(score, 50_000, 60_000).rows == 2000
+    assert choose_training_size(score, 50_000, 60_000, max_rows=8000).rows == 2000
     assert calls == [2000, 4000]
 
 
 def test_describe_says_the_rows_and_the_curve():
     size = TrainingSize(4000, 21_600, choose_training_size(
         table_score({2000: (4.3, 3.3), 4000: (4.31, 3.31), 8000: (4.3105, 3.3105)})[0],
-        20_000, 21_600).curve)  # fmt: skip
+        20_000, 21_600, max_rows=8000).curve)  # fmt: skip
     text = size.describe()
     assert text.startswith("fitted on 4000 of 21600 healthy samples, chosen by a learning curve")
     assert "2000: X 4.300, F 3.300; 4000: X 4.310" in text

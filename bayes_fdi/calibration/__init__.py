@@ -7,6 +7,8 @@ calibrated when its 95 % predictive intervals contain about 95 % of fault-free m
 - `bayes_fdi.calibration.metrics`: ECE (top-label, classwise, bootstrap intervals, noise floor),
   log loss, Brier score, reliability diagrams.
 - `bayes_fdi.calibration.temperature`: temperature scaling (`TemperatureScaler`).
+- `bayes_fdi.calibration.top_label`: a temperature and a beta map of the top class
+  (`TopLabelScaler`), which bends the reliability curve.
 - `bayes_fdi.calibration.dirichlet`: Dirichlet calibration and vector scaling (`DirichletScaler`).
 - `bayes_fdi.calibration.recalibration`: the cross-validated log loss that chooses between
   recalibrators, and what they share.
@@ -38,6 +40,7 @@ from bayes_fdi.calibration.metrics import (
 from bayes_fdi.calibration.nodes import NodeCalibration, node_calibration
 from bayes_fdi.calibration.recalibration import cross_val_log_loss
 from bayes_fdi.calibration.temperature import TemperatureScaler
+from bayes_fdi.calibration.top_label import TopLabelScaler
 from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
 
 __all__ = [
@@ -49,6 +52,7 @@ __all__ = [
     "NodeCalibration",
     "StdScaler",
     "TemperatureScaler",
+    "TopLabelScaler",
     "brier",
     "cross_val_log_loss",
     "crps_gaussian",

@@ -12,7 +12,10 @@
    probabilities (disjoint parameter and noise draws: seeds ``10 seed + 1, 2, 3``);
 4. fits the online diagnoser (`bayes_fdi.diagnosis.OnlineDiagnoser`) with the valve's own normal
    models, detector threshold and input envelope on all the healthy data, and the isolation on
-   those libraries;
+   those libraries; its detector is the two-speed CUSUM
+   (`bayes_fdi.diagnosis.detection.TwoSpeedCUSUM`, `DETECTOR_K_SLOW`): a plant's residuals
+   are often so autocorrelated that their whitening leaves of a lasting fault only a small
+   lasting shift of the innovations, which the slow branch accumulates;
 5. measures what to expect on held-out transplants (`expected_performance`, seed
    ``10 seed + 4``) and writes it, with the twin's fit and what the data identify, into the
    diagnoser's ``commissioning_`` record, which its model file keeps.
@@ -30,7 +33,7 @@ from bayes_fdi.commissioning.expectations import expected_performance
 from bayes_fdi.commissioning.healthy import check_healthy, operating_range
 from bayes_fdi.progress import busy
 
-__all__ = ["LIBRARY_FAULTS", "Commissioning", "commission"]
+__all__ = ["DETECTOR_K_SLOW", "LIBRARY_FAULTS", "Commissioning", "commission"]
 
 #: The faults transplanted by default: the DAMADICS faults, then a bias or drift of one reading.
 LIBRARY_FAULTS: tuple[str, ...] = (
@@ -40,6 +43,10 @@ LIBRARY_FAULTS: tuple[str, ...] = (
     "bias_P1",
     "bias_P2",
 )
+#: Reference value of the detector's slow branch (innovation standard deviations): it is tuned
+#: for a lasting shift of twice this, what the whitening leaves of a residual shift of one to
+#: five standard deviations on the strongly autocorrelated residuals of a plant.
+DETECTOR_K_SLOW = 0.1
 #: Share of the healthy data the twin is fitted on; the rest checks its predictive.
 TWIN_FIT_SHARE = 0.8
 
@@ -103,6 +110,7 @@ def commission(
     sizes: Sequence[float] = (0.25, 0.5, 0.75),
     evaluation_runs: int = 2,
     normal_models: Any = None,
+    normal_samples: int | str = 2000,
     twin: Any = None,
     seed: int = 0,
     progress: bool = True,
@@ -122,9 +130,11 @@ def commission(
     sizes, evaluation_runs
         Fault sizes of the held-out check, and runs per fault and size.
     normal_models
-        Unfitted normal models (default: `DynamicNormalModels` with ``max_train_samples=
-        "auto"``: the samples they are fitted on chosen by a learning curve on held-out time,
-        reported).
+        Unfitted normal models (default: `DynamicNormalModels` fitted on ``normal_samples``).
+    normal_samples
+        Samples the default normal models are fitted on (a seeded subset), or ``"auto"``:
+        chosen by a learning curve on held-out minutes (up to 4000; costlier, see
+        `~bayes_fdi.diagnosis.normal_models.training_size`). The report says which.
     twin
         Unfitted digital twin, cloned before fitting (default:
         ``ActuatorTwin(random_state=seed)``; e.g. fewer fitted parameters for a quick check).
@@ -141,6 +151,7 @@ def commission(
 
     from bayes_fdi.calibration import TemperatureScaler
     from bayes_fdi.diagnosis import OnlineDiagnoser
+    from bayes_fdi.diagnosis.detection import TwoSpeedCUSUM
     from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
     from bayes_fdi.diagnosis.online.training import stack_runs
     from bayes_fdi.twin import ActuatorTwin, transplant_library
@@ -171,10 +182,13 @@ def commission(
     seconds["library"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if normal_models is None:
-        normal_models = DynamicNormalModels(max_train_samples="auto", random_state=seed)
+        normal_models = DynamicNormalModels(max_train_samples=normal_samples, random_state=seed)
     with busy("commissioning: fitting the normal models, detector and isolation", enabled=progress):
         diagnoser = OnlineDiagnoser(
-            normal_models, calibrator=TemperatureScaler(), random_state=seed
+            normal_models,
+            detector=TwoSpeedCUSUM(k_slow=DETECTOR_K_SLOW),
+            calibrator=TemperatureScaler(),
+            random_state=seed,
         ).fit(runs, libraries[0], validation_runs=libraries[1], calibration_runs=libraries[2])
     seconds["diagnoser"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -202,6 +216,9 @@ def commission(
         },
         "normal_models": _training_size_report(diagnoser.normal_models_),
         "detection": {
+            "detector": type(diagnoser.detector_).__name__,
+            "k": float(diagnoser.detector_.k),
+            "k_slow": float(diagnoser.detector_.k_slow),
             "threshold": float(diagnoser.threshold_),
             "false_alarm_hours": float(diagnoser.false_alarm_hours),
         },

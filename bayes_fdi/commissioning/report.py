@@ -49,10 +49,15 @@ def _summary(report: Mapping[str, Any]) -> list[str]:
             f"their faulty seconds.",
         ]
     if report["undetectable"]:
+        rates = report.get("detection_rates", {})
+        runs = report["library"]["runs_per_fault"]
+        named = [
+            f"{f} ({round(rates[f] * runs)} of {runs})" if f in rates else f
+            for f in report["undetectable"]
+        ]
         lines.append(
-            "- Not detectable at this valve's operating point (not classified): "
-            + ", ".join(report["undetectable"])
-            + "."
+            "- Detected in fewer than half of their training transplants (strengths 0.1-1, half "
+            "of them incipient), so not classified: " + ", ".join(named) + "."
         )
     return [*lines, ""]
 

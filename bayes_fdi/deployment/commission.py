@@ -21,15 +21,21 @@ __all__ = ["commission_and_save", "configure_parser", "run_from_cli"]
 
 
 def commission_and_save(
-    healthy: Any, out: str | os.PathLike, *, seed: int = 0, progress: bool = True
+    healthy: Any,
+    out: str | os.PathLike,
+    *,
+    seed: int = 0,
+    normal_samples: int | str = 2000,
+    progress: bool = True,
 ) -> Any:
     """Commission on ``healthy`` and write the model file ``out`` with its report beside it
-    (``out`` without its suffix, plus ``.md`` and ``.json``); returns the `Commissioning`."""
+    (``out`` without its suffix, plus ``.md`` and ``.json``); returns the `Commissioning`
+    (``normal_samples`` as `~bayes_fdi.commissioning.commission`'s)."""
     from bayes_fdi import model_files
     from bayes_fdi.commissioning import commission
     from bayes_fdi.commissioning.report import write_report
 
-    done = commission(healthy, seed=seed, progress=progress)
+    done = commission(healthy, seed=seed, normal_samples=normal_samples, progress=progress)
     model_files.save(done.diagnoser, out)
     write_report(done.report, Path(out).with_suffix(""))
     return done
@@ -37,7 +43,7 @@ def commission_and_save(
 
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     """Add the arguments of ``bayes-fdi commission``."""
-    from bayes_fdi.deployment.fitting import add_reading_arguments
+    from bayes_fdi.deployment.fitting import add_normal_samples_argument, add_reading_arguments
 
     parser.add_argument(
         "recordings",
@@ -53,6 +59,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help="model file to write (.npz); its report goes beside it (.md, .json)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of every draw (default 0)")
+    add_normal_samples_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress")
     add_reading_arguments(parser)
 
@@ -64,7 +71,13 @@ def run_from_cli(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     options = reading_options(args)
     healthy = [read_for_fitting(p, options) for p in args.recordings]
-    done = commission_and_save(healthy, args.out, seed=args.seed, progress=not args.quiet)
+    done = commission_and_save(
+        healthy,
+        args.out,
+        seed=args.seed,
+        normal_samples=args.normal_samples or 2000,
+        progress=not args.quiet,
+    )
     report = done.report
     print(
         f"wrote {args.out} (report {Path(args.out).with_suffix('.md')}): commissioned on "
@@ -72,4 +85,6 @@ def run_from_cli(args: argparse.Namespace) -> int:
         f"{len(report['groups'])} isolability groups; not detectable here: "
         f"{', '.join(report['undetectable']) or 'none'}"
     )
+    if text := report.get("normal_models", {}).get("text"):
+        print(f"  normal models {text}")
     return 0

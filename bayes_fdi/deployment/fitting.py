@@ -218,6 +218,7 @@ def fit_from_recordings(
     faults: Sequence[tuple[str, float, xr.Dataset]] = (),
     *,
     estimator: Any = None,
+    normal_samples: int | str = 2000,
     progress: bool = False,
 ) -> Any:
     """Fit an online diagnoser on the user's recordings.
@@ -232,9 +233,12 @@ def fit_from_recordings(
         ``(state, onset, recording)`` for recordings of known faults (onset in the recording's
         own time; 0 or earlier: faulty throughout).
     estimator
-        The unfitted diagnoser, cloned (default: `new_online_diagnoser` whose normal models
-        choose the samples they are fitted on by a learning curve on held-out time,
-        ``DynamicNormalModels(max_train_samples="auto")``).
+        The unfitted diagnoser, cloned (default: `new_online_diagnoser` with
+        ``DynamicNormalModels(max_train_samples=normal_samples)``).
+    normal_samples
+        Samples the default normal models are fitted on (a seeded subset), or ``"auto"``:
+        chosen by a learning curve on held-out minutes (see
+        `~bayes_fdi.diagnosis.normal_models.training_size`).
     progress
         Say on stderr that the fit is running (after the checks).
     """
@@ -253,9 +257,8 @@ def fit_from_recordings(
     if estimator is None:
         from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
 
-        estimator = new_online_diagnoser(
-            normal_models=DynamicNormalModels(max_train_samples="auto")
-        )
+        models = DynamicNormalModels(max_train_samples=normal_samples)
+        estimator = new_online_diagnoser(normal_models=models)
     model = clone(estimator)
     with busy("fitting the normal models, detector and isolation", enabled=progress):
         return model.fit(normal_runs, fault_runs)
@@ -290,6 +293,32 @@ def _campaign_argument(text: str) -> str:
         return os.fspath(campaign_path(text))
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def normal_samples(text: str) -> int | str:
+    """``--normal-samples``: a count of at least 10, or ``auto``."""
+    if text == "auto":
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 10:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 10 or 'auto', got {text!r}")
+    return value
+
+
+def add_normal_samples_argument(parser: argparse.ArgumentParser) -> None:
+    """``--normal-samples N|auto`` (shared by ``fit --normal`` and ``commission``)."""
+    parser.add_argument(
+        "--normal-samples",
+        type=normal_samples,
+        default=None,
+        metavar="N|auto",
+        help="samples of the healthy data the normal models are fitted on (a seeded subset; "
+        "default 2000), or 'auto': as many as a learning curve on held-out minutes shows to "
+        "help, up to 4000 (slower: a fit of 4000 samples can cost ten times one of 2000)",
+    )
 
 
 def add_reading_arguments(parser: argparse.ArgumentParser) -> None:
@@ -389,6 +418,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         metavar="RECORDING",
         help="fault-free recordings of the actuator (fit the normal models on them)",
     )
+    add_normal_samples_argument(parser)
     parser.add_argument(
         "--fault",
         action="append",
@@ -424,6 +454,8 @@ def run_from_cli(args: argparse.Namespace) -> int:
         raise UsageError("--fault needs --normal (the fault-free recordings)")
     if args.overrides and not args.campaign:
         raise UsageError("--set needs --campaign")
+    if args.normal_samples is not None and not args.normal:
+        raise UsageError("--normal-samples needs --normal (the fault-free recordings)")
     if args.default:
         fit = _default_fitter()
         model = fit(seed=0 if args.seed is None else args.seed, small=args.small, progress=progress)
@@ -439,7 +471,9 @@ def run_from_cli(args: argparse.Namespace) -> int:
         options = reading_options(args)
         normal = [read_for_fitting(p, options) for p in args.normal]
         faults = [(s, onset, read_for_fitting(p, options)) for s, onset, p in args.fault]
-        model = fit_from_recordings(normal, faults, progress=progress)
+        model = fit_from_recordings(
+            normal, faults, normal_samples=args.normal_samples or 2000, progress=progress
+        )
         what = f"{len(normal)} fault-free and {len(faults)} fault recording(s)"
     model_files.save(model, args.out)
     size = os.path.getsize(args.out)

@@ -54,6 +54,8 @@ PERSISTED: dict[str, str] = {
     "CUSUMState": "bayes_fdi.diagnosis.detection:CUSUMState",
     "GLR": "bayes_fdi.diagnosis.detection:GLR",
     "GLRState": "bayes_fdi.diagnosis.detection:GLRState",
+    "TwoSpeedCUSUM": "bayes_fdi.diagnosis.detection:TwoSpeedCUSUM",
+    "TwoSpeedCUSUMState": "bayes_fdi.diagnosis.detection:TwoSpeedCUSUMState",
     "DetectionDecision": "bayes_fdi.diagnosis.detection:DetectionDecision",
     "DecisionState": "bayes_fdi.diagnosis.detection:DecisionState",
     "HierarchicalClassifier": "bayes_fdi.diagnosis.isolation:HierarchicalClassifier",
@@ -74,6 +76,7 @@ PERSISTED: dict[str, str] = {
     "ClassDistribution": "bayes_fdi.diagnosis.seva:ClassDistribution",
     # recalibrators
     "TemperatureScaler": "bayes_fdi.calibration:TemperatureScaler",
+    "TopLabelScaler": "bayes_fdi.calibration:TopLabelScaler",
     "DirichletScaler": "bayes_fdi.calibration:DirichletScaler",
     "NodeCalibration": "bayes_fdi.calibration:NodeCalibration",
     # relevance vector machines

@@ -3,13 +3,15 @@
 - `bayes_fdi.diagnosis.detection.whitening`: `ARWhitener`, an AR prediction-error filter that
   turns standardised residuals into about white innovations.
 - `bayes_fdi.diagnosis.detection.detectors`: the sequential tests `CUSUM` and `GLR`.
+- `bayes_fdi.diagnosis.detection.two_speed`: `TwoSpeedCUSUM`, the CUSUM with a slow branch
+  for lasting small shifts of the innovations (commissioned diagnosers use it).
 - `bayes_fdi.diagnosis.detection.decision`: `DetectionDecision`, the detection decision DD
   with hysteresis and a hold (`CLEAR_HOLD`: the online diagnoser's).
 - `bayes_fdi.diagnosis.detection.thresholds`: thresholds for a false-alarm budget.
 
 Each online component here owns its state, a named tuple of arrays (`WhitenState`,
-`CUSUMState`, `GLRState`, `DecisionState`), with ``update`` for one sample and ``run`` over a
-chunk through the same compiled kernel.
+`CUSUMState`, `GLRState`, `TwoSpeedCUSUMState`, `DecisionState`), with ``update`` for one
+sample and ``run`` over a chunk through the same compiled kernel.
 
 May import `bayes_fdi.diagnosis.component_state`, `bayes_fdi.datasets` and the foundation.
 """
@@ -32,6 +34,7 @@ from bayes_fdi.diagnosis.detection.thresholds import (
     cusum_threshold,
     fit_threshold,
 )
+from bayes_fdi.diagnosis.detection.two_speed import TwoSpeedCUSUM, TwoSpeedCUSUMState
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener, WhitenState
 
 __all__ = [
@@ -44,6 +47,8 @@ __all__ = [
     "DetectionDecision",
     "DetectorOutput",
     "GLRState",
+    "TwoSpeedCUSUM",
+    "TwoSpeedCUSUMState",
     "WhitenState",
     "calibrate_threshold",
     "cusum_threshold",

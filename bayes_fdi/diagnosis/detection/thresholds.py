@@ -24,12 +24,18 @@ from scipy import optimize
 from bayes_fdi.diagnosis.detection.decision import detection_decision
 
 __all__ = [
+    "FEW_ALARMS",
     "calibrate_threshold",
     "cusum_arl",
     "cusum_threshold",
     "empirical_arl",
     "fit_threshold",
 ]
+
+
+#: The fewest alarms a threshold of the calibration grid may give to enter the fit when fewer
+#: than two thresholds give ``min_alarms``.
+FEW_ALARMS = 3
 
 
 def cusum_arl(threshold: Any, k: float) -> np.ndarray:
@@ -102,11 +108,13 @@ def calibrate_threshold(
     """The threshold that meets a false-alarm budget, measured on fault-free innovations.
 
     The empirical ARL (`empirical_arl`) is measured on a grid of thresholds low enough to give
-    at least ``min_alarms`` alarms each; ``log(ARL)`` is fitted as a straight line in the
-    threshold (its large-threshold form for a CUSUM, Siegmund, and a good description of the
-    GLR's) by least squares, and the threshold where the line reaches ``target_arl`` is taken,
-    or the lowest measured threshold whose ARL already exceeds the target if that is smaller.
-    A ``floor`` (e.g. the theoretical threshold for Gaussian innovations) bounds it below.
+    at least ``min_alarms`` alarms each (when fewer than two do, as on short data or for a
+    statistic whose alarms merge, those with at least `FEW_ALARMS`); ``log(ARL)`` is fitted as
+    a straight line in the threshold (its large-threshold form for a CUSUM, Siegmund, and a
+    good description of the GLR's) by least squares, and the threshold where the line reaches
+    ``target_arl`` is taken, or the lowest measured threshold whose ARL already exceeds the
+    target if that is smaller. A ``floor`` (e.g. the theoretical threshold for Gaussian
+    innovations) bounds it below.
 
     Returns
     -------
@@ -124,10 +132,18 @@ def calibrate_threshold(
         counts.append(n_alarms)
         if n_alarms < min_alarms:
             break
+    ok = np.asarray(counts) >= min_alarms
+    if ok.sum() < 2:  # short data, or alarms that merge: fit on thresholds with a few alarms
+        for h in grid[len(counts) :]:
+            if counts[-1] < FEW_ALARMS:
+                break
+            arl, n_alarms, samples = empirical_arl(detector, innovations, float(h), clear)
+            arls.append(arl)
+            counts.append(n_alarms)
+        ok = np.asarray(counts) >= FEW_ALARMS
     arls_a = np.asarray(arls)
     counts_a = np.asarray(counts)
     used = grid[: arls_a.size]
-    ok = counts_a >= min_alarms
     if ok.sum() >= 2:
         slope, intercept = np.polyfit(used[ok], np.log(arls_a[ok]), 1)
     else:

@@ -13,10 +13,11 @@ class's training signatures is an "unknown" fault.
 
 Online, ``run`` (a chunk of seconds) and ``update`` (one) give the per-second isolation. It keeps
 no state: the memory of the stream is the signature window's. With a compiled tree
-(`~bayes_fdi.diagnosis.isolation.compiled_tree.LeanTree`) and a temperature scaling or no
+(`~bayes_fdi.diagnosis.isolation.compiled_tree.LeanTree`) and a temperature scaling (possibly
+followed by the beta map of the top group of `~bayes_fdi.calibration.TopLabelScaler`) or no
 recalibration they run `isolate_rows`, one compiled pass that takes the fitted values as one
-named tuple (`IsolationParams`): the tree's probabilities, their group sums with temperature
-scaling shared back to the faults, and the novelty score, row by row.
+named tuple (`IsolationParams`): the tree's probabilities, their group sums recalibrated and
+shared back to the faults, and the novelty score, row by row.
 """
 
 from __future__ import annotations
@@ -62,6 +63,7 @@ class IsolationParams(NamedTuple):
     n_groups: int
     temperature: float  #: the temperature scaling of the group probabilities (0: none)
     floor: float  #: smallest group probability before taking its logarithm
+    top_map: np.ndarray  #: ``(3,)`` beta map of the top group after the temperature, or ``(0,)``
     novelty: NoveltyArrays  #: the class novelty
 
 
@@ -264,10 +266,17 @@ class FaultIsolator:
         t = getattr(cal, "temperature_", None)
         return float(t) if t is not None and not hasattr(cal, "weights_") else None
 
+    def top_map(self) -> np.ndarray:
+        """The calibrator's beta map of the top group after its temperature (``(3,)``, a
+        `~bayes_fdi.calibration.TopLabelScaler`), or an empty array."""
+        coef = getattr(self.calibrator_, "top_map_", None)
+        return np.zeros(0) if coef is None else np.ascontiguousarray(coef, dtype=np.float64)
+
     @property
     def rows_independent(self) -> bool:
         """Whether `run` gives each row the numbers it gives that row alone (the compiled
-        path: a compiled tree with no calibrator or a temperature scaling)."""
+        path: a compiled tree with no calibrator, a temperature scaling or a top-label
+        scaling)."""
         compiled_calibration = self.calibrator_ is None or self.temperature() is not None
         return self.lean_ is not None and compiled_calibration
 
@@ -282,11 +291,11 @@ class FaultIsolator:
 
         The per-second isolation of the online diagnoser: the classifier's fault
         probabilities, summed over the groups and recalibrated, shared back to the faults in
-        proportion, and the novelty score. With a compiled tree (``lean_``) and no calibrator or
-        a temperature scaling, one compiled pass whose every row's result is independent of the
-        others; otherwise through the classifier's and calibrator's own ``predict_proba`` and
-        ``transform`` (batched: rounding may depend on the rows around). A row with a NaN (no
-        signature) gives NaN.
+        proportion, and the novelty score. With a compiled tree (``lean_``) and no calibrator, a
+        temperature scaling or a top-label scaling, one compiled pass whose every row's result is
+        independent of the others; otherwise through the classifier's and calibrator's own
+        ``predict_proba`` and ``transform`` (batched: rounding may depend on the rows around). A
+        row with a NaN (no signature) gives NaN.
 
         Parameters
         ----------
@@ -314,6 +323,7 @@ class FaultIsolator:
                 n_groups=n_g,
                 temperature=0.0 if T is None else T,
                 floor=floor,
+                top_map=self.top_map(),
                 novelty=self.novelty_.arrays(),
             )
             isolate_rows(feats, params, fq, gq, nov)
@@ -342,6 +352,31 @@ class FaultIsolator:
 # the compiled per-second isolation
 # ----------------------------------------------------------------------------------------------
 @njit(cache=True, error_model="numpy")
+def _map_top(q, coef):  # pragma: no cover - compiled
+    """`bayes_fdi.calibration.top_label.top_label_map` of one row ``q``, in place."""
+    top, p1, p2 = 0, -np.inf, -np.inf
+    for g in range(q.size):
+        if q[g] > p1:
+            top, p2, p1 = g, p1, q[g]
+        elif q[g] > p2:
+            p2 = q[g]
+    edge = 1e-12
+    p = min(max(p1, edge), 1.0 - edge)
+    new = 1.0 / (1.0 + math.exp(-(coef[0] * math.log(p) - coef[1] * math.log1p(-p) + coef[2])))
+    if p2 > 0.0:  # the top stays on top (TIE_MARGIN of top_label)
+        new = max(new, min(p2 / (1.0 - p1 + p2) * (1.0 + 1e-9), p1))
+    rest = 0.0
+    for g in range(q.size):
+        if g != top:
+            rest += q[g]
+    for g in range(q.size):
+        if g == top:
+            continue
+        q[g] = (q[g] / rest if rest > 0.0 else 1.0 / (q.size - 1)) * (1.0 - new)
+    q[top] = new
+
+
+@njit(cache=True, error_model="numpy")
 def _posterior_row(p, params, gp, gq, fq):  # pragma: no cover - compiled
     """Group sums of fault probabilities ``p``, temperature-scaled, shared back to faults."""
     group_of, n_groups = params.group_of, params.n_groups
@@ -365,6 +400,8 @@ def _posterior_row(p, params, gp, gq, fq):  # pragma: no cover - compiled
     else:
         for g in range(n_groups):
             gq[g] = gp[g]
+    if params.top_map.size == 3:
+        _map_top(gq, params.top_map)
     for f in range(p.size):
         g = group_of[f]
         fq[f] = gq[g] * p[f] / gp[g] if gp[g] > 0.0 else gq[g]

@@ -124,7 +124,7 @@ class DynamicNormalModels(BaseEstimator):
         Rows of each fit (a seeded random subset of the fault-free samples), or ``"auto"``:
         chosen by a learning curve on held-out time (`choose_training_size`: from 2000 rows,
         doubled while a doubling raises the held-out log predictive density by at least
-        0.005 nats per sample, at most 8000).
+        0.005 nats per sample, at most 4000).
     calibration_folds
         Folds of the cross-fit that calibrates the predictive standard deviations (>= 2).
     calibration_bins

@@ -96,7 +96,7 @@ class EnvelopeState(NamedTuple):
     @classmethod
     def upgrade_model_file(cls, fields: dict, format_version: int) -> dict:
         """The fields of a state saved before the envelope had rates (model-file format <= 4:
-        no last second, rates 0) or looked up the change point (format <= 5: an empty ring, as
+        no last second, rates 0) or looked up the change point (format <= 7: an empty ring, as
         the envelope of such a file has ``change_lookback = 0``); with or without a leading
         run axis."""
         fields = dict(fields)
@@ -266,7 +266,7 @@ class InputEnvelope:
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
         """An envelope saved before it had rates (model-file format <= 4): no rate check;
-        before it looked up the change point (format <= 5): ``change_lookback = 0``, the onset
+        before it looked up the change point (format <= 7): ``change_lookback = 0``, the onset
         check it was saved with."""
         data = dict(data)
         data.setdefault("change_lookback", 0)

@@ -8,8 +8,9 @@ type, :class:`SBLResult`:
   Bayesian models" (AISTATS), as realised in SparseBayes v2: candidate factors ``S, Q``, one
   add / re-estimate / delete per iteration chosen by the largest exact evidence gain,
   deletions first, a cache ``B^T Phi`` growing one column per addition, the alignment test
-  and the SparseBayes stopping rules. Unlike SparseBayes, the posterior is refactorised each
-  iteration (no rank-one updates, which drift) and every decision is taken on exact factors
+  and the SparseBayes stopping rules. Unlike SparseBayes, the posterior is refactorised after
+  every addition, deletion and noise update (re-estimations move the factor by a rank-one step
+  within an error budget) and every decision is taken on exact factors
   (:mod:`~bayes_fdi.rvm.sbl.decisions`). In :mod:`~bayes_fdi.rvm.sbl.gaussian` and
   :mod:`~bayes_fdi.rvm.sbl.bernoulli`.
 * :func:`em_gaussian` / :func:`em_bernoulli` -- the classical re-estimation of Tipping (2001),
@@ -32,8 +33,9 @@ verification of actions) and the carried screening factors (:class:`TrackedFacto
 
 The modules, bottom up (each imports only modules above it in this list):
 ``screening_copy``, ``design``; ``precision_factor``, ``rounding``, ``noise``; ``result``;
-``decisions``, ``action_kernels``, ``tracked_kernels`` (numba kernels of the decision rules and
-of the carried factors' re-estimation update, used on the CPU in float64);
+``decisions``, ``action_kernels``, ``tracked_kernels``, ``factor_kernels`` (numba kernels of
+the decision rules, of the carried factors' re-estimation update and of the posterior's terms and
+factor update, used on the CPU in float64);
 ``residual_factors``, ``screening``; ``verification``; ``alignment``;
 ``posterior_bounds``, ``tracked_factors``; ``laplace``; ``gaussian``, ``bernoulli``;
 ``reestimation``; ``polish``.

@@ -23,6 +23,7 @@ from torch import Tensor
 from bayes_fdi.rvm.sbl.alignment import Alignment, exact_alignment
 from bayes_fdi.rvm.sbl.decisions import Action, lowest_index_in_band
 from bayes_fdi.rvm.sbl.design import Design
+from bayes_fdi.rvm.sbl.factor_kernels import reestimate_factor
 from bayes_fdi.rvm.sbl.noise import initial_noise_precision, reestimated_noise_precision
 from bayes_fdi.rvm.sbl.posterior_bounds import Posterior, posterior_context
 from bayes_fdi.rvm.sbl.precision_factor import (
@@ -36,7 +37,12 @@ from bayes_fdi.rvm.sbl.rounding import rounding_gamma, thin_matmul
 from bayes_fdi.rvm.sbl.tracked_factors import TrackedFactors
 from bayes_fdi.rvm.sbl.verification import lazy_verified_action
 
-__all__ = ["fast_gaussian"]
+__all__ = ["UPDATED_FACTOR", "fast_gaussian"]
+
+#: After a re-estimation, move the posterior's Cholesky factor by a compiled rank-one step
+#: (:func:`~bayes_fdi.rvm.sbl.factor_kernels.reestimate_factor`, CPU float64) instead of
+#: refactorising; tests clear it to compare with a fresh factorisation every iteration.
+UPDATED_FACTOR = True
 
 # SparseBayes v2 constants
 _BETA_UPDATE_START = 10
@@ -59,6 +65,11 @@ _MIN_EXACT_BUDGET = 8
 _REFRESH_EVERY_ITERATION = False
 # initial number of columns of the fast Gaussian solver's Phi / B^T Phi buffers
 _INITIAL_CAPACITY = 64
+# an updated factor is used while its estimated backward error stays within this many times a
+# fresh factorisation's (gamma_{M+1}); each rank-one update adds one, a downdate its
+# amplification squared. Additions, deletions, noise updates and the reported result always
+# refactorise afresh.
+_FACTOR_ERROR_BUDGET = 8.0
 
 
 def fast_gaussian(
@@ -71,7 +82,8 @@ def fast_gaussian(
 ) -> SBLResult:
     """Tipping & Faul fast marginal-likelihood maximisation, Gaussian noise.
 
-    Each iteration the posterior is refactorised (Cholesky of the scaled precision); the
+    The posterior is refactorised (Cholesky of the scaled precision) after each addition,
+    deletion and noise update and moved by a rank-one step after a re-estimation; the
     candidates' screening factors are carried by rank-one updates with rigorous error bounds
     (:mod:`~bayes_fdi.rvm.sbl.tracked_factors`) and the action is decided on exact factors of
     whatever could win (:func:`~bayes_fdi.rvm.sbl.verification.lazy_verified_action`), so the
@@ -263,6 +275,10 @@ class _FastGaussianRun:
         else:
             active, alpha, beta = _start_state(start, self.norms, self.valid, self.beta_max)
         self.active, self.alpha, self.beta = active, alpha, beta
+        # the factor of the present state moved by re-estimations (None: refactorise), and the
+        # estimated backward error of the factor in use, in units of gamma_{M+1}
+        self.updated_fac: PrecisionFactor | None = None
+        self.factor_error = 0.0
         self._fill_buffers()
         # B^T t of unit columns: a product of N terms in the design's dtype, within gamma_N ||t||
         self.bt_error = rounding_gamma(N + 8, dtype) * math.sqrt(t_sq)
@@ -303,11 +319,17 @@ class _FastGaussianRun:
         """``Phi`` and ``B^T Phi`` of the current basis (views of the buffers)."""
         return self.Phi_buf[:, : self.M], self.BtPhi_buf[:, : self.M]
 
-    def statistics(self) -> tuple[PrecisionFactor, Tensor, Tensor, float]:
-        """Posterior from a fresh factorisation (never from rank-one updates, which drift)."""
+    def statistics(self, fresh: bool = False) -> tuple[PrecisionFactor, Tensor, Tensor, float]:
+        """Posterior from the factor of the present state: the re-estimation-updated one where
+        it is within its error budget (:meth:`reestimate`) and ``fresh`` is False, else a
+        fresh factorisation."""
         Phi = self.views()[0]
         act_t, alpha, beta = self.act_t, self.alpha, self.beta
-        fac = factor_precision(alpha, beta * self.gram)
+        fac = self.updated_fac
+        self.updated_fac = None
+        if fresh or fac is None:
+            fac = factor_precision(alpha, beta * self.gram)
+            self.factor_error = 0.0
         mu = beta * fac.solve(self.Bt_t[act_t])
         resid = self.t - Phi @ mu
         log_ml = gaussian_log_evidence(self.N, beta, float(resid @ resid), alpha, mu, fac)
@@ -368,8 +390,27 @@ class _FastGaussianRun:
     def reestimate(self, post: Posterior, best: Action) -> None:
         """Re-estimate the precision of the active column at ``best.position``."""
         self.tracker.reestimate(post, best.position, best.new_alpha)
+        k, old_alpha = best.position, float(self.alpha[best.position])
         self.alpha = self.alpha.clone()
-        self.alpha[best.position] = best.new_alpha
+        self.alpha[k] = best.new_alpha
+        self.updated_fac = self._updated_factor(k, old_alpha, best.new_alpha)
+
+    def _updated_factor(self, k: int, old_alpha: float, new_alpha: float) -> PrecisionFactor | None:
+        """The present factor moved to ``alpha_k = new_alpha`` by one compiled rank-one step,
+        or None (refactorise) off CPU float64, with :data:`UPDATED_FACTOR` cleared, or when the
+        estimated backward error leaves :data:`_FACTOR_ERROR_BUDGET`."""
+        fac = self.fac
+        L = fac.L
+        if not UPDATED_FACTOR or L.device.type != "cpu" or L.dtype != torch.float64:
+            return None
+        L = L.clone()
+        amp = reestimate_factor(L.numpy(), k, math.sqrt(old_alpha / new_alpha))
+        self.factor_error += amp * amp
+        if not self.factor_error <= _FACTOR_ERROR_BUDGET:
+            return None
+        d = fac.d.clone()
+        d[k] = 1.0 / math.sqrt(new_alpha)
+        return PrecisionFactor(L, d)
 
     def add(self, post: Posterior, exact: _ExactColumns, best: Action) -> None:
         """Add the candidate ``best.index``, from the exact column its factors came from."""
@@ -404,6 +445,7 @@ class _FastGaussianRun:
         self.tracker.add(post, gram, float(BtBi[nu]), best.new_alpha, BtBi, float(self.Bt_t[nu]))
         self.tracker.stale.add(nu)  # its stored products became the exact Gram entries
         self.position[nu] = M - 1
+        self.updated_fac = None
 
     def delete(self, post: Posterior, best: Action) -> None:
         """Delete the active column at ``best.position`` and close the gap in the buffers."""
@@ -425,20 +467,21 @@ class _FastGaussianRun:
         self.in_model[nu] = False
         self.addable = self.addable_mask()
         self.gram = self.views()[1][self.act_t]  # B^T Phi's active rows, until the basis changes
+        self.updated_fac = None
 
     def update_noise(self, last: bool) -> bool:
         """Re-estimate ``beta`` (and refactorise); returns ``last``, cleared when this was to be
         the last iteration and ``log beta`` moved by more than the tolerance."""
         tracker = self.tracker
         if not self.current:
-            self.fac, self.mu, self.resid, _ = self.statistics()
+            self.fac, self.mu, self.resid, _ = self.statistics(fresh=True)
         # the carried factors follow the noise update unless a refresh is pending anyway
         before = None if tracker.needs_refresh else self.context()
         gamma = 1.0 - self.alpha * self.fac.covariance().diagonal()
         beta_old = self.beta
         ee = float(self.resid @ self.resid)
         self.beta = reestimated_noise_precision(self.N, float(gamma.sum()), ee, self.beta_max)
-        self.fac, self.mu, self.resid, self.log_ml = self.statistics()
+        self.fac, self.mu, self.resid, self.log_ml = self.statistics(fresh=True)
         self.current = True
         if before is not None:  # and the actives' afresh (O(M^3))
             tracker.rescale(before, self.context(), _BETA_RELATIVE_REFRESH)
@@ -450,7 +493,7 @@ class _FastGaussianRun:
     def result(self, trace: list[float], n_iter: int, converged: bool) -> SBLResult:
         """The reported posterior and evidence: exact, from a fresh factorisation."""
         if not self.current:
-            self.fac, self.mu, self.resid, self.log_ml = self.statistics()
+            self.fac, self.mu, self.resid, self.log_ml = self.statistics(fresh=True)
             trace[-1] = self.log_ml
         return result_in_caller_basis(
             torch.tensor(self.active, device=self.device),

@@ -18,10 +18,16 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
+from bayes_fdi.rvm.sbl.factor_kernels import posterior_terms
 from bayes_fdi.rvm.sbl.precision_factor import PrecisionFactor
 from bayes_fdi.rvm.sbl.rounding import rounding_gamma
 
-__all__ = ["Posterior", "posterior_context"]
+__all__ = ["COMPILED_POSTERIOR", "Posterior", "posterior_context"]
+
+#: Compute the posterior's terms compiled
+#: (:func:`~bayes_fdi.rvm.sbl.factor_kernels.posterior_terms`) on CPU float64; tests clear it to
+#: compare with the torch operations.
+COMPILED_POSTERIOR = True
 
 
 class Posterior(NamedTuple):
@@ -70,9 +76,16 @@ def posterior_context(
     M = alpha.numel()
     dt = alpha.dtype
     abar = alpha / beta
-    Hb = 0.5 * (G + G.T)
-    Hb.diagonal().add_(abar)
-    Hb_F = float(torch.linalg.matrix_norm(Hb)) * (1.0 + rounding_gamma(M * M + 1, dt))
+    terms = _compiled_terms(G, abar, mu, Phi_t)
+    if terms is not None:
+        Hb, Hb_F, gradient, abs_product = terms
+    else:
+        Hb = 0.5 * (G + G.T)
+        Hb.diagonal().add_(abar)
+        Hb_F = float(torch.linalg.matrix_norm(Hb))
+        gradient = Hb @ mu - Phi_t
+        abs_product = Hb.abs() @ mu.abs() + Phi_t.abs()
+    Hb_F *= 1.0 + rounding_gamma(M * M + 1, dt)
     a_min = float(abar.min())
     low = a_min - M * eps
     gamma2 = rounding_gamma(2, dt)
@@ -81,8 +94,7 @@ def posterior_context(
     else:
         lam = psd = math.inf
     root = abar.sqrt()
-    gradient = Hb @ mu - Phi_t
-    gradient_error = rounding_gamma(M + 3, dt) * (Hb.abs() @ mu.abs() + Phi_t.abs())
+    gradient_error = rounding_gamma(M + 3, dt) * abs_product
     g_w = float(torch.linalg.vector_norm(gradient / root)) + float(
         torch.linalg.vector_norm(gradient_error / root)
     )
@@ -90,3 +102,24 @@ def posterior_context(
     return Posterior(
         fac, beta, abar, root, Hb, Hb_F, lam, psd, mu, mu_error_w, gradient, gradient_error
     )
+
+
+def _compiled_terms(
+    G: Tensor, abar: Tensor, mu: Tensor, Phi_t: Tensor
+) -> tuple[Tensor, float, Tensor, Tensor] | None:
+    """``Hb``, ``||Hb||_F``, the gradient and ``|Hb| |mu| + |Phi_t|`` in one compiled pass
+    (CPU float64, :data:`COMPILED_POSTERIOR`); None where the torch operations apply (another
+    device or dtype, or a squared norm out of float64's range)."""
+    tensors = (G, abar, mu, Phi_t)
+    if not COMPILED_POSTERIOR or any(
+        v.device.type != "cpu" or v.dtype != torch.float64 for v in tensors
+    ):
+        return None
+    M = abar.numel()
+    Hb = G.new_empty(M, M)
+    gradient, abs_product = G.new_empty(M), G.new_empty(M)
+    arrays = [v.numpy() for v in (G, abar, mu, Phi_t)]
+    fro_sq = posterior_terms(*arrays, Hb.numpy(), gradient.numpy(), abs_product.numpy())
+    if not math.isfinite(fro_sq) or fro_sq > 1e300:
+        return None
+    return Hb, math.sqrt(fro_sq), gradient, abs_product

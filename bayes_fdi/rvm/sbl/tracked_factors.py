@@ -43,6 +43,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from bayes_fdi.rvm.sbl.factor_kernels import screened_rows
 from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
 from bayes_fdi.rvm.sbl.rounding import rounding_gamma, thin_matmul
 from bayes_fdi.rvm.sbl.screening import gaussian_screened_Q, screened_factors
@@ -53,6 +54,8 @@ __all__ = ["COMPILED_UPDATE", "TrackedFactors"]
 #: Run the re-estimation update compiled (:mod:`~bayes_fdi.rvm.sbl.tracked_kernels`) on CPU
 #: float64; tests clear it to compare with the torch update.
 COMPILED_UPDATE = True
+#: at most this many rows are refreshed by the compiled kernel (more go through torch's products)
+_COMPILED_ROWS = 32
 #: the carried bounds are used while the stored Gram matrix's error inflates them by at most
 #: this factor (``psd``, see :mod:`bayes_fdi.rvm.sbl.posterior_bounds`); beyond it the solver
 #: screens directly
@@ -97,6 +100,14 @@ class TrackedFactors:
         ``Z`` is the stored ``P x M`` matrix of products ``B^T Phi``."""
         M = Z.shape[1]
         beta = post.beta
+        if (
+            rows is not None
+            and self._compiled
+            and rows.numel() <= _COMPILED_ROWS
+            and math.isfinite(post.lam)
+        ):
+            self._refresh_compiled(post, Z, rows)
+            return
         Zr = Z if rows is None else Z[rows]
         unit = self.unit if rows is None else self.unit[rows]
         Bt_t = self.Bt_t if rows is None else self.Bt_t[rows]
@@ -132,6 +143,35 @@ class TrackedFactors:
             self.S[rows], self.S_err[rows] = scr.S / beta, scr.S_error / beta
             self.Q[rows], self.Q_err[rows] = Q / beta, Q_err / beta
             self.rho[rows], self.nu[rows] = rho, nu
+
+    def _refresh_compiled(self, post: Posterior, Z: Tensor, rows: Tensor) -> None:
+        """:meth:`refresh` of a few ``rows`` by the compiled kernel
+        (:func:`~bayes_fdi.rvm.sbl.factor_kernels.screened_rows`): the same formulas and
+        bounds, ``z_error = 0``."""
+        M, beta, dt = Z.shape[1], post.beta, self.dtype
+        H = beta * post.Hb
+        gradient, gradient_error = beta * post.gradient, beta * post.gradient_error
+        scalars = [
+            post.lam / beta,
+            float(torch.linalg.matrix_norm(H)) * (1.0 + rounding_gamma(M * M, dt)),
+            float(torch.linalg.vector_norm(gradient)),
+            float(torch.linalg.vector_norm(gradient_error)),
+            float(torch.linalg.vector_norm(post.mu)),
+            rounding_gamma(M + 2, dt),
+            rounding_gamma(2 * M + 4, dt),
+            rounding_gamma(M + 3, dt),
+        ]
+        K = rows.numel()
+        C, out = Z.new_empty(K, M), Z.new_empty(K, 5)
+        Zr, unit, Bt_t = beta * Z[rows], beta * self.unit[rows], beta * self.Bt_t[rows]
+        L, d = post.fac
+        arrays = (L, d, H, Zr, unit, Bt_t, post.mu, gradient)
+        screened_rows(*(v.numpy() for v in arrays), np.array(scalars), C.numpy(), out.numpy())
+        self.C[rows, :M] = C
+        self.S[rows], self.S_err[rows] = out[:, 0] / beta, out[:, 1] / beta
+        self.Q[rows], self.Q_err[rows] = out[:, 2] / beta, out[:, 3] / beta
+        self.rho[rows] = out[:, 4] / (beta * float(post.root.min()))
+        self.nu[rows] = torch.linalg.vector_norm(C, dim=1) * (1.0 + rounding_gamma(M + 1, dt))
 
     @staticmethod
     def usable(post: Posterior) -> bool:
