@@ -136,7 +136,7 @@ def test_bad_parameters_are_named_and_the_model_file_round_trips(tmp_path, rng):
     model_files.save(state, tmp_path / "s.npz")
     back, back_state = model_files.load(tmp_path / "t.npz"), model_files.load(tmp_path / "s.npz")
     assert repr(back) == repr(test) == "TwoSpeedCUSUM(k=0.5, k_slow=0.12, threshold=9.0)"
-    assert model_files.read_metadata(tmp_path / "t.npz")["format_version"] == 7
+    assert model_files.read_metadata(tmp_path / "t.npz")["format_version"] >= 7
     np.testing.assert_array_equal(
         back.run(e[100:], back_state)[0].statistic,
         test.run(e[100:], state)[0].statistic,
