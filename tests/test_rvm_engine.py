@@ -160,6 +160,7 @@ def _rbf_problem(seed: int, n: int, width: float):
 def test_compiled_engine_takes_the_torch_engines_actions(seed, n, width, monkeypatch):
     design, t = _rbf_problem(seed, n, width)
     with fit_threads():
+        monkeypatch.setattr(gaussian_module, "UPDATED_FACTOR", True)  # the option, on
         fast = fast_gaussian(design, t)
         monkeypatch.setattr(verification_module, "COMPILED_RULES", False)
         monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", False)
