@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from cusum_reference import hand_two_sided_sums
 from scipy.linalg import solve_toeplitz
 
 from bayes_fdi.diagnosis.detection.decision import DetectionDecision, detection_decision
@@ -21,16 +22,9 @@ from bayes_fdi.diagnosis.detection.whitening import ARWhitener, levinson_durbin
 
 
 def _hand_cusum(e, k, cap):
-    """Page's two-sided recursion written out; a NaN sample counts as an innovation of 0 (the
-    sums decay by k) and shows as NaN."""
-    sp = sn = 0.0
-    out = []
-    for v in e:
-        x = 0.0 if math.isnan(v) else v
-        sp = min(cap, max(0.0, sp + x - k))
-        sn = min(cap, max(0.0, sn - x - k))
-        out.append(math.nan if math.isnan(v) else max(sp, sn))
-    return np.array(out)
+    """Page's two-sided statistic, NaN where the sample is missing."""
+    stat = hand_two_sided_sums(e, k, cap).max(axis=1)
+    return np.where(np.isnan(np.asarray(e, dtype=float)), np.nan, stat)
 
 
 def _hand_glr(e, window):

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from cusum_reference import hand_two_sided_sums
 
 from bayes_fdi import model_files
 from bayes_fdi.diagnosis.component_state import stack_states
@@ -24,25 +25,13 @@ def rng():
     return np.random.default_rng(20261127)
 
 
-def _hand_two_sided(e, k, cap):
-    """Page's two-sided sums written out (a NaN: an innovation of 0): ``(S+, S-)`` per sample."""
-    sp = sn = 0.0
-    out = []
-    for v in e:
-        x = 0.0 if math.isnan(v) else v
-        sp = min(cap, max(0.0, sp + x - k))
-        sn = min(cap, max(0.0, sn - x - k))
-        out.append((sp, sn))
-    return np.array(out)
-
-
 def test_statistic_is_the_larger_of_the_fast_sums_and_the_scaled_slow_ones(rng):
     test = TwoSpeedCUSUM(k=0.5, k_slow=0.1, threshold=12.0)
     e = rng.standard_normal(3000) + np.where(np.arange(3000) > 1500, 0.3, 0.0)
     e[[10, 11, 700]] = np.nan
     scale, band = test.slow_scale_, test.slow_band_
-    fast = _hand_two_sided(e, 0.5, 24.0).max(axis=1)
-    slow = _hand_two_sided(e, 0.1, 24.0 / scale + band).max(axis=1)
+    fast = hand_two_sided_sums(e, 0.5, 24.0).max(axis=1)
+    slow = hand_two_sided_sums(e, 0.1, 24.0 / scale + band).max(axis=1)
     expected = np.maximum(fast, scale * np.maximum(slow - band, 0.0))
     expected[np.isnan(e)] = np.nan
     out, _ = test.run(e)
