@@ -114,3 +114,28 @@ def test_the_report_says_what_the_undetectable_rule_measured(commissioned):
     text = render_report(report)
     assert "fewer than half of their training transplants" in text
     assert "bias_X (1 of 4)" in text  # 4 training runs per fault in this commissioning
+
+
+def test_commissioned_groups_come_from_the_one_way_confusion_of_detected_seconds(
+    commissioned, healthy
+):
+    # the second library (seed 10 seed + 2), diagnosed second by second: its detected seconds
+    # at least GROUP_MIN_AGE after their detection, named by the classifier, give the groups
+    from bayes_fdi.commissioning.isolation import _components
+    from bayes_fdi.diagnosis.isolation.isolator import isolability_groups, naming_confusion
+    from bayes_fdi.diagnosis.online.training import GROUP_MIN_AGE, training_signatures
+    from bayes_fdi.twin import transplant_library
+
+    diag, twin, report = commissioned
+    assert report["group_rule"] == "naming" and diag.isolator_.group_rule == "naming"
+    library = transplant_library(
+        healthy, twin, faults=("f1", "f18", "bias_X"), runs_per_fault=4, duration=400, seed=2
+    )
+    rows, labels, ages, _ = training_signatures(_components(diag), library, per_second=True)
+    iso = diag.isolator_
+    keep = np.isin(labels, iso.faults_) & (ages >= GROUP_MIN_AGE)
+    named = iso.faults_[np.argmax(iso.fault_proba(rows[keep]), axis=1)]
+    faults = [f for f in ("bias_X", "f1", "f18") if f in iso.faults_]  # the natural order
+    confusion = naming_confusion(labels[keep], named, faults)
+    groups = isolability_groups(faults, confusion, threshold=diag.group_threshold)
+    assert [list(g) for g in diag.groups_] == groups

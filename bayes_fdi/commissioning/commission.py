@@ -9,10 +9,12 @@
 3. transplants every fault of the library (the 19 DAMADICS faults and the bias or drift of one
    reading) onto the healthy data, with parameters drawn from the twin's posterior: one
    library trains the isolation, one finds the isolability groups, one calibrates the group
-   probabilities (disjoint parameter and noise draws: seeds ``10 seed + 1, 2, 3``);
+   probabilities (disjoint parameter and noise draws: seeds ``10 seed + 1, 2, 3``; 12 runs
+   per fault, both signs of a signed fault in each profile);
 4. fits the online diagnoser (`bayes_fdi.diagnosis.OnlineDiagnoser`) with the valve's own normal
    models, detector threshold and input envelope on all the healthy data, and the isolation on
-   those libraries; its detector is the two-speed CUSUM
+   those libraries (`bayes_fdi.commissioning.isolation`: groups from the one-way confusion of
+   the held-out library's detected seconds); its detector is the two-speed CUSUM
    (`bayes_fdi.diagnosis.detection.TwoSpeedCUSUM`, `DETECTOR_K_SLOW`): a plant's residuals
    are often so autocorrelated that their whitening leaves of a lasting fault only a small
    lasting shift of the innovations, which the slow branch accumulates;
@@ -31,6 +33,7 @@ import xarray as xr
 
 from bayes_fdi.commissioning.expectations import expected_performance
 from bayes_fdi.commissioning.healthy import check_healthy, operating_range
+from bayes_fdi.commissioning.isolation import GROUP_RULE, fit_commissioned_isolation
 from bayes_fdi.progress import busy
 
 __all__ = ["DETECTOR_K_SLOW", "LIBRARY_FAULTS", "Commissioning", "commission"]
@@ -105,7 +108,7 @@ def commission(
     healthy: xr.Dataset | Sequence[xr.Dataset],
     *,
     faults: Sequence[str] = LIBRARY_FAULTS,
-    runs_per_fault: int = 6,
+    runs_per_fault: int = 12,
     duration: int = 600,
     sizes: Sequence[float] = (0.25, 0.5, 0.75),
     evaluation_runs: int = 2,
@@ -189,7 +192,8 @@ def commission(
             detector=TwoSpeedCUSUM(k_slow=DETECTOR_K_SLOW),
             calibrator=TemperatureScaler(),
             random_state=seed,
-        ).fit(runs, libraries[0], validation_runs=libraries[1], calibration_runs=libraries[2])
+        ).fit(runs)
+        fit_commissioned_isolation(diagnoser, *libraries)
     seconds["diagnoser"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     with busy("commissioning: checking it on held-out transplants", enabled=progress):
@@ -223,6 +227,7 @@ def commission(
             "false_alarm_hours": float(diagnoser.false_alarm_hours),
         },
         "groups": [list(g) for g in diagnoser.groups_],
+        "group_rule": GROUP_RULE,
         "undetectable": list(diagnoser.undetectable_),
         "detection_rates": {k: float(v) for k, v in diagnoser.detection_rates_.items()},
         "expected": expected,

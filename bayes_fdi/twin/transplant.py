@@ -53,6 +53,10 @@ MEASURED_CHANNEL = {name: name.split("_", 1)[1] for name in MEASUREMENT_FAULTS}
 SIGNS = {
     **{f: (-1.0, 1.0) for f in ("f12", "f13", "f14", "f17", "f19", *MEASUREMENT_FAULTS)},
 }
+#: The sign of run ``k`` of a signed fault in a library, times a sign drawn per fault: the
+#: abrupt runs (even ``k``) and the incipient ones (odd ``k``) each alternate, so that every
+#: profile meets both signs once a fault has four runs or more.
+SIGN_PATTERN = (1.0, -1.0, -1.0, 1.0)
 
 
 class MeasurementFault(NamedTuple):
@@ -202,12 +206,16 @@ def transplant_library(
     For fault ``i`` of ``faults`` and its run ``k``, the stream ``default_rng([seed, i, k])``
     draws: the window (``duration`` s, gap-free) uniformly inside the ``k``-th of
     ``runs_per_fault`` equal strata of the recording's possible starts, so each fault's onsets
-    spread over the recording; the strength uniformly in ``strength`` (signed faults and the
-    measurement faults with a random sign; f4 positive, as the benchmark has it); the profile
-    (abrupt for even ``k``, incipient for odd ``k``, with a ramp uniform in ``ramp`` s); the
+    spread over the recording; the strength uniformly in ``strength`` (f4 positive, as the
+    benchmark has it); the profile (abrupt for even ``k``, incipient for odd ``k``, with a ramp
+    uniform in ``ramp`` s); the
     onset uniformly in ``onset`` (fractions of ``duration``, rounded to whole seconds); and
     the twin's parameters (one posterior draw; a fixed `ActuatorParameters` is used as is).
-    Different seeds draw independent parameters, windows and faults; for training and
+    The signed faults (f12, f13, f14, f17, f19 and the measurement faults) take the sign
+    ``SIGN_PATTERN[k % 4]`` times one drawn per fault by ``default_rng([seed, i])``: every
+    profile meets both signs once a fault has four runs (with a random sign per run, all the
+    runs of a fault could share one sign, and a classifier trained on them never saw the
+    other). Different seeds draw independent parameters, windows and faults; for training and
     evaluation sets that share no healthy data either, pass disjoint parts of the recording.
 
     Returns
@@ -232,11 +240,14 @@ def transplant_library(
         raise ValueError(f"the recording has no {duration}-s gap-free windows to transplant into")
     draws, records = [], []
     for i, name in enumerate(names):
+        signs = SIGNS.get(name, (1.0,))
+        flip = np.random.default_rng([int(seed), i]).choice(signs)
         for k in range(int(runs_per_fault)):
             rng = np.random.default_rng([int(seed), i, k])
             stratum = len(starts) / runs_per_fault
             run, start = starts[int(k * stratum + rng.uniform(0.0, stratum))]
-            value = rng.uniform(*strength) * rng.choice(SIGNS.get(name, (1.0,)))
+            sign = flip * SIGN_PATTERN[k % 4] if len(signs) == 2 else 1.0
+            value = rng.uniform(*strength) * sign
             t_on = float(round(rng.uniform(*onset) * duration))
             incipient = k % 2 == 1
             t_ramp = float(rng.uniform(*ramp)) if incipient else 0.0

@@ -43,6 +43,7 @@ __all__ = [
     "IsolationParams",
     "isolability_groups",
     "isolate_rows",
+    "naming_confusion",
     "pairwise_confusion",
 ]
 
@@ -114,8 +115,8 @@ def isolability_groups(
     return [[str(states[i]) for i in c] for c in clusters]
 
 
-def pairwise_confusion(y_true: Any, y_pred: Any, states: Sequence[str]) -> np.ndarray:
-    """Balanced pairwise confusion ``(P(pred b | a) + P(pred a | b)) / 2`` (diagonal 0)."""
+def _naming_rates(y_true: Any, y_pred: Any, states: Sequence[str]) -> np.ndarray:
+    """``rate[a, b] = P(pred b | a)`` over the rows of each state."""
     y_true = np.asarray(y_true).astype(str)
     y_pred = np.asarray(y_pred).astype(str)
     k = len(states)
@@ -125,7 +126,23 @@ def pairwise_confusion(y_true: Any, y_pred: Any, states: Sequence[str]) -> np.nd
         if rows.any():
             for j, b in enumerate(states):
                 rate[i, j] = np.mean(y_pred[rows] == b)
+    return rate
+
+
+def pairwise_confusion(y_true: Any, y_pred: Any, states: Sequence[str]) -> np.ndarray:
+    """Balanced pairwise confusion ``(P(pred b | a) + P(pred a | b)) / 2`` (diagonal 0)."""
+    rate = _naming_rates(y_true, y_pred, states)
     err = (rate + rate.T) / 2.0
+    np.fill_diagonal(err, 0.0)
+    return err
+
+
+def naming_confusion(y_true: Any, y_pred: Any, states: Sequence[str]) -> np.ndarray:
+    """The larger of the two one-way confusions ``max(P(pred b | a), P(pred a | b))``
+    (diagonal 0): a consistent misnaming ``a -> b`` counts in full however rarely ``b`` is
+    named ``a``, where the balanced `pairwise_confusion` halves it."""
+    rate = _naming_rates(y_true, y_pred, states)
+    err = np.maximum(rate, rate.T)
     np.fill_diagonal(err, 0.0)
     return err
 
@@ -148,8 +165,14 @@ class FaultIsolator:
         fitted on the calibration set. None: no recalibration. Not fitted when every known
         fault falls into one group (its probability is 1).
     group_threshold
-        Pairwise held-out confusion from which two faults share a group (default 0.15, the
+        Held-out confusion from which two faults (or groups) share a group (default 0.15, the
         threshold of the paper pipeline's 20-state analysis).
+    group_rule
+        How the validation set's confusion makes the groups: ``"pairwise"`` (default, the
+        paper's): the balanced pairwise confusion of two faults (`pairwise_confusion`);
+        ``"naming"``: the larger one-way confusion (`naming_confusion`), which merges a
+        consistent misnaming of one fault as another. Both with complete linkage
+        (`isolability_groups`).
     random_state
         Seed of the tree design and of the novelty subsets.
 
@@ -166,7 +189,8 @@ class FaultIsolator:
     lean_ : LeanTree or None
         Compiled form of the classifier when it allows one.
     validation_confusion_ : numpy.ndarray
-        The pairwise held-out confusion the groups were found from.
+        The pairwise held-out confusion the groups were found from (`pairwise_confusion` or
+        `naming_confusion`, by ``group_rule``).
     group_of_ : numpy.ndarray
         ``(n_faults,)`` int64: the group (column of the group probabilities) of each fault.
     """
@@ -177,12 +201,19 @@ class FaultIsolator:
         *,
         calibrator: Any = None,
         group_threshold: float = 0.15,
+        group_rule: str = "pairwise",
         random_state: int | None = 0,
     ) -> None:
         self.classifier = classifier
         self.calibrator = calibrator
         self.group_threshold = group_threshold
+        self.group_rule = group_rule
         self.random_state = random_state
+
+    @classmethod
+    def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
+        """An isolator saved before format 9 found its groups by the pairwise rule."""
+        return {"group_rule": "pairwise", **data}
 
     def _make_classifier(self) -> Any:
         if self.classifier is not None:
@@ -203,6 +234,8 @@ class FaultIsolator:
         """Fit the classifier on ``(X, y)``, the groups on ``validation``, the calibrator on
         ``calibration`` (each a ``(rows, labels)`` pair; without one, every fault is its own
         group / no recalibration)."""
+        if self.group_rule not in ("pairwise", "naming"):
+            raise ValueError(f"group_rule must be 'pairwise' or 'naming', got {self.group_rule!r}")
         X = np.asarray(X, dtype=np.float64)
         y = np.asarray(y).astype(str)
         if np.unique(y).size < 2:
@@ -216,7 +249,8 @@ class FaultIsolator:
             Xv, yv = np.asarray(validation[0], float), np.asarray(validation[1]).astype(str)
             known = np.isin(yv, faults)
             pred = self.faults_[np.argmax(self.fault_proba(Xv[known]), axis=1)]
-            self.validation_confusion_ = pairwise_confusion(yv[known], pred, faults)
+            confusion = naming_confusion if self.group_rule == "naming" else pairwise_confusion
+            self.validation_confusion_ = confusion(yv[known], pred, faults)
             # in the faults' natural order (f4 before f12), so groups read "f4|f12"
             order = sorted(range(len(faults)), key=lambda i: _natural(faults[i]))
             groups = isolability_groups(

@@ -339,6 +339,7 @@ def fit_isolation(
     max_signatures_per_fault: int,
     random_state: int | None,
     seconds: dict[str, float],
+    group_rule: str = "pairwise",
 ) -> IsolationFit:
     """The isolator of `OnlineDiagnoser` (whose parameters the keywords are) from fault runs.
 
@@ -349,7 +350,11 @@ def fit_isolation(
     calibration runs, `split_fault_runs` splits ``fault_runs``. Faults detected in fewer than
     ``detect_rate`` of their training runs, or with fewer than 5 signatures, are undetectable
     and not classified; each fault keeps at most ``max_signatures_per_fault`` training rows
-    (`cap_rows`, seed ``[random_state, 5]``). ``seconds`` receives the timings.
+    (`cap_rows`, seed ``[random_state, 5]``). ``seconds`` receives the timings. With
+    ``group_rule="naming"`` (`~bayes_fdi.diagnosis.isolation.isolator.naming_confusion`) the
+    groups come from every detected faulty second of the validation runs at least
+    `GROUP_MIN_AGE` s after its detection (as the diagnoser names them, and as a benchmark
+    scores them) instead of the signatures at `SIGNATURE_AGES`.
     """
     t0 = time.perf_counter()
     if validation_runs is None or calibration_runs is None:
@@ -363,7 +368,8 @@ def fit_isolation(
         train = fault_runs
     X, y, _, detected = training_signatures(components, train)
     rates = {f: float(np.mean(v)) for f, v in detected.items()}
-    Xv, yv, av, _ = training_signatures(components, validation_runs)
+    per_second = group_rule == "naming"
+    Xv, yv, av, _ = training_signatures(components, validation_runs, per_second=per_second)
     Xc, yc, _, _ = training_signatures(components, calibration_runs, per_second=True)
     seconds["signatures"] = time.perf_counter() - t0
     counts = {f: int(np.sum(y == f)) for f in rates}
@@ -384,6 +390,7 @@ def fit_isolation(
         classifier,
         calibrator=calibrator,
         group_threshold=group_threshold,
+        group_rule=group_rule,
         random_state=random_state,
     ).fit(
         X[keep],
