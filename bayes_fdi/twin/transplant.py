@@ -208,9 +208,9 @@ def transplant_library(
     ``runs_per_fault`` equal strata of the recording's possible starts, so each fault's onsets
     spread over the recording; the strength uniformly in ``strength`` (f4 positive, as the
     benchmark has it); the profile (abrupt for even ``k``, incipient for odd ``k``, with a ramp
-    uniform in ``ramp`` s); the
-    onset uniformly in ``onset`` (fractions of ``duration``, rounded to whole seconds); and
-    the twin's parameters (one posterior draw; a fixed `ActuatorParameters` is used as is).
+    uniform in ``ramp`` s); the onset uniformly in ``onset`` (fractions of ``duration``,
+    rounded to whole seconds); and the twin's parameters (one posterior draw; a fixed
+    `ActuatorParameters` is used as is).
     The signed faults (f12, f13, f14, f17, f19 and the measurement faults) take the sign
     ``SIGN_PATTERN[k % 4]`` times one drawn per fault by ``default_rng([seed, i])``: every
     profile meets both signs once a fault has four runs (with a random sign per run, all the
