@@ -128,6 +128,7 @@ def test_commissioned_groups_come_from_the_one_way_confusion_of_detected_seconds
 
     diag, twin, report = commissioned
     assert report["group_rule"] == "naming" and diag.isolator_.group_rule == "naming"
+    assert "named as the other in at least 15% of its detected seconds" in render_report(report)
     library = transplant_library(
         healthy, twin, faults=("f1", "f18", "bias_X"), runs_per_fault=4, duration=400, seed=2
     )

@@ -228,6 +228,7 @@ def commission(
         },
         "groups": [list(g) for g in diagnoser.groups_],
         "group_rule": GROUP_RULE,
+        "group_threshold": float(diagnoser.group_threshold),
         "undetectable": list(diagnoser.undetectable_),
         "detection_rates": {k: float(v) for k, v in diagnoser.detection_rates_.items()},
         "expected": expected,

@@ -158,7 +158,14 @@ def render_report(report: Mapping[str, Any]) -> str:
         "## Isolability groups",
         "",
         "Faults whose signatures the sensors cannot tell apart at this operating point are named "
-        "together:",
+        "together"
+        + (
+            " (one of them named as the other in at least "
+            f"{format_percent(report['group_threshold'], 0)} of its detected seconds on "
+            "held-out transplants):"
+            if report.get("group_rule") == "naming" and "group_threshold" in report
+            else ":"
+        ),
         "",
         *[f"- {g}" for g in groups],
         "",
