@@ -7,7 +7,9 @@ screening factors of a few rows from the fresh factor (:func:`screened_rows`).
 :func:`~bayes_fdi.rvm.sbl.posterior_bounds.posterior_context`, the stored precision
 ``Hb = (G + G^T) / 2 + diag(abar)``, its squared Frobenius norm, the gradient ``Hb mu - Phi^T t``
 and the sums ``|Hb| |mu|`` behind its rounding bound, in one pass over ``G`` instead of some
-fifteen ``M x M`` torch operations. Every value there is either a bound or feeds one (the
+fifteen ``M x M`` torch operations; :func:`posterior_bounds_terms` adds the rest of that
+function's bounds (the same formulas), so that a posterior costs one compiled call. Every value
+there is either a bound or feeds one (the
 carried screening factors), so its rounding changes the cost of a decision, never the decision.
 
 :func:`reestimate_factor` moves the factor ``L`` of the scaled precision
@@ -25,7 +27,8 @@ downdate (1 for an update): the caller refactorises afresh when the accumulated 
 :func:`~bayes_fdi.rvm.sbl.screening.gaussian_screened_Q` for the handful of rows the lazy
 verification tightens each iteration (the same formulas and bounds, with exact stored products),
 without their twenty-odd torch calls; values and bounds only decide which candidates get an
-exact look.
+exact look. :func:`refresh_rows` wraps it for the carried factors: it scales its inputs, gathers
+the rows and writes their carried values back in place, in one call.
 
 Explicit loops, no BLAS, no fast-math: the results do not depend on a BLAS library or a thread
 count. Imports numba and numpy only. Written by hand: no maintained library carries these
@@ -39,7 +42,13 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["posterior_terms", "reestimate_factor", "screened_rows"]
+__all__ = [
+    "posterior_bounds_terms",
+    "posterior_terms",
+    "reestimate_factor",
+    "refresh_rows",
+    "screened_rows",
+]
 
 
 @njit(cache=True, error_model="numpy")
@@ -66,6 +75,53 @@ def posterior_terms(G, abar, mu, Phi_t, Hb, gradient, abs_product):  # pragma: n
         gradient[i] = g - Phi_t[i]
         abs_product[i] = a + abs(Phi_t[i])
     return fro
+
+
+@njit(cache=True, error_model="numpy")
+def _gamma(n):  # pragma: no cover - compiled
+    """Higham's ``gamma_n`` in float64 (``u = 2^-53``), as ``rounding.rounding_gamma``."""
+    nu = n * (2.0**-53)
+    return nu / (1.0 - nu)
+
+
+@njit(cache=True, error_model="numpy")
+def posterior_bounds_terms(G, alpha, beta, mu, Phi_t, eps):  # pragma: no cover - compiled
+    """Everything :func:`~bayes_fdi.rvm.sbl.posterior_bounds.posterior_context` computes, in one
+    call: ``(ok, abar, root, Hb, gradient, gradient_error, bounds)`` with ``bounds`` holding
+    ``(Hb_F, lam, psd, mu_error_w)``; ``ok`` False where ``||Hb||_F^2`` is not finite or above
+    ``1e300`` (the caller then takes the torch operations)."""
+    M = alpha.shape[0]
+    abar = np.empty(M)
+    root = np.empty(M)
+    for i in range(M):
+        abar[i] = alpha[i] / beta
+        root[i] = math.sqrt(abar[i])
+    Hb = np.empty((M, M))
+    gradient = np.empty(M)
+    gradient_error = np.empty(M)
+    bounds = np.empty(4)
+    fro_sq = posterior_terms(G, abar, mu, Phi_t, Hb, gradient, gradient_error)
+    if not (math.isfinite(fro_sq) and fro_sq <= 1e300):
+        return False, abar, root, Hb, gradient, gradient_error, bounds
+    bounds[0] = math.sqrt(fro_sq) * (1.0 + _gamma(M * M + 1))
+    a_min = abar.min()
+    low = a_min - M * eps
+    gamma2 = _gamma(2)
+    if low > 0:
+        bounds[1] = (1.0 / low) * (1.0 + gamma2)
+        bounds[2] = (a_min / low) * (1.0 + gamma2)
+    else:
+        bounds[1] = bounds[2] = math.inf
+    g_sq = 0.0
+    e_sq = 0.0
+    gamma_m3 = _gamma(M + 3)
+    for i in range(M):
+        gradient_error[i] *= gamma_m3  # was |Hb| |mu| + |Phi_t|
+        g_sq += (gradient[i] / root[i]) ** 2
+        e_sq += (gradient_error[i] / root[i]) ** 2
+    g_w = math.sqrt(g_sq) + math.sqrt(e_sq)
+    bounds[3] = math.sqrt(bounds[2]) * g_w * (1.0 + _gamma(M + 2))
+    return True, abar, root, Hb, gradient, gradient_error, bounds
 
 
 @njit(cache=True, error_model="numpy")
@@ -170,3 +226,70 @@ def screened_rows(L, d, H, Z, diag, bt, mu, grad, scalars, C, out):  # pragma: n
             + gM3 * (abs(bt[r]) + z_norm * mu_norm + c_norm * g_norm)
         )
         out[r, 4] = r_norm
+
+
+@njit(cache=True, error_model="numpy")
+def refresh_rows(
+    L, d, Hb, beta, Z, rows, unit, Bt_t, mu, gradient, gradient_error, lam, min_root, carried
+):  # pragma: no cover - compiled
+    """The carried factors of ``rows`` afresh from the fresh factor, as
+    :meth:`~bayes_fdi.rvm.sbl.tracked_factors.TrackedFactors.refresh` of a few rows: the inputs
+    of :func:`screened_rows` in ``beta`` units (``H = beta Hb``, the stored products ``Z``
+    (``(P, M)``) of ``rows``, ``beta b^T b``, ``beta b^T t``, ``beta`` times the gradient and
+    its error bound), then the rows of ``carried = (C, S, Q, S_err, Q_err, rho, nu)`` written in
+    place (``S, Q`` and bounds divided by ``beta``, ``rho = ||r|| / (beta min_root)``,
+    ``nu = ||c|| (1 + gamma_{M+1})``)."""
+    C_all, S, Q, S_err, Q_err, rho, nu = carried
+    M = d.shape[0]
+    K = rows.shape[0]
+    H = np.empty((M, M))
+    fro = 0.0
+    for i in range(M):
+        for j in range(M):
+            h = beta * Hb[i, j]
+            H[i, j] = h
+            fro += h * h
+    grad = np.empty(M)
+    g_sq = 0.0
+    e_sq = 0.0
+    m_sq = 0.0
+    for i in range(M):
+        grad[i] = beta * gradient[i]
+        e = beta * gradient_error[i]
+        g_sq += grad[i] * grad[i]
+        e_sq += e * e
+        m_sq += mu[i] * mu[i]
+    scalars = np.empty(8)
+    scalars[0] = lam / beta
+    scalars[1] = math.sqrt(fro) * (1.0 + _gamma(M * M))
+    scalars[2] = math.sqrt(g_sq)
+    scalars[3] = math.sqrt(e_sq)
+    scalars[4] = math.sqrt(m_sq)
+    scalars[5] = _gamma(M + 2)
+    scalars[6] = _gamma(2 * M + 4)
+    scalars[7] = _gamma(M + 3)
+    Zr = np.empty((K, M))
+    diag = np.empty(K)
+    bt = np.empty(K)
+    for r in range(K):
+        i = rows[r]
+        for j in range(M):
+            Zr[r, j] = beta * Z[i, j]
+        diag[r] = beta * unit[i]
+        bt[r] = beta * Bt_t[i]
+    C = np.empty((K, M))
+    out = np.empty((K, 5))
+    screened_rows(L, d, H, Zr, diag, bt, mu, grad, scalars, C, out)
+    grow = 1.0 + _gamma(M + 1)
+    for r in range(K):
+        i = rows[r]
+        c_sq = 0.0
+        for j in range(M):
+            C_all[i, j] = C[r, j]
+            c_sq += C[r, j] * C[r, j]
+        S[i] = out[r, 0] / beta
+        S_err[i] = out[r, 1] / beta
+        Q[i] = out[r, 2] / beta
+        Q_err[i] = out[r, 3] / beta
+        rho[i] = out[r, 4] / (beta * min_root)
+        nu[i] = math.sqrt(c_sq) * grow

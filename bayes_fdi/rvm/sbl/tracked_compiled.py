@@ -1,0 +1,83 @@
+"""The compiled paths of the carried screening factors' fresh rows and noise updates
+(:func:`refresh_rows_compiled`, :func:`rescale_compiled`), on CPU float64.
+
+:class:`~bayes_fdi.rvm.sbl.tracked_factors.TrackedFactors` calls these instead of its torch
+operations where its arrays are CPU float64 (``COMPILED_UPDATE``): each prepares the scalars of
+the same formulas and hands the carried arrays ``(C, S, Q, S_err, Q_err, rho, nu)`` to one
+numba kernel (:func:`~bayes_fdi.rvm.sbl.factor_kernels.refresh_rows`,
+:func:`~bayes_fdi.rvm.sbl.tracked_kernels.rescale_rows`) that updates them in place. The
+carried values only decide which candidates get an exact look, so this changes the cost of a
+decision, never the decision.
+
+Imports :mod:`~bayes_fdi.rvm.sbl.posterior_bounds` and the two kernel modules. Written by hand:
+no maintained library carries these bounds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from bayes_fdi.rvm.sbl.factor_kernels import refresh_rows
+from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
+from bayes_fdi.rvm.sbl.tracked_kernels import rescale_rows
+
+__all__ = ["refresh_rows_compiled", "rescale_compiled"]
+
+
+def refresh_rows_compiled(
+    post: Posterior,
+    Z: Tensor,
+    rows: Tensor,
+    unit: Tensor,
+    Bt_t: Tensor,
+    carried: tuple[Tensor, ...],
+) -> None:
+    """``TrackedFactors.refresh`` of a few ``rows`` (stored products ``Z``, ``(P, M)``; stored
+    ``b^T b`` and ``b^T t`` of every row) in one compiled call: the same formulas and bounds
+    as the torch screening with ``z_error = 0``."""
+    L, d = post.fac
+    vectors = (post.mu, post.gradient, post.gradient_error)
+    refresh_rows(
+        L.numpy(),
+        d.numpy(),
+        post.Hb.numpy(),
+        float(post.beta),
+        Z.numpy(),
+        rows.numpy(),
+        unit.numpy(),
+        Bt_t.numpy(),
+        *(v.numpy() for v in vectors),
+        float(post.lam),
+        float(post.root.min()),
+        tuple(v.numpy() for v in carried),
+    )
+
+
+def rescale_compiled(
+    old: Posterior, new: Posterior, Delta: Tensor, gM: float, carried: tuple[Tensor, ...]
+) -> None:
+    """``TrackedFactors.rescale`` (a noise update moving ``abar`` by ``Delta``) in one pass
+    over the rows: the same formulas; ``gM`` is the rounding factor ``gamma_{M+4}``."""
+    sq = Delta * Delta
+    weights = torch.stack([Delta, sq / old.abar, sq / new.abar])
+    d_mu = Delta * new.mu
+    m_cross = float((Delta.abs() / (old.root * new.root)).max())
+    dmu = float(torch.linalg.vector_norm(d_mu / old.root)) + m_cross * new.mu_error_w
+    scalars = [
+        math.sqrt(old.psd),
+        float((Delta.abs() / old.abar).max()),
+        new.psd,
+        m_cross,
+        gM,
+        float(Delta.abs().max()),
+        dmu,
+        new.mu_error_w,
+        float(torch.linalg.vector_norm(d_mu)),
+        float((old.root / new.root).max()),
+    ]
+    C, *vectors = (v.numpy() for v in carried)
+    rescale_rows(C, Delta.numel(), weights.numpy(), d_mu.numpy(), *vectors, np.array(scalars))
