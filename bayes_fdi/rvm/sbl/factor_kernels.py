@@ -30,6 +30,11 @@ without their twenty-odd torch calls; values and bounds only decide which candid
 exact look. :func:`refresh_rows` wraps it for the carried factors: it scales its inputs, gathers
 the rows and writes their carried values back in place, in one call.
 
+:func:`reestimate_terms` is the unit solve ``s = Hb^-1 e_k`` and the scalars of a re-estimation
+update of the carried factors
+(:meth:`~bayes_fdi.rvm.sbl.tracked_factors.TrackedFactors.reestimate`; the same formulas and
+bounds), in one call.
+
 Explicit loops, no BLAS, no fast-math: the results do not depend on a BLAS library or a thread
 count. Imports numba and numpy only. Written by hand: no maintained library carries these
 bounds or updates this scaled factor.
@@ -46,6 +51,7 @@ __all__ = [
     "posterior_bounds_terms",
     "posterior_terms",
     "reestimate_factor",
+    "reestimate_terms",
     "refresh_rows",
     "screened_rows",
 ]
@@ -293,3 +299,82 @@ def refresh_rows(
         Q_err[i] = out[r, 3] / beta
         rho[i] = out[r, 4] / (beta * min_root)
         nu[i] = math.sqrt(c_sq) * grow
+
+
+@njit(cache=True, error_model="numpy")
+def reestimate_terms(
+    L, d, Hb, root, mu, beta, k, a_old, a_new, Hb_F, psd, mu_error_w
+):  # pragma: no cover - compiled
+    """``(ok, s, scalars)`` of a re-estimation of position ``k`` from ``abar_k = a_old`` to
+    ``a_new``: the computed ``s = Hb^-1 e_k`` (a solve with the factor ``L, d`` of
+    ``beta Hb``) and the scalars ``(kappa, kappa_err, kap, e_scale, mk, e_mu, g4, grow, rho_ack,
+    rho_aa, rho_nu, s_norm, g2)`` of :func:`~bayes_fdi.rvm.sbl.tracked_kernels.reestimate_rows`,
+    by the formulas of
+    :meth:`~bayes_fdi.rvm.sbl.tracked_factors.TrackedFactors.reestimate`; ``ok`` False where
+    the update's denominator is not bounded away from 0 (the caller then refreshes)."""
+    M = d.shape[0]
+    y = np.zeros(M)
+    for i in range(k, M):  # forward substitution from d_k e_k (zero above k)
+        v = d[i] if i == k else 0.0
+        for j in range(k, i):
+            v -= L[i, j] * y[j]
+        y[i] = v / L[i, i]
+    for i in range(M - 1, -1, -1):
+        v = y[i]
+        for j in range(i + 1, M):
+            v -= L[j, i] * y[j]
+        y[i] = v / L[i, i]
+    s = np.empty(M)
+    for i in range(M):
+        s[i] = beta * (d[i] * y[i])
+    gM2 = _gamma(M + 2)
+    g2 = _gamma(2)
+    g4 = _gamma(4)
+    root_new_k = math.sqrt(a_new)
+    s_sq = 0.0
+    sA_sq = 0.0
+    rw_sq = 0.0
+    rn_sq = 0.0
+    min_root = math.inf
+    min_root_new = math.inf
+    for i in range(M):
+        h = 0.0
+        for j in range(M):
+            h += Hb[i, j] * s[j]
+        r = h - 1.0 if i == k else h
+        s_sq += s[i] * s[i]
+        sA_sq += (s[i] * root[i]) ** 2
+        rw_sq += (r / root[i]) ** 2
+        rn = root_new_k if i == k else root[i]
+        rn_sq += (r / rn) ** 2
+        min_root = min(min_root, root[i])
+        min_root_new = min(min_root_new, rn)
+    s_norm = math.sqrt(s_sq)
+    r_round = gM2 * (Hb_F * s_norm + 1.0)
+    r_w = math.sqrt(rw_sq) * (1.0 + gM2) + r_round / min_root
+    sA = math.sqrt(sA_sq) * (1.0 + gM2) + math.sqrt(psd) * r_w
+    es_k = math.sqrt(psd) * sA * r_w  # |s_k - exact s_k|
+    delta = a_new - a_old
+    den = 1.0 + delta * s[k]
+    den_lo = den - abs(delta) * es_k
+    scalars = np.empty(13)
+    if not (den_lo > 0 and math.isfinite(den) and math.isfinite(sA)):
+        return False, s, scalars
+    kappa = delta / den
+    kappa_err = delta * delta * es_k / (den * den_lo) + g4 * abs(kappa)
+    r_new = math.sqrt(rn_sq) + r_round / min_root_new
+    to_w = (Hb_F + abs(delta)) / min_root_new  # ||A'^-1/2 H_'|| bound
+    scalars[0] = kappa
+    scalars[1] = kappa_err
+    scalars[2] = abs(kappa) + kappa_err
+    scalars[3] = sA * math.sqrt(psd)  # e = e_scale rho bounds |c_k - exact c_k|
+    scalars[4] = mu[k]
+    scalars[5] = sA * mu_error_w  # bound of |mu_k - exact mu_k|
+    scalars[6] = g4
+    scalars[7] = max(1.0, math.sqrt(a_old / a_new))
+    scalars[8] = g4 * abs(delta) / root_new_k + abs(kappa) * r_new
+    scalars[9] = (2.0**-53) * to_w * s_norm
+    scalars[10] = to_w * g2
+    scalars[11] = s_norm
+    scalars[12] = g2
+    return True, s, scalars

@@ -1,11 +1,14 @@
-"""The compiled paths of the carried screening factors' fresh rows and noise updates
-(:func:`refresh_rows_compiled`, :func:`rescale_compiled`), on CPU float64.
+"""The compiled paths of the carried screening factors' re-estimation and noise updates and
+fresh rows (:func:`reestimate_compiled`, :func:`rescale_compiled`,
+:func:`refresh_rows_compiled`), on CPU float64.
 
 :class:`~bayes_fdi.rvm.sbl.tracked_factors.TrackedFactors` calls these instead of its torch
 operations where its arrays are CPU float64 (``COMPILED_UPDATE``): each prepares the scalars of
 the same formulas and hands the carried arrays ``(C, S, Q, S_err, Q_err, rho, nu)`` to one
 numba kernel (:func:`~bayes_fdi.rvm.sbl.factor_kernels.refresh_rows`,
-:func:`~bayes_fdi.rvm.sbl.tracked_kernels.rescale_rows`) that updates them in place. The
+:func:`~bayes_fdi.rvm.sbl.tracked_kernels.rescale_rows`; a re-estimation two:
+:func:`~bayes_fdi.rvm.sbl.factor_kernels.reestimate_terms` and
+:func:`~bayes_fdi.rvm.sbl.tracked_kernels.reestimate_rows`) that updates them in place. The
 carried values only decide which candidates get an exact look, so this changes the cost of a
 decision, never the decision.
 
@@ -21,11 +24,11 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl.factor_kernels import refresh_rows
+from bayes_fdi.rvm.sbl.factor_kernels import reestimate_terms, refresh_rows
 from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
-from bayes_fdi.rvm.sbl.tracked_kernels import rescale_rows
+from bayes_fdi.rvm.sbl.tracked_kernels import reestimate_rows, rescale_rows
 
-__all__ = ["refresh_rows_compiled", "rescale_compiled"]
+__all__ = ["reestimate_compiled", "refresh_rows_compiled", "rescale_compiled"]
 
 
 def refresh_rows_compiled(
@@ -81,3 +84,32 @@ def rescale_compiled(
     ]
     C, *vectors = (v.numpy() for v in carried)
     rescale_rows(C, Delta.numel(), weights.numpy(), d_mu.numpy(), *vectors, np.array(scalars))
+
+
+def reestimate_compiled(
+    post: Posterior, k: int, new_alpha: float, carried: tuple[Tensor, ...]
+) -> bool:
+    """``TrackedFactors.reestimate`` (position ``k`` moves to ``alpha_k = new_alpha``) in two
+    compiled calls: the unit solve and the update's scalars, then one pass over the rows.
+    Returns False, changing nothing, where the update's denominator is not bounded away from 0
+    (the caller then refreshes)."""
+    L, d = post.fac
+    ok, s, scalars = reestimate_terms(
+        L.numpy(),
+        d.numpy(),
+        post.Hb.numpy(),
+        post.root.numpy(),
+        post.mu.numpy(),
+        float(post.beta),
+        k,
+        float(post.abar[k]),
+        new_alpha / post.beta,
+        float(post.Hb_F),
+        float(post.psd),
+        float(post.mu_error_w),
+    )
+    if not ok:
+        return False
+    C, *vectors = (v.numpy() for v in carried)
+    reestimate_rows(C, post.abar.numel(), k, s, *vectors, scalars)
+    return True

@@ -39,15 +39,17 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 from torch import Tensor
 
 from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
 from bayes_fdi.rvm.sbl.rounding import rounding_gamma, thin_matmul
 from bayes_fdi.rvm.sbl.screening import gaussian_screened_Q, screened_factors
-from bayes_fdi.rvm.sbl.tracked_compiled import refresh_rows_compiled, rescale_compiled
-from bayes_fdi.rvm.sbl.tracked_kernels import reestimate_rows
+from bayes_fdi.rvm.sbl.tracked_compiled import (
+    reestimate_compiled,
+    refresh_rows_compiled,
+    rescale_compiled,
+)
 
 __all__ = ["COMPILED_UPDATE", "TrackedFactors"]
 
@@ -242,6 +244,10 @@ class TrackedFactors:
         """
         if self.needs_refresh:  # the next full refresh rewrites everything
             return
+        if self._compiled:  # the scalars, then one pass over the rows (tracked_compiled)
+            if not reestimate_compiled(post, k, new_alpha, self.carried()):
+                self.needs_refresh = True
+            return
         M = post.abar.numel()
         dt = self.dtype
         g2, g4 = rounding_gamma(2, dt), rounding_gamma(4, dt)
@@ -273,14 +279,6 @@ class TrackedFactors:
         rho_ack = g4 * abs(delta) / math.sqrt(a_new) + abs(kappa) * r_new
         rho_aa = self._u * to_w * s_norm
         rho_nu = to_w * g2
-        if self._compiled:  # one pass over the rows (tracked_kernels)
-            scalars = [kappa, kappa_err, kap, e_scale, mk, e_mu, g4, grow]
-            scalars += [rho_ack, rho_aa, rho_nu, s_norm, g2]
-            arrays = (self.S, self.Q, self.S_err, self.Q_err, self.rho, self.nu)
-            reestimate_rows(
-                self.C.numpy(), M, k, s.numpy(), *(v.numpy() for v in arrays), np.array(scalars)
-            )
-            return
         ck = self.C[:, k].clone()
         ack = ck.abs()
         e = e_scale * self.rho
