@@ -289,14 +289,30 @@ def _carried_run(seed: int, compiled: bool, monkeypatch) -> tuple[list[np.ndarra
         assert not tr.needs_refresh
         tr.prepare(post(act, alpha, beta), K[:, torch.tensor(act)])
         states.append(np.concatenate([v.numpy().ravel() for v in tr.carried()]))
+    _check_screen_is_the_torch_screen(tr, post(act, alpha, beta), P, unit, Bt_t, monkeypatch)
     return states, bounds
+
+
+def _check_screen_is_the_torch_screen(tr, post, P, unit, Bt_t, monkeypatch):
+    """The screening of the carried values (all rows, a few rows), by the compiled pass and
+    by the torch operations on the same carried values: the same numbers, bit for bit."""
+    compiled = tracked_module.COMPILED_UPDATE
+    monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", not compiled)
+    other = tracked_module.TrackedFactors(P, 8, unit, Bt_t)
+    for name in ("C", "S", "Q", "S_err", "Q_err", "rho", "nu"):
+        setattr(other, name, getattr(tr, name).clone())
+    for rows in (None, torch.tensor([3, 0, 7])):
+        got = tr.screen(post, 1e-13, 1e-12, rows)
+        want = other.screen(post, 1e-13, 1e-12, rows)
+        assert all(torch.equal(a, b) for a, b in zip(got, want, strict=True))
+    monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", compiled)
 
 
 @pytest.mark.parametrize("seed", range(3))
 def test_compiled_carried_updates_follow_the_torch_updates(seed, monkeypatch):
     """The compiled noise update, re-estimation update, few-row refresh and posterior bounds
     against the torch operations they replace (the same formulas: equal up to the rounding of
-    their sums)."""
+    their sums); the compiled screening gives the torch screening's numbers exactly."""
     got_states, got_bounds = _carried_run(seed, True, monkeypatch)
     want_states, want_bounds = _carried_run(seed, False, monkeypatch)
     for got, want in zip(got_states + got_bounds, want_states + want_bounds, strict=True):

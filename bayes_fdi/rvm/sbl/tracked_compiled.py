@@ -1,6 +1,6 @@
-"""The compiled paths of the carried screening factors' re-estimation and noise updates and
-fresh rows (:func:`reestimate_compiled`, :func:`rescale_compiled`,
-:func:`refresh_rows_compiled`), on CPU float64.
+"""The compiled paths of the carried screening factors' re-estimation and noise updates, fresh
+rows and screening (:func:`reestimate_compiled`, :func:`rescale_compiled`,
+:func:`refresh_rows_compiled`, :func:`screen_compiled`), on CPU float64.
 
 :class:`~bayes_fdi.rvm.sbl.tracked_factors.TrackedFactors` calls these instead of its torch
 operations where its arrays are CPU float64 (``COMPILED_UPDATE``): each prepares the scalars of
@@ -26,9 +26,14 @@ from torch import Tensor
 
 from bayes_fdi.rvm.sbl.factor_kernels import reestimate_terms, refresh_rows
 from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
-from bayes_fdi.rvm.sbl.tracked_kernels import reestimate_rows, rescale_rows
+from bayes_fdi.rvm.sbl.tracked_kernels import reestimate_rows, rescale_rows, screen_rows
 
-__all__ = ["reestimate_compiled", "refresh_rows_compiled", "rescale_compiled"]
+__all__ = [
+    "reestimate_compiled",
+    "refresh_rows_compiled",
+    "rescale_compiled",
+    "screen_compiled",
+]
 
 
 def refresh_rows_compiled(
@@ -113,3 +118,32 @@ def reestimate_compiled(
     C, *vectors = (v.numpy() for v in carried)
     reestimate_rows(C, post.abar.numel(), k, s, *vectors, scalars)
     return True
+
+
+_NO_ROWS = np.empty(0, dtype=np.int64)
+
+
+def screen_compiled(
+    post: Posterior,
+    eps: float,
+    bt_error: float,
+    rows: Tensor | None,
+    carried: tuple[Tensor, ...],
+) -> tuple[Tensor, ...]:
+    """``TrackedFactors.screen`` of ``rows`` (all when None) in one pass
+    (:func:`~bayes_fdi.rvm.sbl.tracked_kernels.screen_rows`): the same operations in the same
+    order, so the same numbers."""
+    M = post.abar.numel()
+    ze = math.sqrt(M) * eps
+    mu_error = math.sqrt(post.lam) * post.mu_error_w
+    mu1 = float(post.mu.abs().sum()) + math.sqrt(M) * mu_error
+    scalars = [math.sqrt(post.lam * post.psd), 2.0 * ze, post.lam * ze * ze, eps * mu1, bt_error]
+    _, *vectors = (v.numpy() for v in carried)
+    out = screen_rows(
+        *vectors,
+        _NO_ROWS if rows is None else rows.numpy(),
+        rows is None,
+        float(post.beta),
+        np.array(scalars, dtype=np.float64),
+    )
+    return tuple(torch.from_numpy(out[j]) for j in range(4))

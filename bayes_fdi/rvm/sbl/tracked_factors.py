@@ -49,6 +49,7 @@ from bayes_fdi.rvm.sbl.tracked_compiled import (
     reestimate_compiled,
     refresh_rows_compiled,
     rescale_compiled,
+    screen_compiled,
 )
 
 __all__ = ["COMPILED_UPDATE", "TrackedFactors"]
@@ -201,6 +202,8 @@ class TrackedFactors:
         ``z``) by ``eps ||mu||_1``; ``b^T t`` is within ``bt_error``.
         """
         beta, M = post.beta, post.abar.numel()
+        if self._compiled:  # one pass (tracked_compiled), the same numbers
+            return screen_compiled(post, eps, bt_error, rows, self.carried())
         S, Q, S_err, Q_err, rho, nu = (
             (v if rows is None else v[rows])
             for v in (self.S, self.Q, self.S_err, self.Q_err, self.rho, self.nu)

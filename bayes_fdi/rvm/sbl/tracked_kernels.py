@@ -1,6 +1,6 @@
 r"""Compiled (numba) kernels of the carried screening factors' most frequent updates, a
-re-estimation (:func:`reestimate_rows`) and a noise update (:func:`rescale_rows`), on CPU
-float64 arrays.
+re-estimation (:func:`reestimate_rows`) and a noise update (:func:`rescale_rows`), and of
+their screening (:func:`screen_rows`), on CPU float64 arrays.
 
 :meth:`bayes_fdi.rvm.sbl.tracked_factors.TrackedFactors.reestimate` moves every candidate's
 carried ``S_, Q_``, their bounds ``e_S, e_Q``, the residual bound ``rho``, the coefficient norm
@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
-__all__ = ["reestimate_rows", "rescale_rows"]
+__all__ = ["reestimate_rows", "rescale_rows", "screen_rows"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -128,3 +129,30 @@ def rescale_rows(
         Q[i] += dQ
         Q_err[i] += r * dmu + dc_new * mu_error_w + gM * (nu[i] * d_mu_norm + abs(Q[i]))
         rho[i] = rho[i] * grow + dc_new
+
+
+@njit(cache=True, error_model="numpy")
+def screen_rows(
+    S, Q, S_err, Q_err, rho, nu, rows, all_rows, beta, scalars
+):  # pragma: no cover - compiled
+    """``beta S, beta Q`` and their bounds of ``rows`` (every row when ``all_rows``) as
+    :meth:`~bayes_fdi.rvm.sbl.tracked_factors.TrackedFactors.screen` computes them, in one pass
+    (the same operations in the same order: the same numbers). ``scalars`` holds ``(root_lp,
+    two_ze, lam_ze_ze, eps_mu1, bt_error)``: ``S_err + two_ze (nu + root_lp rho) + lam_ze_ze``
+    and ``Q_err + eps_mu1 + bt_error``."""
+    root_lp, two_ze, lam_ze_ze, eps_mu1, bt_error = (
+        scalars[0],
+        scalars[1],
+        scalars[2],
+        scalars[3],
+        scalars[4],
+    )
+    K = S.shape[0] if all_rows else rows.shape[0]
+    out = np.empty((4, K))
+    for r in range(K):
+        i = r if all_rows else rows[r]
+        out[0, r] = beta * S[i]
+        out[1, r] = beta * Q[i]
+        out[2, r] = beta * (S_err[i] + two_ze * (nu[i] + root_lp * rho[i]) + lam_ze_ze)
+        out[3, r] = beta * (Q_err[i] + eps_mu1 + bt_error)
+    return out
