@@ -209,6 +209,7 @@ def fit_online_diagnoser(
     progress: bool = True,
     training: str = "dgen",
     calibration: str = "temperature",
+    physics_inputs: bool = False,
     **params: Any,
 ) -> Any:
     """Simulate the online training campaigns and fit an `OnlineDiagnoser` on them.
@@ -227,6 +228,10 @@ def fit_online_diagnoser(
     calibration
         ``"temperature"`` (default) or ``"top-label-long"`` (`CALIBRATIONS`): the recalibration
         of the group probabilities and the calibration runs it is fitted on.
+    physics_inputs
+        The normal models' physics inputs (the command's lag and the valve law:
+        `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``physics_inputs``);
+        ignored where ``params`` gives the normal models.
     **params
         Parameters of `OnlineDiagnoser` (default: ``calibrator=TemperatureScaler()``, or
         ``TopLabelScaler()`` with ``calibration="top-label-long"``;
@@ -257,12 +262,15 @@ def fit_online_diagnoser(
         params.setdefault("max_signatures_per_fault", 25)
         params.setdefault(
             "normal_models",
-            DynamicNormalModels(max_train_samples=800, calibration_folds=3,
-                                std_coverage=coverage, random_state=seed),
+            DynamicNormalModels(max_train_samples=800, calibration_folds=3, std_coverage=coverage,
+                                physics_inputs=physics_inputs, random_state=seed),
         )  # fmt: skip
-    elif mix:
+    elif mix or physics_inputs:
         params.setdefault(
-            "normal_models", DynamicNormalModels(std_coverage=coverage, random_state=seed)
+            "normal_models",
+            DynamicNormalModels(
+                std_coverage=coverage, physics_inputs=physics_inputs, random_state=seed
+            ),
         )
     diag = OnlineDiagnoser(**params).fit(
         data["normal"][0] if len(data["normal"]) == 1 else data["normal"],
