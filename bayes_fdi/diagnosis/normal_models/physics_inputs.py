@@ -16,10 +16,9 @@ the actuator does instead:
 - **The valve law** (`valve_law_flow`): the flow of the nominal valve (DABLib's
   equal-percentage characteristic ``Kv exp(-c x)``, linear above 97.5 % closing, the water's
   density at T1 and P1; no choking, bypass closed) at the predicted position, in the F sensor's
-  normalised units (nominal sensor calibration): ``F_law = 100 Kv Kvr(x) sqrt(dP rho) / F_range``
-  with ``dP`` in MPa... written out in `valve_law_flow`. The flow model takes ``F_law`` as a
-  third input beside ``(X_hat, s)``: the law's shape and its temperature term come from the
-  model rather than from the RBF's interpolation.
+  normalised units with the nominal sensor calibration (`valve_law_at`). The flow model takes
+  it as a third input beside ``(X_hat, s)``: the law's shape and its temperature term come from
+  the model rather than from the RBF's interpolation.
 
 The per-sample functions are compiled (`lag_step`, `valve_law_at`): the normal models' compiled
 kernel calls them every second, and the vectorised functions here call the same ones, so fit
@@ -41,10 +40,12 @@ from bayes_fdi.actuator.valve import compiled_water_density
 __all__ = [
     "LAG_GRID",
     "fit_command_lag",
+    "flow_model_inputs",
     "lag_rates",
     "lag_step",
     "lagged_command",
     "nominal_valve_law",
+    "stream_channels",
     "valve_law_at",
     "valve_law_flow",
 ]
