@@ -209,7 +209,7 @@ def fit_online_diagnoser(
     progress: bool = True,
     training: str = "dgen",
     calibration: str = "temperature",
-    physics_inputs: bool = False,
+    physics_inputs: tuple[str, ...] = (),
     **params: Any,
 ) -> Any:
     """Simulate the online training campaigns and fit an `OnlineDiagnoser` on them.
@@ -229,7 +229,7 @@ def fit_online_diagnoser(
         ``"temperature"`` (default) or ``"top-label-long"`` (`CALIBRATIONS`): the recalibration
         of the group probabilities and the calibration runs it is fitted on.
     physics_inputs
-        The normal models' physics inputs (the command's lag and the valve law:
+        The normal models' physics inputs (``"command_lag"``, ``"valve_law"``:
         `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``physics_inputs``);
         ignored where ``params`` gives the normal models.
     **params

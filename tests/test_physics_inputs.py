@@ -74,7 +74,7 @@ def physics_models():
     normal = simulate(step_ramp_inputs(4, 300, seed=21), seed=21)
     nm = DynamicNormalModels(
         x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
-        calibration_folds=2, physics_inputs=True, random_state=0,
+        calibration_folds=2, physics_inputs=("command_lag", "valve_law"), random_state=0,
     ).fit(normal)  # fmt: skip
     return nm, normal
 
@@ -132,5 +132,6 @@ def test_physics_inputs_are_opt_in():
     # without the valve law, T1 is not needed
     out, _ = nm.run({c: normal[c].values[0] for c in ("CV", "P1", "P2")})
     assert np.isfinite(out[:, 0]).all()
-    with pytest.raises(ValueError, match="physics_inputs"):
-        DynamicNormalModels(physics_inputs="yes").fit(normal)
+    for bad in (True, "valve_law", ("valve_law", "valve_law"), ("lag",)):
+        with pytest.raises(ValueError, match="physics_inputs"):
+            DynamicNormalModels(physics_inputs=bad).fit(normal)

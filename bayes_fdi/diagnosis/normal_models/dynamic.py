@@ -71,6 +71,7 @@ from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     predict_seconds,
 )
 from bayes_fdi.diagnosis.normal_models.physics_inputs import (
+    check_physics_inputs,
     fit_command_lag,
     flow_model_inputs,
     lag_rates,
@@ -122,10 +123,10 @@ class DynamicNormalModels(BaseEstimator):
         out-of-fold ``z``; a level ``q``: the central interval of level ``q`` covers a share ``q``
         of them (robust to a heavy tail, e.g. the seconds after command steps).
     physics_inputs
-        False (default): the inputs above. True: the position model also takes the command
-        through the actuator's two-rate lag (time constants fitted on the runs:
-        ``command_lag_``), the flow model the valve law's flow at ``X_hat`` (and T1 is needed);
-        see `bayes_fdi.diagnosis.normal_models.physics_inputs`.
+        ``()`` (default): the inputs above. With ``"command_lag"`` the position model also takes
+        the command through the actuator's two-rate lag (time constants fitted on the runs:
+        ``command_lag_``); with ``"valve_law"`` the flow model the valve law's flow at
+        ``X_hat`` (T1 is then needed); see `bayes_fdi.diagnosis.normal_models.physics_inputs`.
     random_state
         Seed of the subsets and folds.
 
@@ -168,7 +169,7 @@ class DynamicNormalModels(BaseEstimator):
         calibration_folds: int = 4,
         calibration_bins: int = 5,
         std_coverage: float | None = None,
-        physics_inputs: bool = False,
+        physics_inputs: tuple[str, ...] = (),
         random_state: int | None = 0,
     ) -> None:
         self.n_differences = n_differences
@@ -203,8 +204,7 @@ class DynamicNormalModels(BaseEstimator):
                 raise ValueError(f"{name} must be a non-empty grid of positive widths")
         if self.std_coverage is not None and not 0 < self.std_coverage < 1:
             raise ValueError(f"std_coverage must be None or in (0, 1), got {self.std_coverage!r}")
-        if not isinstance(self.physics_inputs, bool | np.bool_):
-            raise ValueError(f"physics_inputs must be True or False, got {self.physics_inputs!r}")
+        check_physics_inputs(self.physics_inputs)
 
     def fit(self, normal_runs: xr.Dataset) -> DynamicNormalModels:
         """Fit both models on fault-free runs and calibrate their predictive stds.
@@ -230,13 +230,14 @@ class DynamicNormalModels(BaseEstimator):
                 for c in ("CV", "X", "F", "T1", "P1")}  # fmt: skip
         y = {c: grid[c].ravel() for c in OUTPUT_CHANNELS}
         self.command_lag_ = None
-        if self.physics_inputs:
+        if "command_lag" in self.physics_inputs:  # checked by _check_params
             self.command_lag_ = fit_command_lag(grid["CV"], grid["X"], U[:, :, 1])
             lag = lagged_command(grid["CV"], *self.command_lag_)
             U = np.concatenate([U, lag[:, :, None]], axis=-1)
         U = U.reshape(n_runs * n_times, -1)
         s = U[:, 1]
-        law = nominal_valve_law() if self.physics_inputs else np.empty(0)
+        law = nominal_valve_law() if "valve_law" in self.physics_inputs else np.empty(0)
+        self.valve_law_ = law
         t1, p1 = grid["T1"].ravel(), grid["P1"].ravel()
 
         def flow_inputs(xh: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -391,7 +392,7 @@ class DynamicNormalModels(BaseEstimator):
             low=SENSOR_RANGE[0],
             high=SENSOR_RANGE[1],
             command_lag=lag_rates(*self.command_lag_) if self.command_lag_ else np.empty(0),
-            valve_law=nominal_valve_law() if self.command_lag_ else np.empty(0),
+            valve_law=np.ascontiguousarray(self.valve_law_),
         )
 
     def _check_fitted(self) -> None:
@@ -405,7 +406,7 @@ class DynamicNormalModels(BaseEstimator):
             columns = (self.params_.input_mean.size - 2 - lagged) // 2 + lagged
         else:
             self._check_params()
-            columns = int(self.n_differences) + bool(self.physics_inputs)
+            columns = int(self.n_differences) + ("command_lag" in self.physics_inputs)
         return NormalModelsState(np.zeros((2, columns)), np.zeros(1, dtype=np.int64))
 
     def check_state(self, state: Any) -> None:
@@ -479,8 +480,9 @@ class DynamicNormalModels(BaseEstimator):
         files of format <= 8 have no physics inputs."""
         data = {k: v for k, v in data.items() if k not in ("_lean", "_kernel_args")}
         data.setdefault("std_coverage", None)  # before the parameter: maximum likelihood
-        data.setdefault("physics_inputs", False)  # format <= 8
+        data.setdefault("physics_inputs", ())  # format <= 8
         data.setdefault("command_lag_", None)
+        data.setdefault("valve_law_", np.empty(0))
         if "regressors_" in data and "training_size_" not in data:  # before the curve
             data["training_size_"] = TrainingSize(int(data.get("n_train_samples_", 0)), None)
         if "regressors_" in data and "params_" not in data:

@@ -39,6 +39,8 @@ from bayes_fdi.actuator.valve import compiled_water_density
 
 __all__ = [
     "LAG_GRID",
+    "PHYSICS_INPUTS",
+    "check_physics_inputs",
     "fit_command_lag",
     "flow_model_inputs",
     "lag_rates",
@@ -50,8 +52,27 @@ __all__ = [
     "valve_law_flow",
 ]
 
+#: The physics inputs a model may take: the command through the actuator's lag (position model)
+#: and the valve law's flow at the predicted position (flow model).
+PHYSICS_INPUTS: tuple[str, ...] = ("command_lag", "valve_law")
 #: Time constants (s) tried for each direction by `fit_command_lag`.
 LAG_GRID: tuple[float, ...] = tuple(float(v) for v in np.round(np.geomspace(0.25, 32.0, 22), 3))
+
+
+def check_physics_inputs(physics_inputs: Any) -> tuple[str, ...]:
+    """``physics_inputs`` as a tuple of distinct names of `PHYSICS_INPUTS` (ValueError else)."""
+    if isinstance(physics_inputs, str | bytes) or not isinstance(physics_inputs, tuple | list):
+        raise ValueError(
+            f"physics_inputs must be a tuple of names among {PHYSICS_INPUTS}, e.g. "
+            f"('command_lag', 'valve_law'); got {physics_inputs!r}"
+        )
+    names = tuple(physics_inputs)
+    unknown = [n for n in names if n not in PHYSICS_INPUTS]
+    if unknown or len(set(names)) != len(names):
+        raise ValueError(
+            f"physics_inputs must hold distinct names among {PHYSICS_INPUTS}; got {names!r}"
+        )
+    return names
 
 
 def lag_rates(tau_rise: float, tau_fall: float) -> np.ndarray:
