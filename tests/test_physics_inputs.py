@@ -135,3 +135,36 @@ def test_physics_inputs_are_opt_in():
     for bad in (True, "valve_law", ("valve_law", "valve_law"), ("lag",)):
         with pytest.raises(ValueError, match="physics_inputs"):
             DynamicNormalModels(physics_inputs=bad).fit(normal)
+
+
+def test_online_diagnoser_with_physics_inputs_streams_the_same_per_second(tmp_path):
+    from bayes_fdi.actuator import Fault
+    from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+
+    normal = simulate(step_ramp_inputs(4, 400, seed=41), seed=41)
+    specs = [Fault(f, s, 100.0) for f in ("f1", "f18") for s in (0.5, 0.8, 1.0)]
+    faults = simulate(step_ramp_inputs(len(specs), 300, seed=42), specs, seed=42)
+    models = DynamicNormalModels(
+        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
+        calibration_folds=2, physics_inputs=("command_lag", "valve_law"), random_state=0,
+    )  # fmt: skip
+    diag = OnlineDiagnoser(models, calibrator=TemperatureScaler(), max_signatures_per_fault=20)
+    diag.fit(normal, faults)
+    rec = simulate(step_ramp_inputs(1, 200, seed=43), [Fault("f18", 0.8, 100.0)], seed=43)
+    stream = diag.run(rec)
+    last, records = [], []
+    for t in range(rec.sizes["time"]):
+        sample = {c: float(rec[c].values[0, t]) for c in ("CV", "P1", "P2", "T1", "X", "F")}
+        records.append(diag.update({**sample, "time": float(t)}))
+        last.append(dict(diag.last_))
+    np.testing.assert_array_equal([r.x_vmv for r in records], stream["VMV_X"].values[0])
+    np.testing.assert_array_equal([r.f_vmv for r in records], stream["VMV_F"].values[0])
+    assert stream["DD"].values[0, 110:].any()  # f18 is seen
+    for key in ("DD", "stat_X", "stat_F"):
+        np.testing.assert_array_equal([d[key] for d in last], stream[key].values[0], err_msg=key)
+    path = tmp_path / "diagnoser.model"
+    diag.save(path)
+    again = OnlineDiagnoser.load(path).run(rec)
+    np.testing.assert_array_equal(again["F_hat"].values, stream["F_hat"].values)
+    np.testing.assert_array_equal(again["DD"].values, stream["DD"].values)
