@@ -14,6 +14,10 @@ declared in ``sim/``, in one of two trainings (`TRAININGS`):
   fitted by coverage (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels`
   ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all.
 
+Either training may give its normal models physics inputs (``physics_inputs``: the command through
+the actuator's lag, the valve law; `bayes_fdi.diagnosis.normal_models.physics_inputs`); off by
+default.
+
 Each fault file is simulated with three seeds for the training, validation (isolability groups)
 and calibration (group probabilities) sets (`simulation_plan`). Every seed is below 1000, apart
 from the benchmark's evaluation seeds (>= 10 000, see ``bayes_fdi.benchmark.scenarios``). The
