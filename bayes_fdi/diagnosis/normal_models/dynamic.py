@@ -481,8 +481,8 @@ class DynamicNormalModels(BaseEstimator):
         data = {k: v for k, v in data.items() if k not in ("_lean", "_kernel_args")}
         data.setdefault("std_coverage", None)  # before the parameter: maximum likelihood
         data.setdefault("physics_inputs", ())  # format <= 8
-        data.setdefault("command_lag_", None)
-        data.setdefault("valve_law_", np.empty(0))
+        if "regressors_" in data:  # fitted without physics inputs
+            data.update({"command_lag_": None, "valve_law_": np.empty(0)} | data)
         if "regressors_" in data and "training_size_" not in data:  # before the curve
             data["training_size_"] = TrainingSize(int(data.get("n_train_samples_", 0)), None)
         if "regressors_" in data and "params_" not in data:
