@@ -2,7 +2,8 @@
 the best action on exact factors (ties, deletions, the gain floor), the rounds of the lazy
 verification (against the public bound functions), the carried factors' re-estimation update
 (against its formulas in NumPy), the posterior's terms and the re-estimation update of the
-Cholesky factor (against NumPy and a fresh factorisation), and whole fits, which take the same
+Cholesky factor (against NumPy and a fresh factorisation), the carried factors' compiled
+updates and posterior bounds (against the torch operations), and whole fits, which take the same
 actions either way."""
 
 from __future__ import annotations
@@ -241,3 +242,78 @@ def test_screened_rows_match_the_torch_screening(seed):
     np.testing.assert_allclose(C, scr.C.numpy(), rtol=1e-10, atol=1e-13)
     for col, want in enumerate((scr.S, scr.S_error, Q, Q_err, scr.residual)):
         np.testing.assert_allclose(out[:, col], want.numpy(), rtol=1e-6, atol=1e-14)
+
+
+def _carried_run(seed: int, compiled: bool, monkeypatch) -> tuple[list[np.ndarray], ...]:
+    """A stored float64 problem and a seeded sequence of updates of the carried factors
+    (re-estimations, noise updates, additions with their stale rows refreshed), by the compiled
+    paths or by the torch operations; the carried arrays and the posterior bounds after each."""
+    monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", compiled)
+    monkeypatch.setattr(posterior_module, "COMPILED_POSTERIOR", compiled)
+    rng = np.random.default_rng(seed)
+    N, P = 90, 40
+    B = rng.standard_normal((N, P))
+    B /= np.linalg.norm(B, axis=0)
+    K = torch.from_numpy(B.T @ B)
+    K = 0.5 * (K + K.T)
+    Bt_t = torch.from_numpy(B.T @ rng.standard_normal(N))
+    unit = K.diagonal().clone()
+
+    def post(act, alpha, beta):
+        a = torch.tensor(act)
+        al = torch.tensor(alpha, dtype=torch.float64)
+        fac = factor_precision(al, beta * K[a][:, a])
+        mu = beta * fac.solve(Bt_t[a])
+        return posterior_module.posterior_context(fac, al, beta, K[a][:, a], mu, Bt_t[a], 1e-15)
+
+    act, alpha, beta = [0, 1, 2], [1.0, 2.0, 0.5], 30.0
+    tr = tracked_module.TrackedFactors(P, 8, unit, Bt_t)
+    tr.prepare(post(act, alpha, beta), K[:, torch.tensor(act)])
+    states, bounds = [], []
+    for step in range(12):
+        p = post(act, alpha, beta)
+        bounds.append(np.array([p.Hb_F, p.lam, p.psd, p.mu_error_w]))
+        bounds.append(torch.cat([p.abar, p.root, p.gradient, p.gradient_error]).numpy())
+        if step % 4 == 3:  # an addition; its row is refreshed (compiled: refresh_rows)
+            i = 3 + step // 4
+            tr.add(p, K[torch.tensor(act), i], float(K[i, i]), 0.7, K[:, i], float(Bt_t[i]))
+            act, alpha = [*act, i], [*alpha, 0.7]
+            tr.stale.add(i)
+        elif step % 4 == 1:  # a noise update (compiled: rescale_rows)
+            beta *= 1.002
+            tr.rescale(p, post(act, alpha, beta), 1.0)
+        else:  # a re-estimation (compiled: reestimate_terms, reestimate_rows)
+            k = step % len(act)
+            alpha[k] *= float(np.exp(rng.normal(0.0, 1.0)))
+            tr.reestimate(p, k, alpha[k])
+        assert not tr.needs_refresh
+        tr.prepare(post(act, alpha, beta), K[:, torch.tensor(act)])
+        states.append(np.concatenate([v.numpy().ravel() for v in tr.carried()]))
+    _check_screen_is_the_torch_screen(tr, post(act, alpha, beta), P, unit, Bt_t, monkeypatch)
+    return states, bounds
+
+
+def _check_screen_is_the_torch_screen(tr, post, P, unit, Bt_t, monkeypatch):
+    """The screening of the carried values (all rows, a few rows), by the compiled pass and
+    by the torch operations on the same carried values: the same numbers, bit for bit."""
+    compiled = tracked_module.COMPILED_UPDATE
+    monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", not compiled)
+    other = tracked_module.TrackedFactors(P, 8, unit, Bt_t)
+    for name in ("C", "S", "Q", "S_err", "Q_err", "rho", "nu"):
+        setattr(other, name, getattr(tr, name).clone())
+    for rows in (None, torch.tensor([3, 0, 7])):
+        got = tr.screen(post, 1e-13, 1e-12, rows)
+        want = other.screen(post, 1e-13, 1e-12, rows)
+        assert all(torch.equal(a, b) for a, b in zip(got, want, strict=True))
+    monkeypatch.setattr(tracked_module, "COMPILED_UPDATE", compiled)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_compiled_carried_updates_follow_the_torch_updates(seed, monkeypatch):
+    """The compiled noise update, re-estimation update, few-row refresh and posterior bounds
+    against the torch operations they replace (the same formulas: equal up to the rounding of
+    their sums); the compiled screening gives the torch screening's numbers exactly."""
+    got_states, got_bounds = _carried_run(seed, True, monkeypatch)
+    want_states, want_bounds = _carried_run(seed, False, monkeypatch)
+    for got, want in zip(got_states + got_bounds, want_states + want_bounds, strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)

@@ -38,12 +38,13 @@ LAYERS: dict[str, int] = {
     "verification": 1,
     "alignment": 2,
     "posterior_bounds": 1,
-    "tracked_factors": 2,
+    "tracked_compiled": 2,
+    "tracked_factors": 3,
     "laplace": 1,
-    "gaussian": 3,
+    "gaussian": 4,
     "bernoulli": 3,
     "reestimation": 3,
-    "polish": 4,
+    "polish": 5,
 }
 
 

@@ -25,6 +25,7 @@ from bayes_fdi.actuator import NOMINAL, ActuatorParameters
 from bayes_fdi.rvm.threads import limit_fit_threads
 from bayes_fdi.twin.checks import TwinCheck, predictive_check
 from bayes_fdi.twin.fixed_order import cholesky, matvec
+from bayes_fdi.twin.flow_start import flow_law_start
 from bayes_fdi.twin.inference import inference_data
 from bayes_fdi.twin.laplace import fit_laplace, importance_check
 from bayes_fdi.twin.likelihood import ar1_paths
@@ -71,6 +72,10 @@ class ActuatorTwin(BaseEstimator):
         Levenberg-Marquardt steps and the convergence tolerance (nats) of the mode search.
     integrator, hold, warmup
         As in `bayes_fdi.actuator.simulate`.
+    flow_law_start
+        Search the mode also from the flow law fitted to the recorded flow
+        (`bayes_fdi.twin.flow_start.flow_law_start`) besides the priors' medians, and keep the
+        mode of higher posterior density (the search is local; this doubles its cost).
     random_state
         Seed of the posterior and prior draws (the fit itself is deterministic).
     """
@@ -91,6 +96,7 @@ class ActuatorTwin(BaseEstimator):
         integrator: str = "fast",
         hold: str = "linear",
         warmup: int = 30,
+        flow_law_start: bool = True,
         random_state: int = 0,
     ) -> None:
         self.priors = priors
@@ -106,6 +112,7 @@ class ActuatorTwin(BaseEstimator):
         self.integrator = integrator
         self.hold = hold
         self.warmup = warmup
+        self.flow_law_start = flow_law_start
         self.random_state = random_state
 
     # ------------------------------------------------------------------ fitting
@@ -120,6 +127,8 @@ class ActuatorTwin(BaseEstimator):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
                 raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+        if not isinstance(self.flow_law_start, bool | np.bool_):
+            raise ValueError(f"flow_law_start must be True or False, got {self.flow_law_start!r}")
         if self.n_draws < 20:
             raise ValueError(f"n_draws must be at least 20, got {self.n_draws}")
         if not 0.0 < float(self.fd_fraction) < 0.1:
@@ -157,8 +166,18 @@ class ActuatorTwin(BaseEstimator):
             simulator, tuple(priors.values()), self.noise_prior,
             torch.as_tensor(windows.observed), torch.as_tensor(windows.mask), steps,
         )  # fmt: skip
-        start = _start(problem, windows)
-        laplace = fit_laplace(problem, start, max_iter=int(self.max_iter), tol=float(self.tol))
+        starts = {"prior medians": _start(problem, windows)}
+        flow_law = flow_law_start(windows, self.base, priors) if self.flow_law_start else None
+        if flow_law is not None:
+            starts["flow law"] = _start(problem, windows, flow_law)
+        fits = {
+            name: fit_laplace(problem, start, max_iter=int(self.max_iter), tol=float(self.tol))
+            for name, start in starts.items()
+        }
+        # the higher log density; on a tie the priors' medians (the first start)
+        self.start_ = max(fits, key=lambda name: fits[name].log_joint)
+        self.start_log_joints_ = {name: float(fit.log_joint) for name, fit in fits.items()}
+        laplace = fits[self.start_]
         rng = np.random.default_rng([int(self.random_state), STREAM_FIT])
         check = importance_check(problem, laplace, int(self.n_draws), rng)
         self.names_ = names
@@ -174,6 +193,7 @@ class ActuatorTwin(BaseEstimator):
         self.inference_data_ = inference_data(problem, windows, laplace, check, rng)
         self.fit_seconds_ = time.perf_counter() - t_start
         self.inference_data_.attrs["fit_seconds"] = self.fit_seconds_
+        self.inference_data_.attrs["mode_start"] = self.start_
         return self
 
     def _check_fitted(self) -> None:
@@ -258,9 +278,15 @@ def _noise(latent: np.ndarray, n_parameters: int) -> tuple[np.ndarray, np.ndarra
     return sigma, phi
 
 
-def _start(problem: TwinProblem, windows) -> np.ndarray:
-    """Start of the mode search: the priors' medians; the AR(1) model of their residual."""
+def _start(problem: TwinProblem, windows, values: Mapping[str, float] | None = None) -> np.ndarray:
+    """A start of the mode search: the priors' medians, with the physical ``values`` given
+    replacing theirs; the noise parameters of the AR(1) model of the residual there."""
     z = problem.prior_loc().numpy()
+    names = list(problem.simulator.names)
+    for name, value in (values or {}).items():
+        prior = problem.priors[names.index(name)]
+        q = min(max((float(value) - prior.low) / (prior.high - prior.low), 1e-9), 1.0 - 1e-9)
+        z[names.index(name)] = np.log(q / (1.0 - q))
     theta = problem.physical(torch.as_tensor(z)).numpy()
     residual = windows.observed - problem.simulator.outputs(theta[None])[0]
     log_sigma, atanh_phi = [], []

@@ -37,7 +37,8 @@ The modules, bottom up (each imports only modules above it in this list):
 the decision rules, of the carried factors' re-estimation update and of the posterior's terms and
 factor update, used on the CPU in float64);
 ``residual_factors``, ``screening``; ``verification``; ``alignment``;
-``posterior_bounds``, ``tracked_factors``; ``laplace``; ``gaussian``, ``bernoulli``;
+``posterior_bounds``; ``tracked_compiled`` (the carried factors' compiled paths);
+``tracked_factors``; ``laplace``; ``gaussian``, ``bernoulli``;
 ``reestimation``; ``polish``.
 """
 

@@ -18,7 +18,7 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl.factor_kernels import posterior_terms
+from bayes_fdi.rvm.sbl.factor_kernels import posterior_bounds_terms, posterior_terms
 from bayes_fdi.rvm.sbl.precision_factor import PrecisionFactor
 from bayes_fdi.rvm.sbl.rounding import rounding_gamma
 
@@ -73,6 +73,9 @@ def posterior_context(
     ``lambda_max(Hb^-1) <= 1 / (min abar - M eps)``. Where that is not positive, every bound
     is infinite and the carried factors are refreshed each iteration.
     """
+    compiled = _compiled_context(fac, alpha, beta, G, mu, Phi_t, eps)
+    if compiled is not None:
+        return compiled
     M = alpha.numel()
     dt = alpha.dtype
     abar = alpha / beta
@@ -123,3 +126,33 @@ def _compiled_terms(
     if not math.isfinite(fro_sq) or fro_sq > 1e300:
         return None
     return Hb, math.sqrt(fro_sq), gradient, abs_product
+
+
+def _compiled_context(
+    fac: PrecisionFactor,
+    alpha: Tensor,
+    beta: float,
+    G: Tensor,
+    mu: Tensor,
+    Phi_t: Tensor,
+    eps: float,
+) -> Posterior | None:
+    """:func:`posterior_context` in one compiled call
+    (:func:`~bayes_fdi.rvm.sbl.factor_kernels.posterior_bounds_terms`, CPU float64,
+    :data:`COMPILED_POSTERIOR`); None where the torch operations apply."""
+    tensors = (G, alpha, mu, Phi_t)
+    if not COMPILED_POSTERIOR or any(
+        v.device.type != "cpu" or v.dtype != torch.float64 for v in tensors
+    ):
+        return None
+    arrays = [v.numpy() for v in tensors]
+    ok, *parts, bounds = posterior_bounds_terms(
+        arrays[0], arrays[1], float(beta), arrays[2], arrays[3], float(eps)
+    )
+    if not ok:
+        return None
+    abar, root, Hb, gradient, gradient_error = (torch.from_numpy(v) for v in parts)
+    Hb_F, lam, psd, mu_error_w = (float(b) for b in bounds)
+    return Posterior(
+        fac, beta, abar, root, Hb, Hb_F, lam, psd, mu, mu_error_w, gradient, gradient_error
+    )

@@ -39,15 +39,18 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 from torch import Tensor
 
-from bayes_fdi.rvm.sbl.factor_kernels import screened_rows
 from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
 from bayes_fdi.rvm.sbl.rounding import rounding_gamma, thin_matmul
 from bayes_fdi.rvm.sbl.screening import gaussian_screened_Q, screened_factors
-from bayes_fdi.rvm.sbl.tracked_kernels import reestimate_rows
+from bayes_fdi.rvm.sbl.tracked_compiled import (
+    reestimate_compiled,
+    refresh_rows_compiled,
+    rescale_compiled,
+    screen_compiled,
+)
 
 __all__ = ["COMPILED_UPDATE", "TrackedFactors"]
 
@@ -106,7 +109,7 @@ class TrackedFactors:
             and rows.numel() <= _COMPILED_ROWS
             and math.isfinite(post.lam)
         ):
-            self._refresh_compiled(post, Z, rows)
+            refresh_rows_compiled(post, Z, rows, self.unit, self.Bt_t, self.carried())
             return
         Zr = Z if rows is None else Z[rows]
         unit = self.unit if rows is None else self.unit[rows]
@@ -144,34 +147,10 @@ class TrackedFactors:
             self.Q[rows], self.Q_err[rows] = Q / beta, Q_err / beta
             self.rho[rows], self.nu[rows] = rho, nu
 
-    def _refresh_compiled(self, post: Posterior, Z: Tensor, rows: Tensor) -> None:
-        """:meth:`refresh` of a few ``rows`` by the compiled kernel
-        (:func:`~bayes_fdi.rvm.sbl.factor_kernels.screened_rows`): the same formulas and
-        bounds, ``z_error = 0``."""
-        M, beta, dt = Z.shape[1], post.beta, self.dtype
-        H = beta * post.Hb
-        gradient, gradient_error = beta * post.gradient, beta * post.gradient_error
-        scalars = [
-            post.lam / beta,
-            float(torch.linalg.matrix_norm(H)) * (1.0 + rounding_gamma(M * M, dt)),
-            float(torch.linalg.vector_norm(gradient)),
-            float(torch.linalg.vector_norm(gradient_error)),
-            float(torch.linalg.vector_norm(post.mu)),
-            rounding_gamma(M + 2, dt),
-            rounding_gamma(2 * M + 4, dt),
-            rounding_gamma(M + 3, dt),
-        ]
-        K = rows.numel()
-        C, out = Z.new_empty(K, M), Z.new_empty(K, 5)
-        Zr, unit, Bt_t = beta * Z[rows], beta * self.unit[rows], beta * self.Bt_t[rows]
-        L, d = post.fac
-        arrays = (L, d, H, Zr, unit, Bt_t, post.mu, gradient)
-        screened_rows(*(v.numpy() for v in arrays), np.array(scalars), C.numpy(), out.numpy())
-        self.C[rows, :M] = C
-        self.S[rows], self.S_err[rows] = out[:, 0] / beta, out[:, 1] / beta
-        self.Q[rows], self.Q_err[rows] = out[:, 2] / beta, out[:, 3] / beta
-        self.rho[rows] = out[:, 4] / (beta * float(post.root.min()))
-        self.nu[rows] = torch.linalg.vector_norm(C, dim=1) * (1.0 + rounding_gamma(M + 1, dt))
+    def carried(self) -> tuple[Tensor, ...]:
+        """``(C, S, Q, S_err, Q_err, rho, nu)``, the carried arrays (updated in place by the
+        compiled kernels)."""
+        return self.C, self.S, self.Q, self.S_err, self.Q_err, self.rho, self.nu
 
     @staticmethod
     def usable(post: Posterior) -> bool:
@@ -223,6 +202,8 @@ class TrackedFactors:
         ``z``) by ``eps ||mu||_1``; ``b^T t`` is within ``bt_error``.
         """
         beta, M = post.beta, post.abar.numel()
+        if self._compiled:  # one pass (tracked_compiled), the same numbers
+            return screen_compiled(post, eps, bt_error, rows, self.carried())
         S, Q, S_err, Q_err, rho, nu = (
             (v if rows is None else v[rows])
             for v in (self.S, self.Q, self.S_err, self.Q_err, self.rho, self.nu)
@@ -266,6 +247,10 @@ class TrackedFactors:
         """
         if self.needs_refresh:  # the next full refresh rewrites everything
             return
+        if self._compiled:  # the scalars, then one pass over the rows (tracked_compiled)
+            if not reestimate_compiled(post, k, new_alpha, self.carried()):
+                self.needs_refresh = True
+            return
         M = post.abar.numel()
         dt = self.dtype
         g2, g4 = rounding_gamma(2, dt), rounding_gamma(4, dt)
@@ -297,14 +282,6 @@ class TrackedFactors:
         rho_ack = g4 * abs(delta) / math.sqrt(a_new) + abs(kappa) * r_new
         rho_aa = self._u * to_w * s_norm
         rho_nu = to_w * g2
-        if self._compiled:  # one pass over the rows (tracked_kernels)
-            scalars = [kappa, kappa_err, kap, e_scale, mk, e_mu, g4, grow]
-            scalars += [rho_ack, rho_aa, rho_nu, s_norm, g2]
-            arrays = (self.S, self.Q, self.S_err, self.Q_err, self.rho, self.nu)
-            reestimate_rows(
-                self.C.numpy(), M, k, s.numpy(), *(v.numpy() for v in arrays), np.array(scalars)
-            )
-            return
         ck = self.C[:, k].clone()
         ack = ck.abs()
         e = e_scale * self.rho
@@ -480,6 +457,9 @@ class TrackedFactors:
             self.needs_refresh = True
             return
         gM = rounding_gamma(M + 4, dt)
+        if self._compiled:  # one pass over the rows (tracked_kernels)
+            rescale_compiled(old, new, Delta, gM, self.carried())
+            return
         Cm = self.C[:, :M]
         # one pass over C o C: dS = (C o C) Delta, ||A^-1/2 Delta c||^2, ||A'^-1/2 Delta c||^2
         sq = Delta * Delta
