@@ -14,6 +14,10 @@ declared in ``sim/``, in one of two trainings (`TRAININGS`):
   fitted by coverage (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels`
   ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all.
 
+Either training may give its normal models physics inputs (``physics_inputs``: the command through
+the actuator's lag, the valve law; `bayes_fdi.diagnosis.normal_models.physics_inputs`); off by
+default.
+
 Each fault file is simulated with three seeds for the training, validation (isolability groups)
 and calibration (group probabilities) sets (`simulation_plan`). Every seed is below 1000, apart
 from the benchmark's evaluation seeds (>= 10 000, see ``bayes_fdi.benchmark.scenarios``). The
@@ -209,6 +213,7 @@ def fit_online_diagnoser(
     progress: bool = True,
     training: str = "dgen",
     calibration: str = "temperature",
+    physics_inputs: tuple[str, ...] = (),
     **params: Any,
 ) -> Any:
     """Simulate the online training campaigns and fit an `OnlineDiagnoser` on them.
@@ -227,6 +232,10 @@ def fit_online_diagnoser(
     calibration
         ``"temperature"`` (default) or ``"top-label-long"`` (`CALIBRATIONS`): the recalibration
         of the group probabilities and the calibration runs it is fitted on.
+    physics_inputs
+        The normal models' physics inputs (``"command_lag"``, ``"valve_law"``:
+        `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``physics_inputs``);
+        ignored where ``params`` gives the normal models.
     **params
         Parameters of `OnlineDiagnoser` (default: ``calibrator=TemperatureScaler()``, or
         ``TopLabelScaler()`` with ``calibration="top-label-long"``;
@@ -257,12 +266,15 @@ def fit_online_diagnoser(
         params.setdefault("max_signatures_per_fault", 25)
         params.setdefault(
             "normal_models",
-            DynamicNormalModels(max_train_samples=800, calibration_folds=3,
-                                std_coverage=coverage, random_state=seed),
+            DynamicNormalModels(max_train_samples=800, calibration_folds=3, std_coverage=coverage,
+                                physics_inputs=physics_inputs, random_state=seed),
         )  # fmt: skip
-    elif mix:
+    elif mix or physics_inputs:
         params.setdefault(
-            "normal_models", DynamicNormalModels(std_coverage=coverage, random_state=seed)
+            "normal_models",
+            DynamicNormalModels(
+                std_coverage=coverage, physics_inputs=physics_inputs, random_state=seed
+            ),
         )
     diag = OnlineDiagnoser(**params).fit(
         data["normal"][0] if len(data["normal"]) == 1 else data["normal"],

@@ -1,7 +1,9 @@
 """The default online diagnoser on held-out runs of its own training excitation families.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/heldout_families.py \
-        [--model FILE | --small] [--runs 8] [--duration 900] [--fault-runs 1] [--seed 900]
+        [--model FILE | --small] [--training dgen|excitation-mix] \
+        [--physics-inputs command_lag,valve_law] [--f-widths 0.05,0.1,0.2] \
+        [--save FILE] [--runs 8] [--duration 900] [--fault-runs 1] [--seed 900]
 
 Fault-free part: ``--runs`` runs of ``--duration`` s per family (the DGen sines with run-to-run
 variation, and the three excitation families of `bayes_fdi.actuator.excitation`: sums of sines,
@@ -17,7 +19,9 @@ Fault part (``--fault-runs`` > 0): every fault f1..f19 at strength 1.0 from t = 
 median detection time, and the share of detected seconds whose diagnosed group holds the true
 fault (a group-level r_ti over the runs).
 
-Results go to stdout and ``benchmarks/out/heldout_families.json``.
+Without ``--model`` the script fits the diagnoser (`fit_online_diagnoser` with ``--training``
+and ``--physics-inputs``; ``--save``: write it to a model file, e.g. for the benchmark). Results
+go to stdout and ``benchmarks/out/heldout_families.json``.
 """
 
 from __future__ import annotations
@@ -65,6 +69,8 @@ def fault_free_figures(diagnoser, runs: xr.Dataset) -> dict[str, float]:
             stream[f"{y}_hat_std"].values[:, keep],
         )  # fmt: skip
         out[f"z_rms_{y}"] = float(np.sqrt(np.nanmean(z**2)))
+        r = runs[y].values[:, keep] - stream[f"{y}_hat"].values[:, keep]
+        out[f"r_rms_{y}"] = float(np.sqrt(np.nanmean(r**2)))
     dd = stream["DD"].values[:, keep]
     hours = dd.size / 3600.0
     edges = np.sum(dd[:, 1:] & ~dd[:, :-1]) + np.sum(dd[:, 0])
@@ -100,10 +106,27 @@ def fault_figures(diagnoser, runs: xr.Dataset, faults: list[str]) -> dict[str, f
     }
 
 
+def _normal_models(args: argparse.Namespace) -> dict:
+    """``normal_models=`` of the fit when ``--f-widths`` is given (the mix's other settings)."""
+    if not args.f_widths:
+        return {}
+    from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
+
+    physics = tuple(n for n in args.physics_inputs.split(",") if n)
+    return {"normal_models": DynamicNormalModels(
+        f_widths=tuple(float(w) for w in args.f_widths.split(",")), physics_inputs=physics,
+        std_coverage=0.9 if args.training != "dgen" else None, random_state=0,
+    )}  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", help="a model file of bayes-fdi fit (default: fit one)")
     parser.add_argument("--small", action="store_true", help="fit the small default model")
+    parser.add_argument("--training", default="dgen", help="training of the fitted diagnoser")
+    parser.add_argument("--physics-inputs", default="", help="comma-separated physics inputs")
+    parser.add_argument("--f-widths", default="", help="flow model's width grid (comma-separated)")
+    parser.add_argument("--save", help="write the fitted diagnoser to this model file")
     parser.add_argument("--runs", type=int, default=8)
     parser.add_argument("--duration", type=int, default=900)
     parser.add_argument("--fault-runs", type=int, default=1)
@@ -122,7 +145,18 @@ def main() -> None:
     else:
         from bayes_fdi.default_diagnoser import fit_online_diagnoser
 
-        diagnoser = fit_online_diagnoser(small=args.small, progress=False)
+        t_fit = time.process_time()
+        diagnoser = fit_online_diagnoser(
+            small=args.small, progress=False, training=args.training,
+            physics_inputs=tuple(n for n in args.physics_inputs.split(",") if n),
+            **_normal_models(args),
+        )  # fmt: skip
+        print(f"fitted in {time.process_time() - t_fit:.0f} CPU s; threshold "
+              f"{diagnoser.threshold_:.2f}, DGN0 {', '.join(diagnoser.undetectable_) or 'none'}; "
+              f"widths {diagnoser.normal_models_.widths_}, command lag "
+              f"{getattr(diagnoser.normal_models_, 'command_lag_', None)}", flush=True)  # fmt: skip
+        if args.save:
+            diagnoser.save(args.save)
     results: dict[str, dict[str, float]] = {}
     t0 = time.process_time()
     for k, family in enumerate(FAMILIES):

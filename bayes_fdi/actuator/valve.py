@@ -25,7 +25,7 @@ from bayes_fdi.actuator.parameters import (
     parameter_matrix,
 )
 
-__all__ = ["flow_rate", "vapour_pressure", "water_density"]
+__all__ = ["compiled_water_density", "flow_rate", "vapour_pressure", "water_density"]
 
 RC_P = np.array([0.0, 1.724, 3.448, 6.895, 13.79, 17.24, 20.69])  # MPa
 RC_V = np.array([0.94, 0.87, 0.84, 0.79, 0.75, 0.725, 0.685])
@@ -73,6 +73,11 @@ def _water_density(t, p):
     else:
         rho0 = 1000.0 - (t - 4.0) ** 2 * (t + 283.0) * 1000.0 / (503570.0 * (t + 67.2))
     return rho0 / (1.0 - interp_table(t, COMP_T, COMP_V) * p)
+
+
+#: `water_density` of one temperature [°C] and pressure [Pa] as a compiled function, for other
+#: compiled code (the normal models' valve law).
+compiled_water_density = _water_density
 
 
 @njit(cache=True, error_model="numpy")

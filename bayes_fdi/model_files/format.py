@@ -109,10 +109,12 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
-#: 9: a fault isolator records how its isolability groups were found (``group_rule``; older
-#: files found them by the pairwise rule); 8: the online diagnoser's input envelope judges a
-#: detection by the inputs before its estimated change point (``change_lookback``, its
-#: state's ring of input averages);
+#: 10: a fault isolator records how its isolability groups were found (``group_rule``; older
+#: files found them by the pairwise rule);
+#: 9: the dynamic normal models may take physics inputs (``physics_inputs``: the command's lag
+#: and the valve law, two more fields of their compiled predictor's parameters);
+#: 8: the online diagnoser's input envelope judges a detection by the inputs before its
+#: estimated change point (``change_lookback``, its state's ring of input averages);
 #: 7: commissioned diagnosers detect with the two-speed CUSUM (``TwoSpeedCUSUM`` and its state,
 #: which older readers do not know); 6: group probabilities may be recalibrated by a
 #: `~bayes_fdi.calibration.TopLabelScaler` (older files load with their temperature scaling);
@@ -120,7 +122,7 @@ FORMAT_NAME = "bayes_fdi.model"
 #: 4: the detection decision's hold (``hold``, the state's ``quiet`` count); 3: the online
 #: diagnoser's components own their states; 2: classes named by their stable registered names;
 #: 1 (bayes_fdi 0.1.0): classes named by ``module:QualName``.
-FORMAT_VERSION = 9
+FORMAT_VERSION = 10
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.

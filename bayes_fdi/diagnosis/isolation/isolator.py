@@ -212,7 +212,7 @@ class FaultIsolator:
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
-        """An isolator saved before format 9 found its groups by the pairwise rule."""
+        """An isolator saved before format 10 found its groups by the pairwise rule."""
         return {"group_rule": "pairwise", **data}
 
     def _make_classifier(self) -> Any:

@@ -12,7 +12,9 @@
   models (position from the command's dynamics, flow from the predicted position), an online
   component with ``update``/``run`` and its own state;
   `bayes_fdi.diagnosis.normal_models.dynamic_kernel` their inputs and compiled per-second
-  predictor; `bayes_fdi.diagnosis.normal_models.speed_factors` the calibration of their
+  predictor; `bayes_fdi.diagnosis.normal_models.physics_inputs` their opt-in physics inputs
+  (the command's lag, the valve law); `bayes_fdi.diagnosis.normal_models.residuals` their
+  standardised residuals; `bayes_fdi.diagnosis.normal_models.speed_factors` the calibration of their
   predictive standard deviations by command speed;
   `bayes_fdi.diagnosis.normal_models.training_size` the learning curve that chooses how many
   samples they are fitted on.
@@ -22,8 +24,8 @@
 - `bayes_fdi.diagnosis.normal_models.compiled`: the compiled one-sample predictor of a fitted
   RVR.
 
-May import `bayes_fdi.rvm`, `bayes_fdi.datasets`, `bayes_fdi.diagnosis.component_state` and the
-foundation.
+May import `bayes_fdi.rvm`, `bayes_fdi.datasets`, `bayes_fdi.diagnosis.component_state`, the
+foundation and (for the physics inputs' valve law) `bayes_fdi.actuator`.
 """
 
 from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels

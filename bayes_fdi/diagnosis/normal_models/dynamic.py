@@ -70,6 +70,20 @@ from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     predict_runs,
     predict_seconds,
 )
+from bayes_fdi.diagnosis.normal_models.physics_inputs import (
+    check_physics_inputs,
+    fit_command_lag,
+    flow_model_inputs,
+    lag_rates,
+    lagged_command,
+    nominal_valve_law,
+    stream_channels,
+)
+from bayes_fdi.diagnosis.normal_models.residuals import (
+    RAIL_TOL,
+    SENSOR_RANGE,
+    standardised_residuals,
+)
 from bayes_fdi.diagnosis.normal_models.speed_factors import cross_fit_folds, speed_bin_factors
 from bayes_fdi.diagnosis.normal_models.training_size import (
     TrainingSize,
@@ -78,32 +92,7 @@ from bayes_fdi.diagnosis.normal_models.training_size import (
     log_predictive_density,
 )
 
-__all__ = ["DynamicNormalModels", "standardised_residuals"]
-
-#: Output range of the sensors (DABLib clips every measurement to [0, 1]).
-SENSOR_RANGE = (0.0, 1.0)
-#: A measurement or prediction this close to a rail of `SENSOR_RANGE` is "at the rail".
-RAIL_TOL = 5e-3
-
-
-def standardised_residuals(y: Any, y_hat: Any, std: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals ``r = y - y_hat`` and ``z = r / std``, with ``z = 0`` where censored.
-
-    A sample is censored when the measurement and the prediction sit at the same rail of
-    `SENSOR_RANGE` (within `RAIL_TOL`): the clipped sensor cannot show a change there.
-    NaN stays NaN.
-    """
-    y = np.asarray(y, dtype=np.float64)
-    y_hat = np.asarray(y_hat, dtype=np.float64)
-    r = y - y_hat
-    with np.errstate(invalid="ignore", divide="ignore"):
-        z = r / np.asarray(std, dtype=np.float64)
-        lo, hi = SENSOR_RANGE
-        censored = ((y >= hi - RAIL_TOL) & (y_hat >= hi - RAIL_TOL)) | (
-            (y <= lo + RAIL_TOL) & (y_hat <= lo + RAIL_TOL)
-        )
-    z = np.where(censored & np.isfinite(z), 0.0, z)
-    return r, z
+__all__ = ["RAIL_TOL", "SENSOR_RANGE", "DynamicNormalModels", "standardised_residuals"]
 
 
 class DynamicNormalModels(BaseEstimator):
@@ -133,6 +122,11 @@ class DynamicNormalModels(BaseEstimator):
         None (default): each bin's std factor by maximum likelihood, ``sqrt(mean(z^2))`` of the
         out-of-fold ``z``; a level ``q``: the central interval of level ``q`` covers a share ``q``
         of them (robust to a heavy tail, e.g. the seconds after command steps).
+    physics_inputs
+        ``()`` (default): the inputs above. With ``"command_lag"`` the position model also takes
+        the command through the actuator's two-rate lag (time constants fitted on the runs:
+        ``command_lag_``); with ``"valve_law"`` the flow model the valve law's flow at
+        ``X_hat`` (T1 is then needed); see `bayes_fdi.diagnosis.normal_models.physics_inputs`.
     random_state
         Seed of the subsets and folds.
 
@@ -175,6 +169,7 @@ class DynamicNormalModels(BaseEstimator):
         calibration_folds: int = 4,
         calibration_bins: int = 5,
         std_coverage: float | None = None,
+        physics_inputs: tuple[str, ...] = (),
         random_state: int | None = 0,
     ) -> None:
         self.n_differences = n_differences
@@ -185,6 +180,7 @@ class DynamicNormalModels(BaseEstimator):
         self.calibration_folds = calibration_folds
         self.calibration_bins = calibration_bins
         self.std_coverage = std_coverage
+        self.physics_inputs = physics_inputs
         self.random_state = random_state
 
     # ---------------------------------------------------------------- fitting
@@ -208,6 +204,7 @@ class DynamicNormalModels(BaseEstimator):
                 raise ValueError(f"{name} must be a non-empty grid of positive widths")
         if self.std_coverage is not None and not 0 < self.std_coverage < 1:
             raise ValueError(f"std_coverage must be None or in (0, 1), got {self.std_coverage!r}")
+        check_physics_inputs(self.physics_inputs)
 
     def fit(self, normal_runs: xr.Dataset) -> DynamicNormalModels:
         """Fit both models on fault-free runs and calibrate their predictive stds.
@@ -228,13 +225,26 @@ class DynamicNormalModels(BaseEstimator):
         self.fit_seconds_: dict[str, float] = {}
         n_runs, n_times = normal_runs.sizes["run"], normal_runs.sizes["time"]
         D = int(self.n_differences)
-        U = dynamic_inputs(normal_runs, D).reshape(n_runs * n_times, -1)
-        y = {
-            c: np.asarray(normal_runs[c].transpose("run", "time").values, float).ravel()
-            for c in OUTPUT_CHANNELS
-        }
+        U = dynamic_inputs(normal_runs, D)
+        grid = {c: np.asarray(normal_runs[c].transpose("run", "time").values, float)
+                for c in ("CV", "X", "F", "T1", "P1")}  # fmt: skip
+        y = {c: grid[c].ravel() for c in OUTPUT_CHANNELS}
+        self.command_lag_ = None
+        if "command_lag" in self.physics_inputs:  # checked by _check_params
+            self.command_lag_ = fit_command_lag(grid["CV"], grid["X"], U[:, :, 1])
+            lag = lagged_command(grid["CV"], *self.command_lag_)
+            U = np.concatenate([U, lag[:, :, None]], axis=-1)
+        U = U.reshape(n_runs * n_times, -1)
         s = U[:, 1]
+        law = nominal_valve_law() if "valve_law" in self.physics_inputs else np.empty(0)
+        self.valve_law_ = law
+        t1, p1 = grid["T1"].ravel(), grid["P1"].ravel()
+
+        def flow_inputs(xh: np.ndarray, rows: np.ndarray) -> np.ndarray:
+            return flow_model_inputs(xh, s[rows], t1[rows], p1[rows], law)
+
         finite = np.isfinite(U).all(axis=1) & np.isfinite(y["X"]) & np.isfinite(y["F"])
+        finite &= np.isfinite(t1) | (law.size == 0)  # the valve law reads T1
         if finite.sum() < 4 * int(self.calibration_folds):
             raise ValueError(f"only {int(finite.sum())} complete fault-free samples")
         self.input_mean_ = U[finite].mean(axis=0)
@@ -248,7 +258,7 @@ class DynamicNormalModels(BaseEstimator):
             return np.sort(rng.choice(rows, size=size, replace=False)) if rows.size > size else rows
 
         t0 = time.perf_counter()
-        wx, wf = self._search_widths(Z, y, s, subset(idx, int(self.evidence_max_samples)))
+        wx, wf = self._search_widths(Z, y, subset(idx, int(self.evidence_max_samples)), flow_inputs)
         self.fit_seconds_["width_search"] = time.perf_counter() - t0
 
         def fit_pair(rows: np.ndarray) -> tuple[Any, Any]:
@@ -256,7 +266,7 @@ class DynamicNormalModels(BaseEstimator):
 
             mx = RVR(width=wx).fit(Z[rows], y["X"][rows])
             xh = np.clip(mx.predict(Z[rows]), *SENSOR_RANGE)
-            mf = RVR(width=wf).fit(np.column_stack([xh, s[rows]]), y["F"][rows])
+            mf = RVR(width=wf).fit(flow_inputs(xh, rows), y["F"][rows])
             return mx, mf
 
         t0 = time.perf_counter()
@@ -292,9 +302,7 @@ class DynamicNormalModels(BaseEstimator):
         self.training_size_ = choose_training_size(score, fit.size, n_all)
         return self.training_size_.rows
 
-    def _search_widths(
-        self, Z: np.ndarray, y: dict[str, np.ndarray], s: np.ndarray, rows: np.ndarray
-    ) -> tuple[float, float]:
+    def _search_widths(self, Z, y, rows, flow_inputs) -> tuple[float, float]:
         """The widths of largest evidence on the subsample ``rows`` (X first: the flow model's
         inputs need X_hat); fills ``log_evidence_`` and ``widths_``."""
         from bayes_fdi.rvm import RVR
@@ -305,7 +313,7 @@ class DynamicNormalModels(BaseEstimator):
             self.log_evidence_["X"][float(w)] = fitted.log_evidence_
         wx = max(self.log_evidence_["X"], key=self.log_evidence_["X"].get)
         x_ev = RVR(width=wx).fit(Z[rows], y["X"][rows])
-        V_ev = np.column_stack([np.clip(x_ev.predict(Z[rows]), *SENSOR_RANGE), s[rows]])
+        V_ev = flow_inputs(np.clip(x_ev.predict(Z[rows]), *SENSOR_RANGE), rows)
         for w in self.f_widths:
             fitted = RVR(width=float(w)).fit(V_ev, y["F"][rows])
             self.log_evidence_["F"][float(w)] = fitted.log_evidence_
@@ -383,6 +391,8 @@ class DynamicNormalModels(BaseEstimator):
             f_std_scale_all=float(scale_all[1]),
             low=SENSOR_RANGE[0],
             high=SENSOR_RANGE[1],
+            command_lag=lag_rates(*self.command_lag_) if self.command_lag_ else np.empty(0),
+            valve_law=np.ascontiguousarray(self.valve_law_),
         )
 
     def _check_fitted(self) -> None:
@@ -391,12 +401,13 @@ class DynamicNormalModels(BaseEstimator):
 
     def init_state(self) -> NormalModelsState:
         """A fresh stream state: no sample seen (the history of CV and ``s`` is undefined)."""
-        if hasattr(self, "params_"):  # the fitted kernel's number of increments
-            n_differences = (self.params_.input_mean.size - 2) // 2
+        if hasattr(self, "params_"):  # the fitted kernel's columns of history
+            lagged = self.params_.command_lag.size > 0
+            columns = (self.params_.input_mean.size - 2 - lagged) // 2 + lagged
         else:
             self._check_params()
-            n_differences = int(self.n_differences)
-        return NormalModelsState(np.zeros((2, n_differences)), np.zeros(1, dtype=np.int64))
+            columns = int(self.n_differences) + ("command_lag" in self.physics_inputs)
+        return NormalModelsState(np.zeros((2, columns)), np.zeros(1, dtype=np.int64))
 
     def check_state(self, state: Any) -> None:
         """Raise a `ValueError` naming the field unless ``state`` is a state of these models."""
@@ -410,8 +421,8 @@ class DynamicNormalModels(BaseEstimator):
         Parameters
         ----------
         channels
-            ``CV``, ``P1``, ``P2``: ``(n,)`` sequences (normalised; NaN = missing); other keys
-            are ignored.
+            ``CV``, ``P1``, ``P2`` (and ``T1`` with physics inputs): ``(n,)`` sequences
+            (normalised; NaN = missing); other keys are ignored.
         state
             The state after the preceding second (default: a fresh one); not changed.
 
@@ -424,15 +435,10 @@ class DynamicNormalModels(BaseEstimator):
             The state after the last second.
         """
         self._check_fitted()
-        cv, p1, p2 = (
-            np.ascontiguousarray(np.asarray(channels[c], dtype=np.float64))
-            for c in ("CV", "P1", "P2")
-        )
-        if cv.ndim != 1 or p1.shape != cv.shape or p2.shape != cv.shape:
-            raise ValueError("CV, P1 and P2 must be (n,) sequences of one length")
+        arrays = stream_channels(channels, self.params_.valve_law.size > 0, 1)
         state = working_state(self, state)
-        out = np.empty((cv.size, 5))
-        predict_seconds(cv, p1, p2, self.params_, state, out)
+        out = np.empty((arrays[0].size, 5))
+        predict_seconds(*arrays, self.params_, state, out)
         return out, state
 
     def run_stacked(
@@ -442,47 +448,41 @@ class DynamicNormalModels(BaseEstimator):
         states stacked along a leading run axis; returns ``(runs, n, 5)`` predictions and the
         stacked states after them (each run's equal to `run`'s)."""
         self._check_fitted()
-        cv, p1, p2 = (
-            np.ascontiguousarray(np.asarray(channels[c], dtype=np.float64))
-            for c in ("CV", "P1", "P2")
-        )
-        if cv.ndim != 2 or p1.shape != cv.shape or p2.shape != cv.shape:
-            raise ValueError("CV, P1 and P2 must be (runs, n) arrays of one shape")
-        check_stacked_state(state, self.init_state(), cv.shape[0], "normal models state")
+        arrays = stream_channels(channels, self.params_.valve_law.size > 0, 2)
+        check_stacked_state(state, self.init_state(), arrays[0].shape[0], "normal models state")
         state = writable_copy(state)
-        out = np.empty((*cv.shape, 5))
-        predict_runs(cv, p1, p2, self.params_, state, out)
+        out = np.empty((*arrays[0].shape, 5))
+        predict_runs(*arrays, self.params_, state, out)
         return out, state
 
     def update(
         self, sample: Mapping[str, Any], state: NormalModelsState | None = None
     ) -> tuple[np.ndarray, NormalModelsState]:
         """Predictions of one second (`run` on one sample): ``(5,)`` and the new state."""
-        one = {c: np.array([float(sample[c])]) for c in ("CV", "P1", "P2")}
+        one = {c: np.array([float(sample[c])]) for c in ("CV", "P1", "P2", "T1") if c in sample}
         out, state = self.run(one, state)
         return out[0], state
 
     def _stream_runs(self, runs: xr.Dataset, params: NormalModelsParams) -> np.ndarray:
         """``(n_runs, n_times, 5)`` predictions of every run from a fresh state."""
-        arrays = [
-            np.ascontiguousarray(runs[c].transpose("run", "time").values, dtype=np.float64)
-            for c in ("CV", "P1", "P2")
-        ]
-        n_runs, n_times = arrays[0].shape
-        out = np.empty((n_runs, n_times, 5))
-        for i in range(n_runs):
-            predict_seconds(
-                arrays[0][i], arrays[1][i], arrays[2][i], params, self.init_state(), out[i]
-            )
+        channels = {c: runs[c].transpose("run", "time").values for c in INPUT_CHANNELS if c in runs}
+        arrays = stream_channels(channels, params.valve_law.size > 0, 2)
+        out = np.empty((*arrays[0].shape, 5))
+        for i in range(out.shape[0]):
+            predict_seconds(*(a[i] for a in arrays), params, self.init_state(), out[i])
         return out
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
         """Saved attributes in today's layout: files of bayes_fdi 0.1.0 hold the compiled
         kernel's arguments as ``_lean`` and ``_kernel_args``; today they are ``params_``; files
-        of format <= 4 fitted the std factors by maximum likelihood (``std_coverage=None``)."""
+        of format <= 4 fitted the std factors by maximum likelihood (``std_coverage=None``);
+        files of format <= 8 have no physics inputs."""
         data = {k: v for k, v in data.items() if k not in ("_lean", "_kernel_args")}
         data.setdefault("std_coverage", None)  # before the parameter: maximum likelihood
+        data.setdefault("physics_inputs", ())  # format <= 8
+        if "regressors_" in data:  # fitted without physics inputs
+            data.update({"command_lag_": None, "valve_law_": np.empty(0)} | data)
         if "regressors_" in data and "training_size_" not in data:  # before the curve
             data["training_size_"] = TrainingSize(int(data.get("n_train_samples_", 0)), None)
         if "regressors_" in data and "params_" not in data:

@@ -9,7 +9,10 @@ the input standardisation, the two `~bayes_fdi.diagnosis.normal_models.compiled.
 regressions and the std factors per command-speed bin). Whole recordings and single seconds go
 through the same loop (`predict_runs` runs it over many runs at once), so they give the same
 numbers. `dynamic_inputs` is a vectorised reference
-of the inputs the loop builds, and the fit's.
+of the inputs the loop builds, and the fit's. With physics inputs
+(`bayes_fdi.diagnosis.normal_models.physics_inputs`) the loop also carries the command's lag
+(one more input of the position model) and evaluates the valve law at the predicted position (one
+more input of the flow model).
 
 Written by hand: no library compiles this per-sample chain of two RVM predictions.
 """
@@ -24,6 +27,7 @@ import xarray as xr
 from numba import njit
 
 from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR, rvr_predict
+from bayes_fdi.diagnosis.normal_models.physics_inputs import lag_step, valve_law_at
 
 __all__ = [
     "PREDICTION_COLUMNS",
@@ -75,7 +79,8 @@ def dynamic_inputs(runs: xr.Dataset, n_differences: int) -> np.ndarray:
 class NormalModelsState(NamedTuple):
     """The state of the dynamic normal models' predictor (one run)."""
 
-    #: ``(2, D)`` the last ``D`` values of CV (row 0) and ``s`` (row 1), newest first
+    #: ``(2, D)`` the last ``D`` values of CV (row 0) and ``s`` (row 1), newest first; with
+    #: physics inputs ``(2, D + 1)``, the last column holding the command lag's output (row 0)
     history: np.ndarray
     #: ``(1,)`` int64: 1 once a sample has been seen (before it, the history is undefined)
     seen: np.ndarray
@@ -95,19 +100,33 @@ class NormalModelsParams(NamedTuple):
     f_std_scale_all: float  #: std factor of F there
     low: float  #: lower rail of the predictions
     high: float  #: upper rail of the predictions
+    #: ``(2,)`` rates of the command lag (`~.physics_inputs.lag_rates`), or ``(0,)``: none
+    command_lag: np.ndarray = np.empty(0)
+    #: the valve law's constants (`~.physics_inputs.nominal_valve_law`), or ``(0,)``: none
+    valve_law: np.ndarray = np.empty(0)
+
+    @classmethod
+    def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
+        """Files of format <= 8 have no physics inputs."""
+        data.setdefault("command_lag", np.empty(0))
+        data.setdefault("valve_law", np.empty(0))
+        return data
 
 
 # one compiled loop over the seconds, clearer whole than cut into pieces
 @njit(cache=True, error_model="numpy")
-def predict_seconds(cv, p1, p2, params, state, out):  # pragma: no cover - compiled
+def predict_seconds(cv, p1, p2, t1, params, state, out):  # pragma: no cover - compiled
     """Predictions of one run's consecutive samples into ``out`` ``(n, 5)`` (columns
-    `PREDICTION_COLUMNS`); ``state`` (a `NormalModelsState`) is updated in place."""
+    `PREDICTION_COLUMNS`); ``state`` (a `NormalModelsState`) is updated in place. ``t1`` is
+    read by the valve law only."""
     hist = state.history
     n_seen = state.seen
-    n_d = hist.shape[1]
-    n_u = 2 + 2 * n_d
+    lagged = params.command_lag.size > 0
+    law = params.valve_law.size > 0
+    n_d = hist.shape[1] - (1 if lagged else 0)
+    n_u = 2 + 2 * n_d + (1 if lagged else 0)
     u = np.empty(n_u)
-    v = np.empty(2)
+    v = np.empty(3 if law else 2)
     phi_x = np.empty(params.x_model.weights.size)
     phi_f = np.empty(params.f_model.weights.size)
     edges = params.speed_edges
@@ -119,6 +138,9 @@ def predict_seconds(cv, p1, p2, params, state, out):  # pragma: no cover - compi
             for k in range(n_d):
                 hist[0, k] = c
                 hist[1, k] = s
+            if lagged:
+                hist[0, n_d] = c
+                hist[1, n_d] = 0.0
             n_seen[0] = 1
         # raw inputs: levels, then the increments of CV and of s
         u[0] = c
@@ -137,6 +159,11 @@ def predict_seconds(cv, p1, p2, params, state, out):  # pragma: no cover - compi
         if n_d > 0:
             hist[0, 0] = c
             hist[1, 0] = s
+        if lagged:  # the two-rate lag of the command; a NaN command leaves it where it was
+            if np.isfinite(c):
+                y = hist[0, n_d]
+                hist[0, n_d] = c if not np.isfinite(y) else lag_step(y, c, params.command_lag)
+            u[n_u - 1] = hist[0, n_d] if np.isfinite(c) else math.nan
         ok = True
         for j in range(u.size):
             if not np.isfinite(u[j]):
@@ -151,6 +178,8 @@ def predict_seconds(cv, p1, p2, params, state, out):  # pragma: no cover - compi
         xm = min(max(xm, params.low), params.high)
         v[0] = xm
         v[1] = s
+        if law:
+            v[2] = valve_law_at(xm, s, t1[t], p1[t], params.valve_law)
         fm, fv = rvr_predict(v, params.f_model, phi_f)
         fm = min(max(fm, params.low), params.high)
         if np.isfinite(speed):
@@ -170,9 +199,9 @@ def predict_seconds(cv, p1, p2, params, state, out):  # pragma: no cover - compi
 
 
 @njit(cache=True, error_model="numpy")
-def predict_runs(cv, p1, p2, params, state, out):  # pragma: no cover - compiled
+def predict_runs(cv, p1, p2, t1, params, state, out):  # pragma: no cover - compiled
     """`predict_seconds` of each run (row) of ``(runs, n)`` inputs into ``out``
     ``(runs, n, 5)``; ``state`` stacks the runs' `NormalModelsState` (leading run axis)."""
     for r in range(cv.shape[0]):
         run_state = NormalModelsState(state.history[r], state.seen[r])
-        predict_seconds(cv[r], p1[r], p2[r], params, run_state, out[r])
+        predict_seconds(cv[r], p1[r], p2[r], t1[r], params, run_state, out[r])
