@@ -121,9 +121,12 @@ def test_commissioned_groups_come_from_the_one_way_confusion_of_detected_seconds
 ):
     # the second library (seed 10 seed + 2), diagnosed second by second: its detected seconds
     # at least GROUP_MIN_AGE after their detection, named by the classifier, give the groups
-    from bayes_fdi.commissioning.isolation import _components
     from bayes_fdi.diagnosis.isolation.isolator import isolability_groups, naming_confusion
-    from bayes_fdi.diagnosis.online.training import GROUP_MIN_AGE, training_signatures
+    from bayes_fdi.diagnosis.online.training import (
+        GROUP_MIN_AGE,
+        detection_components,
+        training_signatures,
+    )
     from bayes_fdi.twin import transplant_library
 
     diag, twin, report = commissioned
@@ -132,7 +135,9 @@ def test_commissioned_groups_come_from_the_one_way_confusion_of_detected_seconds
     library = transplant_library(
         healthy, twin, faults=("f1", "f18", "bias_X"), runs_per_fault=4, duration=400, seed=2
     )
-    rows, labels, ages, _ = training_signatures(_components(diag), library, per_second=True)
+    rows, labels, ages, _ = training_signatures(
+        detection_components(diag), library, per_second=True
+    )
     iso = diag.isolator_
     keep = np.isin(labels, iso.faults_) & (ages >= GROUP_MIN_AGE)
     named = iso.faults_[np.argmax(iso.fault_proba(rows[keep]), axis=1)]

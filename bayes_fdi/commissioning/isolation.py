@@ -17,28 +17,13 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from bayes_fdi.diagnosis.online.state import PerOutput
-from bayes_fdi.diagnosis.online.step import Components
-from bayes_fdi.diagnosis.online.training import Runs, fit_isolation
+from bayes_fdi.diagnosis.online.training import Runs, attach_isolation
 
 __all__ = ["GROUP_RULE", "fit_commissioned_isolation"]
 
 #: How a commissioned diagnoser's isolability groups are found
 #: (`~bayes_fdi.diagnosis.isolation.isolator.FaultIsolator`'s ``group_rule``).
 GROUP_RULE = "naming"
-
-
-def _components(diagnoser: Any) -> Components:
-    """The fitted detection components of ``diagnoser`` (no isolator)."""
-    return Components(
-        normal_models=diagnoser.normal_models_,
-        whiteners=PerOutput(diagnoser.whiteners_["X"], diagnoser.whiteners_["F"]),
-        detector=diagnoser.detector_,
-        decision=diagnoser.decision_,
-        signature=diagnoser.signature_,
-        envelope=diagnoser.envelope_,
-        isolator=None,
-    )
 
 
 def fit_commissioned_isolation(
@@ -61,24 +46,9 @@ def fit_commissioned_isolation(
         raise ValueError("the diagnoser already has an isolator: fit it without fault runs")
     t0 = time.perf_counter()
     seconds = dict(diagnoser.fit_seconds_)
-    fitted = fit_isolation(
-        _components(diagnoser),
-        training,
-        validation,
-        calibration,
-        classifier=diagnoser.isolation_classifier,
-        calibrator=diagnoser.calibrator,
-        group_threshold=diagnoser.group_threshold,
-        group_rule=GROUP_RULE,
-        detect_rate=diagnoser.detect_rate,
-        max_signatures_per_fault=diagnoser.max_signatures_per_fault,
-        random_state=diagnoser.random_state,
-        seconds=seconds,
+    attach_isolation(
+        diagnoser, training, validation, calibration, seconds=seconds, group_rule=GROUP_RULE
     )
-    diagnoser.isolator_, diagnoser.undetectable_ = fitted.isolator, fitted.undetectable
-    diagnoser.detection_rates_ = fitted.detection_rates
-    if fitted.n_signatures is not None:
-        diagnoser.n_signatures_ = fitted.n_signatures
     seconds["total"] = seconds.get("total", 0.0) + time.perf_counter() - t0
     diagnoser.fit_seconds_ = seconds
     return diagnoser.reset()

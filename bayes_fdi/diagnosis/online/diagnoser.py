@@ -40,7 +40,12 @@ from bayes_fdi.diagnosis.online.step import (
     step_runs,
 )
 from bayes_fdi.diagnosis.online.stream import assemble_stream, decide, stream_attrs
-from bayes_fdi.diagnosis.online.training import Runs, fit_detection, fit_isolation, stack_runs
+from bayes_fdi.diagnosis.online.training import (
+    Runs,
+    attach_isolation,
+    fit_detection,
+    stack_runs,
+)
 from bayes_fdi.diagnosis.seva.record import SevaRecord
 
 __all__ = ["OnlineDiagnoser"]
@@ -248,23 +253,7 @@ class OnlineDiagnoser(BaseEstimator):
         self.undetectable_: tuple[str, ...] = ()
         self.detection_rates_: dict[str, float] = {}
         if fault_runs is not None:
-            fitted = fit_isolation(
-                self._components(),
-                fault_runs,
-                validation_runs,
-                calibration_runs,
-                classifier=self.isolation_classifier,
-                calibrator=self.calibrator,
-                group_threshold=self.group_threshold,
-                detect_rate=self.detect_rate,
-                max_signatures_per_fault=self.max_signatures_per_fault,
-                random_state=self.random_state,
-                seconds=seconds,
-            )
-            self.isolator_, self.undetectable_ = fitted.isolator, fitted.undetectable
-            self.detection_rates_ = fitted.detection_rates
-            if fitted.n_signatures is not None:
-                self.n_signatures_ = fitted.n_signatures
+            attach_isolation(self, fault_runs, validation_runs, calibration_runs, seconds=seconds)
         seconds["total"] = time.perf_counter() - t_start
         self.fit_seconds_ = seconds
         self.reset()

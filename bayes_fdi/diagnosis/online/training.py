@@ -33,6 +33,7 @@ from bayes_fdi.diagnosis.detection.thresholds import fit_threshold
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener
 from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
 from bayes_fdi.diagnosis.isolation.signatures import ISOLATION_FEATURES
+from bayes_fdi.diagnosis.online.state import PerOutput
 from bayes_fdi.diagnosis.online.step import Components, init_run_state, step
 
 __all__ = [
@@ -43,8 +44,10 @@ __all__ = [
     "IsolationFit",
     "Runs",
     "Signatures",
+    "attach_isolation",
     "cap_rows",
     "detected_seconds",
+    "detection_components",
     "detection_signatures",
     "fit_detection",
     "fit_isolation",
@@ -405,3 +408,50 @@ def fit_isolation(
         "calibration": int(ckeep.sum()),
     }
     return IsolationFit(isolator, tuple(undetectable), rates, counts)
+
+
+def detection_components(diagnoser: Any) -> Components:
+    """The fitted detection components of an `OnlineDiagnoser`, without its isolator: what
+    the isolation's training signatures are streamed through."""
+    return Components(
+        normal_models=diagnoser.normal_models_,
+        whiteners=PerOutput(diagnoser.whiteners_["X"], diagnoser.whiteners_["F"]),
+        detector=diagnoser.detector_,
+        decision=diagnoser.decision_,
+        signature=diagnoser.signature_,
+        envelope=diagnoser.envelope_,
+        isolator=None,
+    )
+
+
+def attach_isolation(
+    diagnoser: Any,
+    fault_runs: Runs,
+    validation_runs: Runs | None,
+    calibration_runs: Runs | None,
+    *,
+    seconds: dict[str, float],
+    group_rule: str = "pairwise",
+) -> None:
+    """Fit the isolation of ``diagnoser`` (an `OnlineDiagnoser` whose detection is fitted) on
+    fault runs with `fit_isolation` and set its ``isolator_``, ``undetectable_``,
+    ``detection_rates_`` (and ``n_signatures_``) in place; the diagnoser's parameters set the
+    isolation's, ``seconds`` receives the timings."""
+    fitted = fit_isolation(
+        detection_components(diagnoser),
+        fault_runs,
+        validation_runs,
+        calibration_runs,
+        classifier=diagnoser.isolation_classifier,
+        calibrator=diagnoser.calibrator,
+        group_threshold=diagnoser.group_threshold,
+        group_rule=group_rule,
+        detect_rate=diagnoser.detect_rate,
+        max_signatures_per_fault=diagnoser.max_signatures_per_fault,
+        random_state=diagnoser.random_state,
+        seconds=seconds,
+    )
+    diagnoser.isolator_, diagnoser.undetectable_ = fitted.isolator, fitted.undetectable
+    diagnoser.detection_rates_ = fitted.detection_rates
+    if fitted.n_signatures is not None:
+        diagnoser.n_signatures_ = fitted.n_signatures
