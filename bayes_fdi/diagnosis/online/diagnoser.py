@@ -31,7 +31,7 @@ from bayes_fdi.diagnosis.online.clock import check_next_time, check_time_axis
 from bayes_fdi.diagnosis.online.envelope import InputEnvelope
 from bayes_fdi.diagnosis.online.legacy import upgrade_diagnoser
 from bayes_fdi.diagnosis.online.records import last_values, second_record, status_reasons
-from bayes_fdi.diagnosis.online.state import PerOutput, StreamState
+from bayes_fdi.diagnosis.online.state import StreamState
 from bayes_fdi.diagnosis.online.step import (
     Components,
     check_stream_state,
@@ -43,6 +43,7 @@ from bayes_fdi.diagnosis.online.stream import assemble_stream, decide, stream_at
 from bayes_fdi.diagnosis.online.training import (
     Runs,
     attach_isolation,
+    detection_components,
     fit_detection,
     stack_runs,
 )
@@ -317,15 +318,7 @@ class OnlineDiagnoser(BaseEstimator):
     # ------------------------------------------------------------------ the per-second core
     def _components(self) -> Components:
         """The fitted components, in the order a second goes through them."""
-        return Components(
-            normal_models=self.normal_models_,
-            whiteners=PerOutput(self.whiteners_["X"], self.whiteners_["F"]),
-            detector=self.detector_,
-            decision=self.decision_,
-            signature=self.signature_,
-            envelope=self.envelope_,
-            isolator=self.isolator_,
-        )
+        return detection_components(self)._replace(isolator=self.isolator_)
 
     def _decide(self, arrays: Mapping[str, np.ndarray], out: Mapping[str, Any]) -> dict[str, Any]:
         return decide(

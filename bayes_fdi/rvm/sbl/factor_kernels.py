@@ -58,6 +58,18 @@ __all__ = [
 
 
 @njit(cache=True, error_model="numpy")
+def _solve_upper_transposed(L, y):  # pragma: no cover - compiled
+    """``y <- L^-T y`` in place (backward substitution with the lower factor ``L``), in a
+    fixed order."""
+    M = y.shape[0]
+    for i in range(M - 1, -1, -1):
+        v = y[i]
+        for j in range(i + 1, M):
+            v -= L[j, i] * y[j]
+        y[i] = v / L[i, i]
+
+
+@njit(cache=True, error_model="numpy")
 def posterior_terms(G, abar, mu, Phi_t, Hb, gradient, abs_product):  # pragma: no cover
     """Fill ``Hb`` (``(M, M)``), ``gradient`` and ``abs_product`` (``(M,)``) and return
     ``||Hb||_F^2``.
@@ -192,11 +204,7 @@ def screened_rows(L, d, H, Z, diag, bt, mu, grad, scalars, C, out):  # pragma: n
             for j in range(i):
                 v -= L[i, j] * y[j]
             y[i] = v / L[i, i]
-        for i in range(M - 1, -1, -1):
-            v = y[i]
-            for j in range(i + 1, M):
-                v -= L[j, i] * y[j]
-            y[i] = v / L[i, i]
+        _solve_upper_transposed(L, y)
         c_sq = 0.0
         z_sq = 0.0
         for i in range(M):
@@ -319,11 +327,7 @@ def reestimate_terms(
         for j in range(k, i):
             v -= L[i, j] * y[j]
         y[i] = v / L[i, i]
-    for i in range(M - 1, -1, -1):
-        v = y[i]
-        for j in range(i + 1, M):
-            v -= L[j, i] * y[j]
-        y[i] = v / L[i, i]
+    _solve_upper_transposed(L, y)
     s = np.empty(M)
     for i in range(M):
         s[i] = beta * (d[i] * y[i])
