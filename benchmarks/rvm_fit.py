@@ -233,7 +233,10 @@ class Targets:
 
     ``fit_seconds``: CPU seconds at N; ``peak_mb``: peak RSS at N; ``rmse_ratio``: test RMSE /
     the best peer's at every N; ``speedup``: at N, the fastest peer's CPU seconds / ours;
-    ``evidence``: whether the log evidence must be at least every peer's that reports one.
+    ``evidence``: whether the log evidence must be at least every peer's that reports one;
+    ``fastrvm_ratio``: at N, the most our CPU seconds / fastrvm's in the same run may be;
+    ``floor_ratio`` and ``streaming_floor_ratio``: at N, the most our CPU seconds / the float64
+    or the streaming floor of ``rvm_floor.py`` may be (checked where ``--floor`` measured it).
     """
 
     fit_seconds: Mapping[int, float]
@@ -241,6 +244,9 @@ class Targets:
     rmse_ratio: float
     speedup: Mapping[int, float] = field(default_factory=dict)
     evidence: bool = False
+    fastrvm_ratio: Mapping[int, float] = field(default_factory=dict)
+    floor_ratio: Mapping[int, float] = field(default_factory=dict)
+    streaming_floor_ratio: Mapping[int, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -263,6 +269,8 @@ TARGETS = Targets(
     peak_mb={20000: 4096.0},
     rmse_ratio=1.02,
     evidence=True,
+    fastrvm_ratio={2000: 0.5, 5000: 0.5, 7000: 0.5},
+    floor_ratio={5000: 2.0},
 )
 SINC_TARGETS = Targets(
     fit_seconds={5000: 2.5, 20000: 30.0},
@@ -270,6 +278,9 @@ SINC_TARGETS = Targets(
     rmse_ratio=1.02,
     speedup={5000: 15.0},
     evidence=True,
+    fastrvm_ratio={2000: 0.5, 5000: 0.5, 7000: 0.5},
+    floor_ratio={5000: 2.0},
+    streaming_floor_ratio={20000: 2.0},
 )
 PROBLEMS: dict[str, Problem] = {
     p.name: p
@@ -514,7 +525,8 @@ def add_ratios(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     log evidence (exact or reported, see :func:`_best_evidence`). ``best_peer_time`` and
     ``best_peer_rmse`` name the peers. ``fastrvm_ratio`` = fit CPU seconds / fastrvm's at the
     same N (same run); ``floor_ratio`` = fit CPU seconds / the row's ``floor_s``, the float64
-    floor of ``benchmarks/rvm_floor.py`` (``--floor``), where measured. Ratios are ``None``
+    floor of ``benchmarks/rvm_floor.py`` (``--floor``), where measured, and
+    ``streaming_floor_ratio`` the same for ``floor_streaming_s``. Ratios are ``None``
     where the row or every peer at that N failed.
     """
     out = [dict(r) for r in rows]
@@ -529,8 +541,11 @@ def add_ratios(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
         ]
         r["time_ratio"] = r["rmse_ratio"] = r["rmse_f_ratio"] = r["evidence_gap"] = None
         r["best_peer_time"] = r["best_peer_rmse"] = r["fastrvm_ratio"] = r["floor_ratio"] = None
+        r["streaming_floor_ratio"] = None
         if r.get("status") == "ok" and r.get("floor_s"):
             r["floor_ratio"] = r["fit_cpu_s"] / r["floor_s"]
+        if r.get("status") == "ok" and r.get("floor_streaming_s"):
+            r["streaming_floor_ratio"] = r["fit_cpu_s"] / r["floor_streaming_s"]
         if not peers or r.get("status") != "ok":
             continue
         fastrvm = [p for p in peers if p["method"] == "fastrvm"]
@@ -591,6 +606,7 @@ def check_targets(
                     "verdict": verdict,
                 }
             )
+        checks += _ratio_checks(r, targets)
         ratio = r.get("rmse_ratio")
         if not ok:
             verdict = "FAIL"
@@ -622,6 +638,30 @@ def check_targets(
     return checks
 
 
+_RATIO_TARGETS = (
+    ("fastrvm_ratio", "time / fastrvm"),
+    ("floor_ratio", "time / float64 floor"),
+    ("streaming_floor_ratio", "time / streaming floor"),
+)
+
+
+def _ratio_checks(r: Mapping[str, Any], targets: Targets) -> list[dict[str, Any]]:
+    """The checks of the ratio targets (at most ``limit``) of one row: FAIL where the fit did
+    not finish, n/a where the ratio was not measured (no fastrvm fit, no ``--floor``)."""
+    checks = []
+    for key, what in _RATIO_TARGETS:
+        limits: Mapping[int, float] = getattr(targets, key)
+        if r["n"] not in limits:
+            continue
+        lim, val = limits[r["n"]], r.get(key)
+        if r.get("status") != "ok":
+            verdict = "FAIL"
+        else:
+            verdict = "n/a" if val is None else _verdict(val <= lim)
+        checks.append({"n": r["n"], "what": what, "limit": lim, "value": val, "verdict": verdict})
+    return checks
+
+
 def _verdict(ok: bool) -> str:
     return "PASS" if ok else "FAIL"
 
@@ -647,29 +687,30 @@ def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
     Columns: N, method, fit CPU s, fit wall s, peak MB, n RV, test RMSE, RMSE vs f (noise-free),
     log evidence (exact, of the returned hyperparameters; with the method's own value where it
     differs), time ratio and RMSE ratio to the best peer, time ratio to fastrvm and to the
-    float64 floor (``--floor``). Failed or skipped fits show their
-    status.
+    float64 and streaming floors (``--floor``; the two floors differ where the solver's product
+    reads the screening copy). Failed or skipped fits show their status.
     """
     order = {name: i for i, name in enumerate(METHODS)}
     head = (
         "| N | method | fit s (CPU) | fit s (wall) | peak MB | n RV | test RMSE | RMSE vs f "
         "| log evidence | time / fastest peer | RMSE / best peer | time / fastrvm "
-        "| time / float64 floor |"
+        "| time / float64 floor | time / streaming floor |"
     )
-    lines = [head, "|---:|:---|" + "---:|" * 11]
+    lines = [head, "|---:|:---|" + "---:|" * 12]
     for r in sorted(rows, key=lambda r: (r["n"], order.get(r["method"], 99))):
         name = r["method"]
         if r.get("status") != "ok":
             status = r.get("status", "?")
             detail = f" ({r['detail']})" if r.get("detail") else ""
-            lines.append(f"| {r['n']} | {name} | {status}{detail} |" + "  |" * 10)
+            lines.append(f"| {r['n']} | {name} | {status}{detail} |" + "  |" * 11)
             continue
         lines.append(
             f"| {r['n']} | {name} | {r['fit_cpu_s']:.2f} | {r['fit_s']:.2f} "
             f"| {r['peak_rss_mb']:.0f} | {r['n_rv']} | {r['rmse']:.4f} | {r['rmse_f']:.4f} "
             f"| {_fmt_evidence(r)} "
             f"| {_fmt(r.get('time_ratio'), '.3f')} | {_fmt(r.get('rmse_ratio'), '.3f')} "
-            f"| {_fmt(r.get('fastrvm_ratio'), '.3f')} | {_fmt(r.get('floor_ratio'), '.2f')} |"
+            f"| {_fmt(r.get('fastrvm_ratio'), '.3f')} | {_fmt(r.get('floor_ratio'), '.2f')} "
+            f"| {_fmt(r.get('streaming_floor_ratio'), '.2f')} |"
         )
     return "\n".join(lines)
 

@@ -162,12 +162,43 @@ def test_check_targets_verdicts():
     assert verdicts == {"fit CPU s": "FAIL", "test RMSE / best peer": "FAIL"}
 
 
+def test_ratio_targets_against_fastrvm_and_the_floors():
+    """Ours / fastrvm and ours / floor, checked as at most the limit; n/a where not measured."""
+    t = bench.Targets(
+        fit_seconds={},
+        peak_mb={},
+        rmse_ratio=1.02,
+        fastrvm_ratio={2000: 0.5, 5000: 0.5},
+        floor_ratio={5000: 2.0},
+        streaming_floor_ratio={5000: 2.0},
+    )
+    rows = bench.add_ratios(
+        [
+            _row("fastrvm", 2000, 4.0, 0.1),
+            _row("bayes_fdi", 2000, 2.0, 0.1),  # 0.5x fastrvm: at the limit
+            _row("fastrvm", 5000, 10.0, 0.1),
+            {**_row("bayes_fdi", 5000, 6.0, 0.1), "floor_s": 3.0, "floor_streaming_s": 2.0},
+        ]
+    )
+    checks = {(c["n"], c["what"]): c for c in bench.check_targets(rows, t)}
+    assert checks[(2000, "time / fastrvm")]["verdict"] == "PASS"
+    assert checks[(5000, "time / fastrvm")]["value"] == 0.6
+    assert checks[(5000, "time / fastrvm")]["verdict"] == "FAIL"
+    assert checks[(5000, "time / float64 floor")]["value"] == 2.0
+    assert checks[(5000, "time / float64 floor")]["verdict"] == "PASS"
+    assert checks[(5000, "time / streaming floor")]["value"] == 3.0
+    assert checks[(5000, "time / streaming floor")]["verdict"] == "FAIL"
+    no_floor = bench.add_ratios([_row("bayes_fdi", 5000, 6.0, 0.1)])
+    verdicts = {c["what"]: c["verdict"] for c in bench.check_targets(no_floor, t)}
+    assert verdicts["time / fastrvm"] == verdicts["time / float64 floor"] == "n/a"
+
+
 # -------------------------------------------------------------------------------- table
 def test_format_table_rows_columns_and_statuses():
     rows = bench.add_ratios(
         [
             _row("fastrvm", 2000, 0.5, 0.105),
-            {**_row("bayes_fdi", 2000, 0.25, 0.1071), "floor_s": 0.1},
+            {**_row("bayes_fdi", 2000, 0.25, 0.1071), "floor_s": 0.1, "floor_streaming_s": 0.05},
             {"method": "sklearn-rvm", "n": 2000, "status": "skipped", "detail": "timeout at N=500"},
             _row("bayes_fdi", 500, 0.1, 0.11),
         ]
@@ -175,7 +206,7 @@ def test_format_table_rows_columns_and_statuses():
     lines = bench.format_table(rows).splitlines()
     n_cols = lines[0].count("|")
     assert all(line.count("|") == n_cols for line in lines)
-    assert n_cols - 1 == 13
+    assert n_cols - 1 == 14
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines[2:]]
     # ordered by N, then method order (bayes_fdi, fastrvm, sklearn-rvm, ...)
     assert [(c[0], c[1]) for c in cells] == [
@@ -188,7 +219,9 @@ def test_format_table_rows_columns_and_statuses():
     assert ours[2] == "0.25" and ours[6] == "0.1071"
     assert ours[9] == "0.500" and ours[10] == f"{0.1071 / 0.105:.3f}"
     assert ours[11] == "0.500" and ours[12] == "2.50"  # against fastrvm, against the floor
+    assert ours[13] == "5.00"  # against the streaming floor
     assert cells[0][9] == "–" and cells[0][11] == "–" and cells[0][12] == "–"  # no peer, floor
+    assert cells[0][13] == "–"
     assert cells[3][2] == "skipped (timeout at N=500)"
     report = bench.format_report(rows, {"sigma": 0.5, "gamma": 2.0, "n_test": 10})
     assert "| 2000 | test RMSE / best peer | 1.02 | 1.020 | PASS |" in report
