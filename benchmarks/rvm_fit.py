@@ -844,7 +844,8 @@ def _source_description(root: Path) -> str:
 def measure_floor(problem: str, n: int, ours_root: Path) -> dict[str, float]:
     """``floor_s`` (float64) and ``floor_streaming_s`` of ``benchmarks/rvm_floor.py`` for one
     problem and size, measured in a fresh single-threaded process (one more fit, on
-    ``make_data(n)``: the floor counts that fit's products and iterations)."""
+    ``make_data(n)``: the floor counts that fit's products and iterations), and every other
+    measurement of that process as ``floor_detail``."""
     env = {**os.environ, **THREAD_ENV, "PYTHONPATH": str(ours_root)}
     cmd = [sys.executable, str(HERE / "rvm_floor.py"), "--problems", problem]
     proc = subprocess.run(
@@ -857,7 +858,12 @@ def measure_floor(problem: str, n: int, ours_root: Path) -> dict[str, float]:
         file=sys.stderr,
         flush=True,
     )
-    return {k: result[k] for k in ("floor_s", "floor_streaming_s")}
+    detail = {k: v for k, v in result.items() if k not in ("problem", "n")}
+    return {
+        "floor_s": result["floor_s"],
+        "floor_streaming_s": result["floor_streaming_s"],
+        "floor_detail": detail,
+    }
 
 
 def _parse_sizes(text: str) -> tuple[int, ...]:
