@@ -31,6 +31,7 @@ LAYERS: dict[str, int] = {
     "precision_factor": 0,
     "rounding": 0,
     "noise": 0,
+    "capacity": 0,
     "result": 2,
     "decisions": 0,
     "residual_factors": 1,

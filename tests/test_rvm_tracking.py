@@ -15,12 +15,14 @@ import numpy as np
 import pytest
 import torch
 
+import bayes_fdi.rvm.sbl.capacity as capacity_module  # the module whose constants are patched
 import bayes_fdi.rvm.sbl.gaussian as gaussian_module  # the module whose constant is patched
 from bayes_fdi.rvm import RVR
 from bayes_fdi.rvm.sbl import (
     TrackedFactors,
     best_action,
     factor_precision,
+    grown_capacity,
     lazy_verified_action,
     posterior_context,
     reestimate_gain_bounds,
@@ -279,3 +281,42 @@ def test_precise_data_screen_from_the_fresh_factor(monkeypatch):
     np.testing.assert_array_equal(carried.relevance_indices_, fresh.relevance_indices_)
     assert carried.n_iter_ == fresh.n_iter_
     assert carried.log_evidence_ == pytest.approx(fresh.log_evidence_, rel=1e-10)
+
+
+def test_buffer_capacity_grows_by_doubling_then_by_a_quarter():
+    """Hand-computed growth: doubling up to 256 columns, then steps of a quarter (multiples of
+    64), never beyond the number of candidates unless more columns are needed."""
+    assert [grown_capacity(c, c + 1, 10_000) for c in (1, 64, 128, 256, 320, 512, 1000)] == [
+        2,
+        128,
+        256,
+        320,
+        384,
+        640,
+        1192,
+    ]
+    assert grown_capacity(64, 300, 10_000) == 320  # 128, 256, 320
+    assert grown_capacity(256, 257, 300) == 300
+    assert grown_capacity(64, 65, 40) == 65  # more than the limit is needed: exactly that
+
+
+def test_buffer_widths_change_storage_only(monkeypatch):
+    """The fast Gaussian fit is bit-identical whatever the width of its column buffers, as long
+    as it is a multiple of 8 columns (64-byte rows): from 8 columns growing 8 at a time (widths
+    the default never uses) against the default capacities. (Widths of 1, 2, 4, 7, 10, ...
+    columns move the fitted precisions by rounding, about 1e-14: BLAS takes other code paths
+    on unaligned rows; the default keeps multiples of 64.)"""
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-6, 6, size=(300, 2))
+    y = np.sinc(X[:, 0] / np.pi) * np.cos(X[:, 1] / 3) + 0.05 * rng.standard_normal(300)
+    default = RVR(width=1.0).fit(X, y)
+    monkeypatch.setattr(gaussian_module, "_INITIAL_CAPACITY", 8)
+    monkeypatch.setattr(capacity_module, "_DOUBLING_LIMIT", 8)
+    monkeypatch.setattr(capacity_module, "_STEP", 8)
+    narrow = RVR(width=1.0).fit(X, y)
+    assert len(default.relevance_indices_) > 32  # the narrow buffers grew four times or more
+    np.testing.assert_array_equal(default.relevance_indices_, narrow.relevance_indices_)
+    assert default.n_iter_ == narrow.n_iter_
+    for attr in ("alpha_", "mean_", "covariance_", "evidence_trace_"):
+        np.testing.assert_array_equal(getattr(default, attr), getattr(narrow, attr))
+    assert default.beta_ == narrow.beta_ and default.log_evidence_ == narrow.log_evidence_

@@ -27,12 +27,14 @@ including the ``-N/2 log 2 pi`` constant) or its Laplace approximation (Bernoull
 
 Also exported, for the estimators and for checking the solvers: the candidate basis
 (:class:`Design`, its screening copy :class:`TriangleCopy`), the numerics
-(:func:`factor_precision`, :func:`rounding_gamma`, :func:`thin_matmul`), the decision rules
-(:func:`best_action`, :func:`lowest_index_in_band`, the exact and screened factors, the
-verification of actions) and the carried screening factors (:class:`TrackedFactors`).
+(:func:`factor_precision`, :func:`rounding_gamma`, :func:`thin_matmul`,
+:func:`grown_capacity`), the decision rules (:func:`best_action`,
+:func:`lowest_index_in_band`, the exact and screened factors, the verification of actions) and
+the carried screening factors (:class:`TrackedFactors`).
 
 The modules, bottom up (each imports only modules above it in this list):
-``screening_copy``, ``design``; ``precision_factor``, ``rounding``, ``noise``; ``result``;
+``screening_copy``, ``design``; ``precision_factor``, ``rounding``, ``noise``, ``capacity`` (the
+growth of the Gaussian solver's column buffers); ``result``;
 ``decisions``, ``action_kernels``, ``tracked_kernels``, ``factor_kernels`` (numba kernels of
 the decision rules, of the carried factors' re-estimation update and of the posterior's terms and
 factor update, used on the CPU in float64);
@@ -45,6 +47,7 @@ factor update, used on the CPU in float64);
 from __future__ import annotations
 
 from bayes_fdi.rvm.sbl.bernoulli import fast_bernoulli
+from bayes_fdi.rvm.sbl.capacity import grown_capacity
 from bayes_fdi.rvm.sbl.decisions import Action, best_action, lowest_index_in_band
 from bayes_fdi.rvm.sbl.design import DEFAULT_MAX_BYTES, Design
 from bayes_fdi.rvm.sbl.gaussian import fast_gaussian
@@ -94,6 +97,7 @@ __all__ = [
     "fast_bernoulli",
     "fast_gaussian",
     "gaussian_screened_Q",
+    "grown_capacity",
     "lazy_verified_action",
     "lowest_index_in_band",
     "optimistic_ratio",

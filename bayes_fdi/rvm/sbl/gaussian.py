@@ -21,6 +21,7 @@ import torch
 from torch import Tensor
 
 from bayes_fdi.rvm.sbl.alignment import Alignment, exact_alignment
+from bayes_fdi.rvm.sbl.capacity import grown_capacity
 from bayes_fdi.rvm.sbl.decisions import Action, lowest_index_in_band
 from bayes_fdi.rvm.sbl.design import Design
 from bayes_fdi.rvm.sbl.factor_kernels import reestimate_factor
@@ -419,7 +420,7 @@ class _FastGaussianRun:
         design, norms, nu, M, P = self.design, self.norms, best.index, self.M, self.P
         Phi, BtPhi = self.views()
         if M == self.Phi_buf.shape[1]:  # grow the buffers
-            cap = min(P, 2 * M)
+            cap = grown_capacity(M, M + 1, P)
             self.Phi_buf = torch.cat([self.Phi_buf, self.Phi_buf.new_empty(self.N, cap - M)], 1)
             self.BtPhi_buf = torch.cat([self.BtPhi_buf, self.BtPhi_buf.new_empty(P, cap - M)], 1)
             Phi, BtPhi = self.views()

@@ -30,7 +30,8 @@ that many rows need it, the solver asks for a full refresh (:meth:`TrackedFactor
 ``H_ = diag(alpha / beta) + Phi^T Phi``, ``z_m = Phi^T b_m``; ``S = beta S_``, ``Q = beta Q_``
 (the posterior and its bounds: :mod:`bayes_fdi.rvm.sbl.posterior_bounds`).
 
-Imports :mod:`~bayes_fdi.rvm.sbl.posterior_bounds`, :mod:`~bayes_fdi.rvm.sbl.rounding` and
+Imports :mod:`~bayes_fdi.rvm.sbl.capacity`, :mod:`~bayes_fdi.rvm.sbl.posterior_bounds`,
+:mod:`~bayes_fdi.rvm.sbl.rounding` and
 :mod:`~bayes_fdi.rvm.sbl.screening`. Written by hand: no maintained library implements Tipping &
 Faul's solver, nor error bounds for its updates.
 """
@@ -42,6 +43,7 @@ import math
 import torch
 from torch import Tensor
 
+from bayes_fdi.rvm.sbl.capacity import grown_capacity
 from bayes_fdi.rvm.sbl.posterior_bounds import Posterior
 from bayes_fdi.rvm.sbl.rounding import rounding_gamma, thin_matmul
 from bayes_fdi.rvm.sbl.screening import gaussian_screened_Q, screened_factors
@@ -134,7 +136,8 @@ class TrackedFactors:
         nu = scr.c_norm * (1.0 + rounding_gamma(M + 1, self.dtype))
         if rows is None:
             if self.C.shape[1] < M:
-                self.C = self.C.new_zeros(self.C.shape[0], max(M, 2 * self.C.shape[1]))
+                cap = grown_capacity(self.C.shape[1], M, self.C.shape[0])
+                self.C = self.C.new_zeros(self.C.shape[0], cap)
             self.C[:, :M] = scr.C
             self.S, self.S_err = scr.S / beta, scr.S_error / beta
             self.Q, self.Q_err = Q / beta, Q_err / beta
@@ -380,7 +383,10 @@ class TrackedFactors:
         g2, g4 = rounding_gamma(2, dt), rounding_gamma(4, dt)
         gM = rounding_gamma(M + 3, dt)
         if self.C.shape[1] < M + 1:
-            self.C = torch.cat([self.C, self.C.new_zeros(self.C.shape[0], self.C.shape[1])], 1)
+            cap = grown_capacity(self.C.shape[1], M + 1, self.C.shape[0])
+            self.C = torch.cat(
+                [self.C, self.C.new_zeros(self.C.shape[0], cap - self.C.shape[1])], 1
+            )
         w = post.solve(h)
         r_w = post.Hb @ w - h
         w_norm = float(torch.linalg.vector_norm(w))
