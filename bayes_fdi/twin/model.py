@@ -13,6 +13,7 @@ for a batch of latent vectors by tracing it with Pyro.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -114,15 +115,18 @@ def flow_scales(
 def _variance_fit(u2: np.ndarray, q2: np.ndarray, floors: tuple[float, float]) -> np.ndarray:
     """``(a, b)`` of ``E u2 = a + b q2`` (both >= their floors) by iteratively reweighted least
     squares with weights ``1 / (a + b q2)^2``: at its fixed point, the maximum-likelihood
-    variances of zero-mean Gaussian ``u``."""
+    variances of zero-mean Gaussian ``u``. The 2 x 2 normal equations are solved in closed form
+    from numpy's sums (no LAPACK: the same bits on every machine)."""
     weights = np.ones_like(u2)
     ab = np.array(floors, dtype=np.float64)
     for _ in range(4):
-        design = np.stack([np.ones_like(q2), q2], axis=1) * np.sqrt(weights)[:, None]
-        target = u2 * np.sqrt(weights)
-        ab = np.linalg.lstsq(design, target, rcond=None)[0]
-        if ab[1] < floors[1]:  # the flow term is not supported: the constant alone
-            ab = np.array([np.sum(weights * (u2 - floors[1] * q2)) / np.sum(weights), floors[1]])
+        s0, s1, s2 = np.sum(weights), np.sum(weights * q2), np.sum(weights * q2**2)
+        t0, t1 = np.sum(weights * u2), np.sum(weights * q2 * u2)
+        det = s0 * s2 - s1 * s1
+        b = (s0 * t1 - s1 * t0) / det if det > 0 else -math.inf
+        ab = np.array([(t0 - b * s1) / s0, b])
+        if not ab[1] >= floors[1]:  # the flow term is not supported: the constant alone
+            ab = np.array([np.sum(weights * (u2 - floors[1] * q2)) / s0, floors[1]])
         ab = np.maximum(ab, floors)
         weights = 1.0 / (ab[0] + ab[1] * q2) ** 2
     return ab
