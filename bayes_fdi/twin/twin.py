@@ -4,10 +4,13 @@
 recording identifies, given the recording's own inputs (CV, P1, P2, T1) and outputs (X, F):
 the Pyro model of `bayes_fdi.twin.model` (logit-normal priors around DABLib's nominal values,
 the simulator, an AR(1) residual per channel), its Laplace approximation at the posterior mode
-(`bayes_fdi.twin.laplace`), checked by Pareto-smoothed importance sampling. The result is an
-ArviZ ``InferenceData`` (`bayes_fdi.twin.inference`); `sample_parameters` draws actuator
-parameter records from the posterior, `predict` gives the posterior predictive of X and F for
-any inputs, `check` scores it on held-out healthy data. See ``docs/twin.md``.
+(`bayes_fdi.twin.laplace`), checked by Pareto-smoothed importance sampling. After `fit`,
+``noise_`` holds each channel's ``(sigma, phi)`` at the mode and ``kappa_`` the pressure
+drop's reading error (F's innovation scale is
+``sqrt(sigma_F^2 + (kappa (F' - o) / (2 dP))^2)``). The result is an ArviZ
+``InferenceData`` (`bayes_fdi.twin.inference`); `sample_parameters` draws actuator parameter
+records from the posterior, `predict` gives the posterior predictive of X and F for any
+inputs, `check` scores it on held-out healthy data. See ``docs/twin.md``.
 """
 
 from __future__ import annotations
@@ -56,7 +59,9 @@ class ActuatorTwin(BaseEstimator):
         `DEFAULT_PRIORS`: Kv, the characteristic's exponent, the F' zero, the X' zero and span,
         the positioner's air capacity and set-point lag, the backlash).
     noise_prior
-        Prior of the AR(1) residual model of X and F.
+        Prior of the AR(1) residual model of X and F, and of ``kappa``, the recorded pressure
+        drop's error, which makes F's innovation scale grow with the flow over the pressure
+        drop (`bayes_fdi.twin.likelihood.flow_innovation_scale`).
     base
         Values of the parameters not fitted (default: nominal).
     window, settle
@@ -242,7 +247,8 @@ class ActuatorTwin(BaseEstimator):
 
         Each draw takes actuator and noise parameters from the posterior and simulates every run
         from its first sample (``X_model``, ``F_model``: the simulated X', F'); ``X``, ``F`` add
-        a stationary AR(1) path of the draw's noise parameters. Returns a dataset of dims
+        an AR(1) path of the draw's noise parameters (F's innovation scale growing with the
+        draw's flow over the inputs' pressure drop). Returns a dataset of dims
         ``(draw, run, time)``. The random stream is ``default_rng([seed, 1])``.
         """
         self._check_fitted()
