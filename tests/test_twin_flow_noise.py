@@ -79,3 +79,12 @@ def test_held_out_data_are_covered_at_the_stated_level_across_the_flows(valve):
     width = (high - low)[0, twin.settle :]
     q = ratio[0, 600 + twin.settle :]
     assert np.corrcoef(width, q)[0, 1] > 0.9
+
+
+@pytest.mark.parametrize("field", ["kappa_median", "kappa_spread", "sigma_median"])
+def test_a_noise_prior_that_is_not_positive_is_refused_by_name(field):
+    from bayes_fdi.twin import NoisePrior
+
+    hour = load_lublin_example()
+    with pytest.raises(ValueError, match=f"noise_prior.{field} must be a finite number > 0"):
+        ActuatorTwin(noise_prior=NoisePrior(**{field: 0.0})).fit(hour)
