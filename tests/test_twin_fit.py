@@ -16,6 +16,7 @@ from bayes_fdi.actuator import NOISE_STD, NOMINAL, simulate
 from bayes_fdi.datasets import load_lublin_example
 from bayes_fdi.twin import ActuatorTwin, ParameterPrior, identification
 from bayes_fdi.twin.likelihood import ar1_paths
+from bayes_fdi.twin.model import flow_ratio
 from bayes_fdi.twin.simulator import WindowSimulator, cut_windows, simulated_outputs
 
 TRUE = NOMINAL._replace(
@@ -99,13 +100,16 @@ def test_the_simulator_slope_in_kv_is_the_closed_form(hour):
     assert float(grad[1]) == pytest.approx(np.sum(w[..., 1]), rel=1e-9)
 
 
-def _gls(residual: np.ndarray, sigma: float, phi: float) -> tuple[float, float]:
-    """Posterior mean and sd of a constant under stationary AR(1) noise, flat prior."""
+def _gls(residual: np.ndarray, scale: np.ndarray, phi: float) -> tuple[float, float]:
+    """``1' P r`` and ``1' P 1`` of a constant under AR(1) noise with innovation scales
+    ``scale[t]`` (flat prior): the precision ``P = L' D^-1 L``, ``L`` the AR(1) differencing,
+    ``D`` the innovations' variances (the first sample's stationary)."""
     n = residual.size
-    prec = np.diag(np.r_[1.0, np.full(n - 2, 1 + phi**2), 1.0])
-    prec -= phi * (np.eye(n, k=1) + np.eye(n, k=-1))
+    ell = np.eye(n) - phi * np.eye(n, k=-1)
+    variances = np.r_[scale[0] ** 2 / (1.0 - phi**2), scale[1:] ** 2]
+    prec = ell.T @ np.diag(1.0 / variances) @ ell
     ones = np.ones(n)
-    return float(ones @ prec @ residual), float(ones @ prec @ ones) / sigma**2
+    return float(ones @ prec @ residual), float(ones @ prec @ ones)
 
 
 def test_an_offsets_posterior_is_the_generalised_least_squares_posterior(hour):
@@ -124,8 +128,15 @@ def test_an_offsets_posterior_is_the_generalised_least_squares_posterior(hour):
         window = inputs.isel(time=slice(start, start + 300))
         base = simulate(window, noise=False).F.values[0]
         e = (data.F.values[0, start : start + 300] - base)[twin.settle :]
-        num, prec = _gls(e, sigma, phi)
-        numerator += num / sigma**2
+        # the flow's innovation scale at the mode: F' - o does not depend on the offset o
+        pressures = np.stack([window.P1.values[0], window.P2.values[0]], axis=-1)
+        ratio = flow_ratio(
+            torch.as_tensor(base), torch.tensor([0.0]), ("f_offset",), NOMINAL,
+            torch.as_tensor(pressures),
+        ).numpy()[0, twin.settle :]  # fmt: skip
+        scale = np.sqrt(sigma**2 + (twin.kappa_ * ratio) ** 2)
+        num, prec = _gls(e, scale, phi)
+        numerator += num
         precision += prec
     mean, sd = numerator / precision, precision**-0.5
     post = twin.inference_data_.posterior["f_offset"].values.ravel()

@@ -1,11 +1,12 @@
 """The twin's posterior as ArviZ ``InferenceData``, and what it says the data identify.
 
 :func:`inference_data` gathers the fit: ``posterior`` (Laplace draws of the fitted parameters in
-their physical units and of the AR(1) noise parameters ``sigma_X, phi_X, sigma_F, phi_F``),
+their physical units and of the residual model's ``sigma_X, sigma_F, phi_X, phi_F, kappa_F``),
 ``sample_stats`` (each draw's Pareto-smoothed log importance weight against the exact
 posterior), ``prior`` (draws from the priors), ``observed_data`` (the fitted X, F per window),
 ``constant_data`` (the windows' inputs and which samples were fitted) and
-``posterior_predictive`` (X, F: the simulator at each draw plus an AR(1) path).
+``posterior_predictive`` (X, F: the simulator at each draw plus an AR(1) path, F's with the
+innovation scale that grows with the flow over the pressure drop).
 :func:`identification` tabulates prior and posterior widths and the posterior correlations.
 """
 
@@ -19,8 +20,8 @@ import torch
 
 from bayes_fdi.datasets import INPUT_CHANNELS
 from bayes_fdi.twin.laplace import ImportanceCheck, LaplaceFit
-from bayes_fdi.twin.likelihood import ar1_paths
-from bayes_fdi.twin.model import TwinProblem
+from bayes_fdi.twin.likelihood import ar1_from_innovations
+from bayes_fdi.twin.model import TwinProblem, flow_scales
 from bayes_fdi.twin.simulator import OUTPUTS, FitWindows
 
 __all__ = ["ParameterIdentification", "identification", "inference_data", "latent_names"]
@@ -29,16 +30,17 @@ __all__ = ["ParameterIdentification", "identification", "inference_data", "laten
 def latent_names(names: tuple[str, ...]) -> tuple[str, ...]:
     """Names of the posterior's variables: the fitted parameters, then the noise parameters."""
     noise = tuple(f"sigma_{c}" for c in OUTPUTS) + tuple(f"phi_{c}" for c in OUTPUTS)
-    return tuple(names) + noise
+    return (*names, *noise, "kappa_F")
 
 
 def _physical(problem: TwinProblem, latent: np.ndarray) -> np.ndarray:
-    """Latent draws ``(n, p + 4)`` in the posterior's units (parameters, sigma, phi)."""
+    """Latent draws ``(n, p + 5)`` in the posterior's units (parameters, sigma, phi, kappa)."""
     p = problem.n_parameters
     out = np.empty_like(latent)
     out[:, :p] = problem.physical(torch.as_tensor(latent[:, :p])).numpy()
     out[:, p : p + 2] = np.exp(latent[:, p : p + 2])
-    out[:, p + 2 :] = np.tanh(latent[:, p + 2 :])
+    out[:, p + 2 : p + 4] = np.tanh(latent[:, p + 2 : p + 4])
+    out[:, p + 4] = np.exp(latent[:, p + 4])
     return out
 
 
@@ -49,7 +51,8 @@ def _prior_latent(problem: TwinProblem, n: int, rng: np.random.Generator) -> np.
     )
     log_sigma = np.log(noise.sigma_median) + noise.sigma_spread * rng.standard_normal((n, 2))
     atanh_phi = noise.phi_spread * rng.standard_normal((n, 2))
-    return np.concatenate([z, log_sigma, atanh_phi], axis=1)
+    log_kappa = np.log(noise.kappa_median) + noise.kappa_spread * rng.standard_normal((n, 1))
+    return np.concatenate([z, log_sigma, atanh_phi, log_kappa], axis=1)
 
 
 def inference_data(
@@ -67,10 +70,18 @@ def inference_data(
     p = problem.n_parameters
     predictive = check.outputs.copy()  # (draw, window, time, 2)
     n_windows, n_t = predictive.shape[1:3]
-    for c in range(len(OUTPUTS)):
-        sigma = np.broadcast_to(post[:, p + c, None], (n, n_windows))
+    sim = problem.simulator
+    scales = {
+        "X": np.broadcast_to(post[:, p, None], (n, n_windows)),
+        "F": flow_scales(
+            check.draws, post[:, :p], check.outputs, sim.names, sim.base,
+            problem.pressures.numpy(),
+        ),
+    }  # fmt: skip
+    for c, name in enumerate(OUTPUTS):
         phi = np.broadcast_to(post[:, p + 2 + c, None], (n, n_windows))
-        predictive[..., c] += ar1_paths(rng, sigma, phi, n_t)
+        eps = rng.standard_normal((n, n_windows, n_t))
+        predictive[..., c] += ar1_from_innovations(eps, scales[name], phi)
     observed = windows.observed
     constant = {c: windows.inputs[c].transpose("run", "time").values for c in INPUT_CHANNELS}
     constant["fitted"] = windows.mask.astype(np.int8)

@@ -79,7 +79,8 @@ def _profiled(problem: TwinProblem, z: np.ndarray) -> tuple[float, np.ndarray]:
     with torch.no_grad():
         theta = problem.physical(torch.as_tensor(z, dtype=torch.float64))
         outputs = problem.simulator.outputs(theta.numpy()[None])
-        noise = noise_estimate(problem.observed.numpy() - outputs[0], problem.mask.numpy())
+        ratio = problem.flow_ratio(theta, torch.as_tensor(outputs[0, ..., 1])).numpy()
+        noise = noise_estimate(problem.observed.numpy() - outputs[0], problem.mask.numpy(), ratio)
         v = np.concatenate([z, noise])
         value, _ = score(problem, torch.as_tensor(v)[None], torch.as_tensor(outputs))
     return float(-value[0]), v

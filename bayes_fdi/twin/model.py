@@ -2,14 +2,19 @@
 
 Latent variables (all unconstrained): ``z`` (one per fitted parameter, logit-normal priors of
 `bayes_fdi.twin.priors`), ``log_sigma`` and ``atanh_phi`` (the AR(1) residual model of X and
-F). Given them, the simulator (`bayes_fdi.twin.simulator`) runs the recording's windows with the
-recording's own inputs, and the recorded X and F are AR(1) series around its outputs
-(`bayes_fdi.twin.likelihood.StationaryAR1`). :func:`log_joint` evaluates the model's log density
+F) and ``log_kappa`` (the recorded pressure drop's error, which scales the flow residual with
+the flow over the pressure drop: :func:`flow_ratio`). Given them, the simulator
+(`bayes_fdi.twin.simulator`) runs the recording's windows with the recording's own inputs, and
+the recorded X and F are AR(1) series around its outputs
+(`bayes_fdi.twin.likelihood.StationaryAR1`), X's with one innovation scale ``sigma_X``, F's with
+``sqrt(sigma_F^2 + (kappa ratio_t)^2)``. :func:`log_joint` evaluates the model's log density
 for a batch of latent vectors by tracing it with Pyro.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -18,27 +23,148 @@ import pyro.distributions as dist
 import torch
 from pyro import poutine
 
-from bayes_fdi.twin.likelihood import StationaryAR1
+from bayes_fdi.actuator import ActuatorParameters
+from bayes_fdi.twin.likelihood import StationaryAR1, flow_innovation_scale
 from bayes_fdi.twin.priors import NoisePrior, ParameterPrior
 from bayes_fdi.twin.simulator import OUTPUTS, WindowSimulator, simulated_outputs
 
-__all__ = ["TwinProblem", "log_joint", "noise_estimate", "score", "split_latent", "twin_model"]
+__all__ = [
+    "MIN_PRESSURE_DROP",
+    "N_NOISE",
+    "TwinProblem",
+    "flow_ratio",
+    "flow_scales",
+    "log_joint",
+    "noise_estimate",
+    "noise_values",
+    "score",
+    "split_latent",
+    "twin_model",
+]
+
+#: Noise latents after the fitted parameters: log sigma (X, F), atanh phi (X, F), log kappa.
+N_NOISE = 5
+#: Floor of the pressure drop in :func:`flow_ratio` (full scale of the pressure transmitters:
+#: 20 kPa). The flow's error ``F d(P1 - P2) / (2 (P1 - P2))`` is a linearisation for an error
+#: small against the drop; below a few times the readings' noise the error is of the order of
+#: the flow itself, which the floor keeps it at.
+MIN_PRESSURE_DROP = 0.005
 
 
-def noise_estimate(residual: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Least-squares AR(1) fit of residuals ``(..., W, T, 2)``: ``(..., 4)`` latent noise values
-    (``log sigma`` of X and F, then ``atanh phi``), the conditional mode up to the priors and
-    the first samples' terms."""
+def flow_ratio(
+    flow: torch.Tensor,
+    theta: torch.Tensor,
+    names: Sequence[str],
+    base: ActuatorParameters,
+    pressures: torch.Tensor,
+) -> torch.Tensor:
+    """``(F' - o) / (2 (P1 - P2))``: the model's flow reading above the F' zero ``o`` over twice
+    the pressure drop that drove it, clipped below at 0 and with the drop floored at
+    `MIN_PRESSURE_DROP` (full-scale units of F' and of the pressure transmitters).
+
+    ``flow``: the model's F' ``(..., W, T)``; ``theta``: the fitted parameters ``(..., p)`` in
+    the order of ``names`` (the F' zero and the pressure transmitters' calibration come from
+    ``theta`` when fitted, else from ``base``); ``pressures``: the recorded P1', P2'
+    ``(W, T, 2)``, read back through the calibration as the simulator reads them.
+    """
+    names = list(names)
+
+    def field(name: str):
+        if name in names:
+            return theta[..., names.index(name), None, None]
+        return float(getattr(base, name))
+
+    p1 = (pressures[..., 0] - field("p1_offset")) / field("p1_gain")
+    p2 = (pressures[..., 1] - field("p2_offset")) / field("p2_gain")
+    drop = (p1 - p2).clamp(min=MIN_PRESSURE_DROP)
+    return (flow - field("f_offset")).clamp(min=0.0) / (2.0 * drop)
+
+
+def noise_values(latent: np.ndarray, n_parameters: int) -> tuple[np.ndarray, ...]:
+    """``sigma (..., 2)``, ``phi (..., 2)`` (X, F) and ``kappa (...)`` of latent vector(s)."""
+    latent = np.asarray(latent)
+    p = n_parameters
+    sigma = np.exp(latent[..., p : p + 2])
+    phi = np.tanh(latent[..., p + 2 : p + 4])
+    return sigma, phi, np.exp(latent[..., p + 4])
+
+
+def flow_scales(
+    latent: np.ndarray,
+    thetas: np.ndarray,
+    model: np.ndarray,
+    names: Sequence[str],
+    base: ActuatorParameters,
+    pressures: np.ndarray,
+) -> np.ndarray:
+    """The flow residual's innovation scale ``(draw, W, T)`` for latent draws ``(draw, p + 5)``,
+    their parameters ``thetas`` ``(draw, p)``, their simulated outputs ``model``
+    ``(draw, W, T, 2)`` and the recorded P1', P2' ``pressures`` ``(W, T, 2)``."""
+    sigma, _, kappa = noise_values(latent, len(names))
+    with torch.no_grad():
+        ratio = flow_ratio(
+            torch.as_tensor(model[..., 1]), torch.as_tensor(thetas), names, base,
+            torch.as_tensor(pressures),
+        )  # fmt: skip
+        scale = flow_innovation_scale(
+            torch.as_tensor(sigma[:, 1, None, None]), torch.as_tensor(kappa[:, None, None]), ratio
+        )
+    return scale.numpy()
+
+
+def _variance_fit(u2: np.ndarray, q2: np.ndarray, floors: tuple[float, float]) -> np.ndarray:
+    """``(a, b)`` of ``E u2 = a + b q2`` (both >= their floors) by iteratively reweighted least
+    squares with weights ``1 / (a + b q2)^2``: at its fixed point, the maximum-likelihood
+    variances of zero-mean Gaussian ``u``. The 2 x 2 normal equations are solved in closed form
+    from numpy's sums (no LAPACK: the same bits on every machine)."""
+    weights = np.ones_like(u2)
+    ab = np.array(floors, dtype=np.float64)
+    for _ in range(4):
+        s0, s1, s2 = np.sum(weights), np.sum(weights * q2), np.sum(weights * q2**2)
+        t0, t1 = np.sum(weights * u2), np.sum(weights * q2 * u2)
+        det = s0 * s2 - s1 * s1
+        b = (s0 * t1 - s1 * t0) / det if det > 0 else -math.inf
+        ab = np.array([(t0 - b * s1) / s0, b])
+        if not ab[1] >= floors[1]:  # the flow term is not supported: the constant alone
+            ab = np.array([np.sum(weights * (u2 - floors[1] * q2)) / s0, floors[1]])
+        ab = np.maximum(ab, floors)
+        weights = 1.0 / (ab[0] + ab[1] * q2) ** 2
+    return ab
+
+
+def noise_estimate(
+    residual: np.ndarray, mask: np.ndarray, ratio: np.ndarray, kappa_floor: float = 1e-5
+) -> np.ndarray:
+    """Least-squares fit of the AR(1) residual model to residuals ``(W, T, 2)``: the ``(5,)``
+    latent noise values (``log sigma`` of X and F, ``atanh phi`` of X and F, ``log kappa``),
+    the conditional mode up to the priors and the first samples' terms.
+
+    ``ratio`` ``(W, T)``: :func:`flow_ratio` at the residual's parameters. X's innovations have
+    one variance; F's variance ``sigma^2 + kappa^2 ratio_t^2`` is fitted to the squared
+    innovations (``kappa`` at least ``kappa_floor``), and ``phi_F`` again by weighted least
+    squares with those variances.
+    """
     pairs = mask[:, 1:] & mask[:, :-1]
+    q2 = (ratio[:, 1:][pairs]) ** 2
     out = []
+    kappa = kappa_floor
     for c in range(residual.shape[-1]):
-        now = residual[..., 1:, c][..., pairs]
-        before = residual[..., :-1, c][..., pairs]
-        phi = np.sum(now * before, axis=-1) / np.maximum(np.sum(before**2, axis=-1), 1e-300)
-        phi = np.clip(phi, -0.99, 0.99)
-        var = np.mean((now - phi[..., None] * before) ** 2, axis=-1)
-        out.append((0.5 * np.log(np.maximum(var, 1e-300)), np.arctanh(phi)))
-    return np.stack([out[0][0], out[1][0], out[0][1], out[1][1]], axis=-1)
+        now = residual[:, 1:, c][pairs]
+        before = residual[:, :-1, c][pairs]
+        weights = np.ones_like(now)
+        for _ in range(2 if OUTPUTS[c] == "F" else 1):
+            phi = np.sum(weights * now * before) / max(np.sum(weights * before**2), 1e-300)
+            phi = float(np.clip(phi, -0.99, 0.99))
+            u2 = (now - phi * before) ** 2
+            if OUTPUTS[c] != "F":
+                var = max(float(np.mean(u2)), 1e-300)
+                break
+            floor = max(1e-12 * float(np.mean(u2)), 1e-300)
+            var, kappa2 = _variance_fit(u2, q2, (floor, kappa_floor**2))
+            kappa = float(np.sqrt(kappa2))
+            weights = 1.0 / (var + kappa2 * q2)
+        out.append((0.5 * np.log(var), np.arctanh(phi)))
+    return np.array([out[0][0], out[1][0], out[0][1], out[1][1], np.log(kappa)])
 
 
 class TwinProblem(NamedTuple):
@@ -50,6 +176,7 @@ class TwinProblem(NamedTuple):
     observed: torch.Tensor  # (W, T, 2) recorded X, F
     mask: torch.Tensor  # (W, T) samples that count
     steps: np.ndarray  # (p,) finite-difference steps of the physical parameters
+    pressures: torch.Tensor  # (W, T, 2) recorded P1', P2'
 
     @property
     def n_parameters(self) -> int:
@@ -57,7 +184,7 @@ class TwinProblem(NamedTuple):
 
     @property
     def n_latent(self) -> int:
-        return len(self.priors) + 2 * len(OUTPUTS)
+        return len(self.priors) + N_NOISE
 
     def prior_loc(self) -> torch.Tensor:
         return torch.tensor([p.loc() for p in self.priors], dtype=torch.float64)
@@ -71,6 +198,16 @@ class TwinProblem(NamedTuple):
         high = torch.tensor([p.high for p in self.priors], dtype=z.dtype)
         return low + (high - low) * torch.sigmoid(z)
 
+    def flow_ratio(self, theta: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
+        """:func:`flow_ratio` of the windows for parameters ``theta`` and model flow ``flow``."""
+        sim = self.simulator
+        return flow_ratio(flow, theta, sim.names, sim.base, self.pressures)
+
+
+def _normal(median: float, spread: float, n: int) -> dist.Distribution:
+    loc = torch.full((n,), float(np.log(median)), dtype=torch.float64)
+    return dist.Normal(loc, torch.full((n,), float(spread), dtype=torch.float64)).to_event(1)
+
 
 def twin_model(problem: TwinProblem, outputs: torch.Tensor | None = None) -> None:
     """The Pyro model; batch the latents along a leading dimension to score several at once.
@@ -81,13 +218,7 @@ def twin_model(problem: TwinProblem, outputs: torch.Tensor | None = None) -> Non
     n_out = len(OUTPUTS)
     z = pyro.sample("z", dist.Normal(problem.prior_loc(), problem.prior_spread()).to_event(1))
     noise = problem.noise
-    log_sigma = pyro.sample(
-        "log_sigma",
-        dist.Normal(
-            torch.full((n_out,), float(np.log(noise.sigma_median)), dtype=torch.float64),
-            torch.full((n_out,), noise.sigma_spread, dtype=torch.float64),
-        ).to_event(1),
-    )
+    log_sigma = pyro.sample("log_sigma", _normal(noise.sigma_median, noise.sigma_spread, n_out))
     atanh_phi = pyro.sample(
         "atanh_phi",
         dist.Normal(
@@ -95,19 +226,26 @@ def twin_model(problem: TwinProblem, outputs: torch.Tensor | None = None) -> Non
             torch.full((n_out,), noise.phi_spread, dtype=torch.float64),
         ).to_event(1),
     )
+    log_kappa = pyro.sample("log_kappa", _normal(noise.kappa_median, noise.kappa_spread, 1))
     theta = problem.physical(z)
     if outputs is None:
         outputs = simulated_outputs(theta, problem.simulator, problem.steps)
-    sigma = log_sigma.exp()
-    phi = atanh_phi.tanh()
+    sigma = log_sigma.exp()[..., None, None, :]  # (..., 1, 1, 2): per channel
+    phi = atanh_phi.tanh()[..., None, :]  # (..., 1, 2)
+    kappa = log_kappa.exp()[..., None, :]  # (..., 1, 1)
+    batch = outputs.shape[:-3]
+    n_windows = problem.mask.shape[0]
     for c, name in enumerate(OUTPUTS):
-        batch = outputs.shape[:-3]
+        scale = sigma[..., c]
+        if name == "F":
+            ratio = problem.flow_ratio(theta, outputs[..., c])
+            scale = flow_innovation_scale(scale, kappa, ratio)
         pyro.sample(
             f"obs_{name}",
             StationaryAR1(
                 outputs[..., c],
-                sigma[..., c, None].expand(*batch, problem.mask.shape[0]),
-                phi[..., c, None].expand(*batch, problem.mask.shape[0]),
+                scale.expand(*batch, *problem.mask.shape),
+                phi[..., c].expand(*batch, n_windows),
                 mask=problem.mask.expand(*batch, *problem.mask.shape),
             ).to_event(1),
             obs=problem.observed[..., c],
@@ -115,14 +253,19 @@ def twin_model(problem: TwinProblem, outputs: torch.Tensor | None = None) -> Non
 
 
 def split_latent(v: torch.Tensor, n_parameters: int) -> dict[str, torch.Tensor]:
-    """The latent vector(s) ``(..., p + 4)`` as the model's sites ``z``, ``log_sigma``,
-    ``atanh_phi``."""
+    """The latent vector(s) ``(..., p + 5)`` as the model's sites ``z``, ``log_sigma``,
+    ``atanh_phi``, ``log_kappa``."""
     p = n_parameters
-    return {"z": v[..., :p], "log_sigma": v[..., p : p + 2], "atanh_phi": v[..., p + 2 : p + 4]}
+    return {
+        "z": v[..., :p],
+        "log_sigma": v[..., p : p + 2],
+        "atanh_phi": v[..., p + 2 : p + 4],
+        "log_kappa": v[..., p + 4 : p + 5],
+    }
 
 
 def log_joint(problem: TwinProblem, v: torch.Tensor) -> torch.Tensor:
-    """Log density of the model (prior plus likelihood) at latent vectors ``v`` ``(B, p + 4)``.
+    """Log density of the model (prior plus likelihood) at latent vectors ``v`` ``(B, p + 5)``.
 
     Returns a tensor ``(B,)``; differentiable in ``v`` when ``B == 1``.
     """

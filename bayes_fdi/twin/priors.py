@@ -53,20 +53,28 @@ class ParameterPrior(NamedTuple):
 
 
 class NoisePrior(NamedTuple):
-    """Prior of the AR(1) residual model of one channel.
+    """Prior of the AR(1) residual model of each channel.
 
     ``log(sigma) ~ Normal(log(sigma_median), sigma_spread)`` (``sigma``: standard deviation of
     the innovations, full-scale units) and ``atanh(phi) ~ Normal(0, phi_spread)`` (``phi``: the
-    lag-1 coefficient, in ``(-1, 1)``).
+    lag-1 coefficient, in ``(-1, 1)``), for X and F alike; and
+    ``log(kappa) ~ Normal(log(kappa_median), kappa_spread)``: ``kappa`` is the standard
+    deviation of the recorded pressure drop's error (full scale of the pressure transmitters),
+    which adds ``kappa (F' - o) / (2 (P1 - P2))`` to the flow's innovation scale
+    (`bayes_fdi.twin.likelihood.flow_innovation_scale`).
     """
 
     sigma_median: float = 0.02
     sigma_spread: float = 1.5
     phi_spread: float = 1.0
+    kappa_median: float = 0.002
+    kappa_spread: float = 1.5
 
 
 #: The noise prior of X and F: innovations around 2 % of full scale (a factor of 4.5 either way
-#: at one standard deviation), lag-1 correlation centred on 0.
+#: at one standard deviation), lag-1 correlation centred on 0; the pressure drop read with an
+#: error around 0.2 % of the transmitters' full scale (two readings with DAMADICS' 0.14 % white
+#: noise each; a factor of 4.5 either way at one standard deviation).
 NOISE_PRIOR = NoisePrior()
 
 

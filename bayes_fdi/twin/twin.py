@@ -4,14 +4,18 @@
 recording identifies, given the recording's own inputs (CV, P1, P2, T1) and outputs (X, F):
 the Pyro model of `bayes_fdi.twin.model` (logit-normal priors around DABLib's nominal values,
 the simulator, an AR(1) residual per channel), its Laplace approximation at the posterior mode
-(`bayes_fdi.twin.laplace`), checked by Pareto-smoothed importance sampling. The result is an
-ArviZ ``InferenceData`` (`bayes_fdi.twin.inference`); `sample_parameters` draws actuator
-parameter records from the posterior, `predict` gives the posterior predictive of X and F for
-any inputs, `check` scores it on held-out healthy data. See ``docs/twin.md``.
+(`bayes_fdi.twin.laplace`), checked by Pareto-smoothed importance sampling. After `fit`,
+``noise_`` holds each channel's ``(sigma, phi)`` at the mode and ``kappa_`` the pressure
+drop's reading error (F's innovation scale is
+``sqrt(sigma_F^2 + (kappa (F' - o) / (2 dP))^2)``). The result is an ArviZ
+``InferenceData`` (`bayes_fdi.twin.inference`); `sample_parameters` draws actuator parameter
+records from the posterior, `predict` gives the posterior predictive of X and F for any
+inputs, `check` scores it on held-out healthy data. See ``docs/twin.md``.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -28,8 +32,8 @@ from bayes_fdi.twin.fixed_order import cholesky, matvec
 from bayes_fdi.twin.flow_start import flow_law_start
 from bayes_fdi.twin.inference import inference_data
 from bayes_fdi.twin.laplace import fit_laplace, importance_check
-from bayes_fdi.twin.likelihood import ar1_paths
-from bayes_fdi.twin.model import TwinProblem
+from bayes_fdi.twin.likelihood import ar1_from_innovations
+from bayes_fdi.twin.model import TwinProblem, flow_scales, noise_estimate, noise_values
 from bayes_fdi.twin.priors import (
     DEFAULT_PRIORS,
     NOISE_PRIOR,
@@ -55,7 +59,9 @@ class ActuatorTwin(BaseEstimator):
         `DEFAULT_PRIORS`: Kv, the characteristic's exponent, the F' zero, the X' zero and span,
         the positioner's air capacity and set-point lag, the backlash).
     noise_prior
-        Prior of the AR(1) residual model of X and F.
+        Prior of the AR(1) residual model of X and F, and of ``kappa``, the recorded pressure
+        drop's error, which makes F's innovation scale grow with the flow over the pressure
+        drop (`bayes_fdi.twin.likelihood.flow_innovation_scale`).
     base
         Values of the parameters not fitted (default: nominal).
     window, settle
@@ -123,6 +129,9 @@ class ActuatorTwin(BaseEstimator):
         self.base.validated()
         if not isinstance(self.noise_prior, NoisePrior):
             raise ValueError(f"noise_prior must be a NoisePrior, got {self.noise_prior!r}")
+        for name, value in self.noise_prior._asdict().items():
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"noise_prior.{name} must be a finite number > 0, got {value!r}")
         for name in ("window", "settle", "n_draws", "max_iter", "warmup", "random_state"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
@@ -165,6 +174,7 @@ class ActuatorTwin(BaseEstimator):
         problem = TwinProblem(
             simulator, tuple(priors.values()), self.noise_prior,
             torch.as_tensor(windows.observed), torch.as_tensor(windows.mask), steps,
+            torch.as_tensor(_pressures(windows.inputs)),
         )  # fmt: skip
         starts = {"prior medians": _start(problem, windows)}
         flow_law = flow_law_start(windows, self.base, priors) if self.flow_law_start else None
@@ -188,8 +198,9 @@ class ActuatorTwin(BaseEstimator):
         self.windows_ = windows.origin
         mode = problem.physical(torch.as_tensor(laplace.mode[: len(names)])).numpy()
         self.parameters_ = self.base._replace(**dict(zip(names, map(float, mode), strict=True)))
-        sigma, phi = _noise(laplace.mode, len(names))
+        sigma, phi, kappa = noise_values(laplace.mode, len(names))
         self.noise_ = {c: (float(sigma[i]), float(phi[i])) for i, c in enumerate(OUTPUTS)}
+        self.kappa_ = float(kappa)
         self.inference_data_ = inference_data(problem, windows, laplace, check, rng)
         self.fit_seconds_ = time.perf_counter() - t_start
         self.inference_data_.attrs["fit_seconds"] = self.fit_seconds_
@@ -202,13 +213,13 @@ class ActuatorTwin(BaseEstimator):
 
     # ------------------------------------------------------------------ draws
     def sample_latent(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """``n`` draws ``(n, p + 4)`` of the latent vector from the Laplace posterior."""
+        """``n`` draws ``(n, p + 5)`` of the latent vector from the Laplace posterior."""
         self._check_fitted()
         chol = cholesky(self.laplace_.covariance)
         return self.laplace_.mode + matvec(chol, rng.standard_normal((int(n), chol.shape[0])))
 
     def latent_to_parameters(self, latent: np.ndarray) -> list[ActuatorParameters]:
-        """Parameter records of latent vectors ``(n, p + 4)`` (unfitted fields from ``base``)."""
+        """Parameter records of latent vectors ``(n, p + 5)`` (unfitted fields from ``base``)."""
         self._check_fitted()
         latent = np.atleast_2d(latent)
         out = []
@@ -236,7 +247,8 @@ class ActuatorTwin(BaseEstimator):
 
         Each draw takes actuator and noise parameters from the posterior and simulates every run
         from its first sample (``X_model``, ``F_model``: the simulated X', F'); ``X``, ``F`` add
-        a stationary AR(1) path of the draw's noise parameters. Returns a dataset of dims
+        an AR(1) path of the draw's noise parameters (F's innovation scale growing with the
+        draw's flow over the inputs' pressure drop). Returns a dataset of dims
         ``(draw, run, time)``. The random stream is ``default_rng([seed, 1])``.
         """
         self._check_fitted()
@@ -249,14 +261,17 @@ class ActuatorTwin(BaseEstimator):
         records = self.latent_to_parameters(latent)
         thetas = np.array([[getattr(p, n) for n in self.names_] for p in records])
         model = simulator.outputs(thetas)  # (draw, run, time, 2)
-        sigma, phi = _noise(latent, len(self.names_))
+        sigma, phi, _ = noise_values(latent, len(self.names_))
+        scales = {
+            "X": np.broadcast_to(sigma[:, 0, None], (n_draws, n_runs)),
+            "F": flow_scales(latent, thetas, model, self.names_, self.base, _pressures(inputs)),
+        }
         dims = ("draw", "run", "time")
         data = {}
         for c, name in enumerate(OUTPUTS):
-            shape = (n_draws, n_runs)
-            s = np.broadcast_to(sigma[:, c, None], shape)
-            f = np.broadcast_to(phi[:, c, None], shape)
-            data[name] = (dims, model[..., c] + ar1_paths(rng, s, f, n_t))
+            eps = rng.standard_normal((n_draws, n_runs, n_t))
+            f = np.broadcast_to(phi[:, c, None], (n_draws, n_runs))
+            data[name] = (dims, model[..., c] + ar1_from_innovations(eps, scales[name], f))
             data[f"{name}_model"] = (dims, model[..., c])
         coords = {"draw": np.arange(n_draws), "run": inputs["run"].values,
                   "time": inputs["time"].values}  # fmt: skip
@@ -270,12 +285,9 @@ class ActuatorTwin(BaseEstimator):
         return predictive_check(self, heldout, n_draws=n_draws, seed=seed, level=level)
 
 
-def _noise(latent: np.ndarray, n_parameters: int) -> tuple[np.ndarray, np.ndarray]:
-    """(sigma, phi) of X and F from latent vector(s): ``(..., 2)`` each."""
-    latent = np.asarray(latent)
-    sigma = np.exp(latent[..., n_parameters : n_parameters + 2])
-    phi = np.tanh(latent[..., n_parameters + 2 : n_parameters + 4])
-    return sigma, phi
+def _pressures(inputs: xr.Dataset) -> np.ndarray:
+    """The recorded P1', P2' of every run ``(run, time, 2)``."""
+    return np.stack([inputs[c].transpose("run", "time").values for c in ("P1", "P2")], axis=-1)
 
 
 def _start(problem: TwinProblem, windows, values: Mapping[str, float] | None = None) -> np.ndarray:
@@ -287,13 +299,7 @@ def _start(problem: TwinProblem, windows, values: Mapping[str, float] | None = N
         prior = problem.priors[names.index(name)]
         q = min(max((float(value) - prior.low) / (prior.high - prior.low), 1e-9), 1.0 - 1e-9)
         z[names.index(name)] = np.log(q / (1.0 - q))
-    theta = problem.physical(torch.as_tensor(z)).numpy()
-    residual = windows.observed - problem.simulator.outputs(theta[None])[0]
-    log_sigma, atanh_phi = [], []
-    for c in range(len(OUTPUTS)):
-        e = residual[..., c][windows.mask]
-        e = e - np.mean(e)
-        r1 = float(np.clip(np.sum(e[1:] * e[:-1]) / np.sum(e * e), -0.9, 0.9))
-        log_sigma.append(np.log(max(float(np.std(e)), 1e-6) * np.sqrt(1.0 - r1 * r1)))
-        atanh_phi.append(np.arctanh(r1))
-    return np.concatenate([z, log_sigma, atanh_phi])
+    theta = problem.physical(torch.as_tensor(z))
+    outputs = problem.simulator.outputs(theta.numpy()[None])[0]
+    ratio = problem.flow_ratio(theta, torch.as_tensor(outputs[..., 1])).numpy()
+    return np.concatenate([z, noise_estimate(windows.observed - outputs, windows.mask, ratio)])
