@@ -116,6 +116,17 @@ def test_the_report_says_what_the_undetectable_rule_measured(commissioned):
     assert "bias_X (1 of 4)" in text  # 4 training runs per fault in this commissioning
 
 
+@pytest.mark.parametrize(("pareto_k", "warned"), [(1.05, True), (0.7, False), (0.3, False)])
+def test_the_report_says_when_the_laplace_check_failed(commissioned, pareto_k, warned):
+    # Vehtari et al.'s rule: above k = 0.7 the Gaussian is not a usable proposal, and the report
+    # must say so in words rather than leave the reader to compare k with the threshold
+    report = dict(commissioned.report, twin=dict(commissioned.report["twin"], pareto_k=pareto_k))
+    text = render_report(report)
+    assert f"k = {pareto_k:.2f}; up to 0.7 the approximation is reliable" in text
+    assert ("**The check failed here (k = 1.05 > 0.7):**" in text) is warned
+    assert ("as indicative only" in text) is warned
+
+
 def test_commissioned_groups_come_from_the_one_way_confusion_of_detected_seconds(
     commissioned, healthy
 ):

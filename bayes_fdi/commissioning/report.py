@@ -16,6 +16,7 @@ from typing import Any
 from bayes_fdi.atomic import write_text
 from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import format_number, format_percent, markdown_table, write_json
+from bayes_fdi.twin.laplace import RELIABLE_PARETO_K
 
 __all__ = ["render_report", "write_report"]
 
@@ -62,6 +63,19 @@ def _summary(report: Mapping[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _laplace_warning(pareto_k: float) -> list[str]:
+    """What a failed importance check means for the twin's posterior (nothing when it passed)."""
+    if not pareto_k > RELIABLE_PARETO_K:  # a NaN k (no check) says nothing either
+        return []
+    return [
+        f"**The check failed here (k = {pareto_k:.2f} > {RELIABLE_PARETO_K}):** the Gaussian "
+        "misses part of the posterior's shape, so read the posterior standard deviations and "
+        "sd ratios below as indicative only. The mode, the held-out check and the fault "
+        "library drawn from this Gaussian are what commissioning used.",
+        "",
+    ]
+
+
 def _twin_section(twin: Mapping[str, Any]) -> list[str]:
     rows = [
         [
@@ -78,9 +92,11 @@ def _twin_section(twin: Mapping[str, Any]) -> list[str]:
         "",
         "Posterior of the parameters the healthy data can inform (Laplace approximation at the "
         "mode, checked by Pareto-smoothed importance sampling: shape "
-        f"k = {twin['pareto_k']:.2f}; below 0.7 the approximation is reliable). The sd ratio is "
+        f"k = {twin['pareto_k']:.2f}; up to {RELIABLE_PARETO_K} the approximation is reliable). "
+        "The sd ratio is "
         "the posterior's standard deviation over the prior's: small means identified.",
         "",
+        *_laplace_warning(twin["pareto_k"]),
         markdown_table(
             ["parameter", "prior mean", "posterior mean", "posterior sd", "sd ratio"], rows
         ),

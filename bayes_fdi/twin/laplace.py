@@ -30,7 +30,18 @@ from bayes_fdi.twin.fixed_order import (
 )
 from bayes_fdi.twin.model import TwinProblem, log_joint, noise_estimate, score
 
-__all__ = ["ImportanceCheck", "LaplaceFit", "fit_laplace", "importance_check"]
+__all__ = [
+    "RELIABLE_PARETO_K",
+    "ImportanceCheck",
+    "LaplaceFit",
+    "fit_laplace",
+    "importance_check",
+]
+
+#: Largest Pareto shape ``k`` of the importance weights at which the Laplace Gaussian is a
+#: usable proposal for the true posterior (Vehtari et al.'s threshold); above it the Gaussian
+#: misses part of the posterior's shape and the smoothed weights rest on few draws.
+RELIABLE_PARETO_K = 0.7
 
 
 class LaplaceFit(NamedTuple):
