@@ -20,8 +20,7 @@ import torch
 
 from bayes_fdi.datasets import INPUT_CHANNELS
 from bayes_fdi.twin.laplace import ImportanceCheck, LaplaceFit
-from bayes_fdi.twin.likelihood import ar1_from_innovations
-from bayes_fdi.twin.model import TwinProblem, flow_scales
+from bayes_fdi.twin.model import TwinProblem, residual_paths
 from bayes_fdi.twin.simulator import OUTPUTS, FitWindows
 
 __all__ = ["ParameterIdentification", "identification", "inference_data", "latent_names"]
@@ -71,17 +70,10 @@ def inference_data(
     predictive = check.outputs.copy()  # (draw, window, time, 2)
     n_windows, n_t = predictive.shape[1:3]
     sim = problem.simulator
-    scales = {
-        "X": np.broadcast_to(post[:, p, None], (n, n_windows)),
-        "F": flow_scales(
-            check.draws, post[:, :p], check.outputs, sim.names, sim.base,
-            problem.pressures.numpy(),
-        ),
-    }  # fmt: skip
-    for c, name in enumerate(OUTPUTS):
-        phi = np.broadcast_to(post[:, p + 2 + c, None], (n, n_windows))
-        eps = rng.standard_normal((n, n_windows, n_t))
-        predictive[..., c] += ar1_from_innovations(eps, scales[name], phi)
+    predictive += residual_paths(
+        rng, check.draws, post[:, :p], check.outputs, sim.names, sim.base,
+        problem.pressures.numpy(),
+    )  # fmt: skip
     observed = windows.observed
     constant = {c: windows.inputs[c].transpose("run", "time").values for c in INPUT_CHANNELS}
     constant["fitted"] = windows.mask.astype(np.int8)

@@ -24,7 +24,7 @@ import torch
 from pyro import poutine
 
 from bayes_fdi.actuator import ActuatorParameters
-from bayes_fdi.twin.likelihood import StationaryAR1, flow_innovation_scale
+from bayes_fdi.twin.likelihood import StationaryAR1, ar1_from_innovations, flow_innovation_scale
 from bayes_fdi.twin.priors import NoisePrior, ParameterPrior
 from bayes_fdi.twin.simulator import OUTPUTS, WindowSimulator, simulated_outputs
 
@@ -33,10 +33,10 @@ __all__ = [
     "N_NOISE",
     "TwinProblem",
     "flow_ratio",
-    "flow_scales",
     "log_joint",
     "noise_estimate",
     "noise_values",
+    "residual_paths",
     "score",
     "split_latent",
     "twin_model",
@@ -89,7 +89,8 @@ def noise_values(latent: np.ndarray, n_parameters: int) -> tuple[np.ndarray, ...
     return sigma, phi, np.exp(latent[..., p + 4])
 
 
-def flow_scales(
+def residual_paths(
+    rng: np.random.Generator,
     latent: np.ndarray,
     thetas: np.ndarray,
     model: np.ndarray,
@@ -97,19 +98,29 @@ def flow_scales(
     base: ActuatorParameters,
     pressures: np.ndarray,
 ) -> np.ndarray:
-    """The flow residual's innovation scale ``(draw, W, T)`` for latent draws ``(draw, p + 5)``,
+    """AR(1) residual paths ``(draw, W, T, 2)`` of X and F for latent draws ``(draw, p + 5)``,
     their parameters ``thetas`` ``(draw, p)``, their simulated outputs ``model``
-    ``(draw, W, T, 2)`` and the recorded P1', P2' ``pressures`` ``(W, T, 2)``."""
-    sigma, _, kappa = noise_values(latent, len(names))
+    ``(draw, W, T, 2)`` and the recorded P1', P2' ``pressures`` ``(W, T, 2)``: X's with one
+    innovation scale per draw, F's with the scale that grows with the flow over the pressure
+    drop. ``rng`` draws the standard normal innovations, X's then F's."""
+    sigma, phi, kappa = noise_values(latent, len(names))
+    n, n_w, n_t = model.shape[:3]
     with torch.no_grad():
         ratio = flow_ratio(
             torch.as_tensor(model[..., 1]), torch.as_tensor(thetas), names, base,
             torch.as_tensor(pressures),
         )  # fmt: skip
-        scale = flow_innovation_scale(
+        scale_f = flow_innovation_scale(
             torch.as_tensor(sigma[:, 1, None, None]), torch.as_tensor(kappa[:, None, None]), ratio
+        ).numpy()
+    scales = {"X": np.broadcast_to(sigma[:, 0, None], (n, n_w)), "F": scale_f}
+    paths = np.empty(model.shape)
+    for c, name in enumerate(OUTPUTS):
+        eps = rng.standard_normal((n, n_w, n_t))
+        paths[..., c] = ar1_from_innovations(
+            eps, scales[name], np.broadcast_to(phi[:, c, None], (n, n_w))
         )
-    return scale.numpy()
+    return paths
 
 
 def _variance_fit(u2: np.ndarray, q2: np.ndarray, floors: tuple[float, float]) -> np.ndarray:
@@ -146,25 +157,30 @@ def noise_estimate(
     """
     pairs = mask[:, 1:] & mask[:, :-1]
     q2 = (ratio[:, 1:][pairs]) ** 2
-    out = []
-    kappa = kappa_floor
-    for c in range(residual.shape[-1]):
+    log_sigma, atanh_phi = [], []
+    for c, name in enumerate(OUTPUTS):
         now = residual[:, 1:, c][pairs]
         before = residual[:, :-1, c][pairs]
-        weights = np.ones_like(now)
-        for _ in range(2 if OUTPUTS[c] == "F" else 1):
-            phi = np.sum(weights * now * before) / max(np.sum(weights * before**2), 1e-300)
-            phi = float(np.clip(phi, -0.99, 0.99))
-            u2 = (now - phi * before) ** 2
-            if OUTPUTS[c] != "F":
-                var = max(float(np.mean(u2)), 1e-300)
-                break
-            floor = max(1e-12 * float(np.mean(u2)), 1e-300)
-            var, kappa2 = _variance_fit(u2, q2, (floor, kappa_floor**2))
-            kappa = float(np.sqrt(kappa2))
-            weights = 1.0 / (var + kappa2 * q2)
-        out.append((0.5 * np.log(var), np.arctanh(phi)))
-    return np.array([out[0][0], out[1][0], out[0][1], out[1][1], np.log(kappa)])
+        if name != "F":
+            phi = _lag_one(now, before, np.ones_like(now))
+            var = max(float(np.mean((now - phi * before) ** 2)), 1e-300)
+        else:
+            weights = np.ones_like(now)
+            for _ in range(2):  # phi, then the variances, then phi again with them
+                phi = _lag_one(now, before, weights)
+                u2 = (now - phi * before) ** 2
+                floor = max(1e-12 * float(np.mean(u2)), 1e-300)
+                var, kappa2 = _variance_fit(u2, q2, (floor, kappa_floor**2))
+                weights = 1.0 / (var + kappa2 * q2)
+        log_sigma.append(0.5 * np.log(var))
+        atanh_phi.append(np.arctanh(phi))
+    return np.array([*log_sigma, *atanh_phi, np.log(np.sqrt(kappa2))])
+
+
+def _lag_one(now: np.ndarray, before: np.ndarray, weights: np.ndarray) -> float:
+    """Weighted least-squares lag-1 coefficient of ``now`` on ``before``, clipped to 0.99."""
+    phi = np.sum(weights * now * before) / max(np.sum(weights * before**2), 1e-300)
+    return float(np.clip(phi, -0.99, 0.99))
 
 
 class TwinProblem(NamedTuple):

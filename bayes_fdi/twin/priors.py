@@ -42,7 +42,12 @@ class ParameterPrior(NamedTuple):
 
     def loc(self) -> float:
         """The prior mean of the unconstrained ``z``."""
-        q = (self.nominal - self.low) / (self.high - self.low)
+        return self.to_latent(self.nominal)
+
+    def to_latent(self, value: float) -> float:
+        """``logit((value - low) / (high - low))``, the inverse of `to_value`; a value at or
+        beyond the support's ends is taken ``1e-9`` of the interval inside them."""
+        q = min(max((float(value) - self.low) / (self.high - self.low), 1e-9), 1.0 - 1e-9)
         return math.log(q / (1.0 - q))
 
     def to_value(self, z):

@@ -32,8 +32,7 @@ from bayes_fdi.twin.fixed_order import cholesky, matvec
 from bayes_fdi.twin.flow_start import flow_law_start
 from bayes_fdi.twin.inference import inference_data
 from bayes_fdi.twin.laplace import fit_laplace, importance_check
-from bayes_fdi.twin.likelihood import ar1_from_innovations
-from bayes_fdi.twin.model import TwinProblem, flow_scales, noise_estimate, noise_values
+from bayes_fdi.twin.model import TwinProblem, noise_estimate, noise_values, residual_paths
 from bayes_fdi.twin.priors import (
     DEFAULT_PRIORS,
     NOISE_PRIOR,
@@ -256,22 +255,16 @@ class ActuatorTwin(BaseEstimator):
             raise ValueError(f"n_draws must be a positive integer, got {n_draws!r}")
         rng = np.random.default_rng([int(seed), STREAM_PREDICT])
         latent = self.sample_latent(n_draws, rng)
-        n_runs, n_t = inputs.sizes["run"], inputs.sizes["time"]
         simulator = WindowSimulator(inputs, self.base, self.names_, **self._simulate_options())
         records = self.latent_to_parameters(latent)
         thetas = np.array([[getattr(p, n) for n in self.names_] for p in records])
         model = simulator.outputs(thetas)  # (draw, run, time, 2)
-        sigma, phi, _ = noise_values(latent, len(self.names_))
-        scales = {
-            "X": np.broadcast_to(sigma[:, 0, None], (n_draws, n_runs)),
-            "F": flow_scales(latent, thetas, model, self.names_, self.base, _pressures(inputs)),
-        }
+        noise = residual_paths(rng, latent, thetas, model, self.names_, self.base,
+                               _pressures(inputs))  # fmt: skip
         dims = ("draw", "run", "time")
         data = {}
         for c, name in enumerate(OUTPUTS):
-            eps = rng.standard_normal((n_draws, n_runs, n_t))
-            f = np.broadcast_to(phi[:, c, None], (n_draws, n_runs))
-            data[name] = (dims, model[..., c] + ar1_from_innovations(eps, scales[name], f))
+            data[name] = (dims, model[..., c] + noise[..., c])
             data[f"{name}_model"] = (dims, model[..., c])
         coords = {"draw": np.arange(n_draws), "run": inputs["run"].values,
                   "time": inputs["time"].values}  # fmt: skip
@@ -296,9 +289,7 @@ def _start(problem: TwinProblem, windows, values: Mapping[str, float] | None = N
     z = problem.prior_loc().numpy()
     names = list(problem.simulator.names)
     for name, value in (values or {}).items():
-        prior = problem.priors[names.index(name)]
-        q = min(max((float(value) - prior.low) / (prior.high - prior.low), 1e-9), 1.0 - 1e-9)
-        z[names.index(name)] = np.log(q / (1.0 - q))
+        z[names.index(name)] = problem.priors[names.index(name)].to_latent(value)
     theta = problem.physical(torch.as_tensor(z))
     outputs = problem.simulator.outputs(theta.numpy()[None])[0]
     ratio = problem.flow_ratio(theta, torch.as_tensor(outputs[..., 1])).numpy()
