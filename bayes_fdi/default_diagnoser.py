@@ -3,20 +3,22 @@
 The online diagnoser (`bayes_fdi.diagnosis.OnlineDiagnoser`) is fitted on simulated campaigns
 declared in ``sim/``, in one of two trainings (`TRAININGS`):
 
-- ``"dgen"`` (default): the DGen sines of the benchmark with run-to-run variation:
-  ``online-normal.toml`` (fault-free runs: normal models, whitening, detector threshold, input
-  envelope), ``online-faults-abrupt.toml`` and ``online-faults-incipient.toml`` (every fault at
-  magnitudes from 0.1 to 1.0, abrupt and ramping);
-- ``"excitation-mix"``: the same files with fewer runs, plus their sister files
-  ``online-*-sine-sum.toml``, ``-step-ramp.toml`` and ``-level-loop.toml``: the excitation
+- ``"excitation-mix"`` (default): the DGen sines of the benchmark with run-to-run variation
+  (``online-normal.toml``: fault-free runs for the normal models, whitening, detector threshold
+  and input envelope; ``online-faults-abrupt.toml`` and ``online-faults-incipient.toml``: every
+  fault at magnitudes from 0.1 to 1.0, abrupt and ramping), with fewer runs, plus their sister
+  files ``online-*-sine-sum.toml``, ``-step-ramp.toml`` and ``-level-loop.toml``: the excitation
   families of `bayes_fdi.actuator.excitation` (sums of sines, steps and ramps, a PI level loop)
-  over the DABLib operating ranges of P1, P2, T1, and normal models whose std factors are
-  fitted by coverage (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels`
-  ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all.
+  over the DABLib operating ranges of P1, P2, T1; normal models whose std factors are fitted by
+  coverage (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels`
+  ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all, and
+  that take the command through the actuator's lag as an input (``physics_inputs``);
+- ``"dgen"``: the three DGen files alone, with all their runs: a diagnoser for the DAMADICS
+  benchmark's own excitation, which alarms as soon as the valve is moved otherwise.
 
-Either training may give its normal models physics inputs (``physics_inputs``: the command through
-the actuator's lag, the valve law; `bayes_fdi.diagnosis.normal_models.physics_inputs`); off by
-default.
+The normal models' physics inputs (``physics_inputs``: the command through the actuator's lag,
+the valve law; `bayes_fdi.diagnosis.normal_models.physics_inputs`) default to each training's
+`DEFAULT_PHYSICS_INPUTS`.
 
 Each fault file is simulated with three seeds for the training, validation (isolability groups)
 and calibration (group probabilities) sets (`simulation_plan`). Every seed is below 1000, apart
@@ -51,6 +53,8 @@ __all__ = [
     "CALIBRATIONS",
     "CALIBRATION_AFTER_ONSET",
     "CAMPAIGNS",
+    "DEFAULT_PHYSICS_INPUTS",
+    "DEFAULT_TRAINING",
     "LONG_CALIBRATION_FILES",
     "SET_SEED_OFFSETS",
     "TRAININGS",
@@ -80,7 +84,15 @@ TRAININGS: dict[str, dict[str, tuple[tuple[str, dict[str, Any]], ...]]] = {
                       ("online-faults-incipient-level-loop", {})),
     },
 }  # fmt: skip
-#: The campaign files of each set of the default training (``"dgen"``).
+#: The training `fit_online_diagnoser` simulates unless told otherwise.
+DEFAULT_TRAINING = "excitation-mix"
+#: The normal models' physics inputs of each training unless ``physics_inputs`` is given: the
+#: command's lag measured better on held-out runs of every family with the mix, and changed
+#: little with the DGen sines alone.
+DEFAULT_PHYSICS_INPUTS: dict[str, tuple[str, ...]] = {
+    "dgen": (), "excitation-mix": ("command_lag",),
+}  # fmt: skip
+#: The campaign files of each set of the DGen-only training (``"dgen"``).
 CAMPAIGNS: dict[str, tuple[str, ...]] = {
     key: tuple(name for name, _ in files) for key, files in TRAININGS["dgen"].items()
 }
@@ -125,7 +137,7 @@ def _check_calibration(calibration: Any) -> str:
 
 
 def online_campaigns(
-    *, small: bool = False, training: str = "dgen", calibration: str = "temperature"
+    *, small: bool = False, training: str = DEFAULT_TRAINING, calibration: str = "temperature"
 ) -> dict[str, tuple[Campaign, ...]]:
     """The campaigns of each set of ``training`` (`TRAININGS`; ``small``: the quick version);
     with ``calibration="top-label-long"`` (not ``small``), the `LONG_CALIBRATION_FILES` too under
@@ -156,7 +168,11 @@ def _max_seed(campaigns: dict[str, tuple[Campaign, ...]]) -> int:
 
 
 def simulation_plan(
-    *, seed: int = 0, small: bool = False, training: str = "dgen", calibration: str = "temperature"
+    *,
+    seed: int = 0,
+    small: bool = False,
+    training: str = DEFAULT_TRAINING,
+    calibration: str = "temperature",
 ) -> list[tuple[str, Campaign, int]]:
     """What `simulate_online_campaigns` simulates, in order: ``(part, campaign, seed)`` with part
     ``"normal"``, ``"train"``, ``"validation"`` or ``"calibration"``.
@@ -192,7 +208,7 @@ def simulate_online_campaigns(
     seed: int = 0,
     small: bool = False,
     progress: bool = True,
-    training: str = "dgen",
+    training: str = DEFAULT_TRAINING,
     calibration: str = "temperature",
 ) -> dict[str, list[xr.Dataset]]:
     """Simulate the training data of ``training`` (`simulation_plan`): ``{"normal": [...],
@@ -211,9 +227,9 @@ def fit_online_diagnoser(
     seed: int = 0,
     small: bool = False,
     progress: bool = True,
-    training: str = "dgen",
+    training: str = DEFAULT_TRAINING,
     calibration: str = "temperature",
-    physics_inputs: tuple[str, ...] = (),
+    physics_inputs: tuple[str, ...] | None = None,
     **params: Any,
 ) -> Any:
     """Simulate the online training campaigns and fit an `OnlineDiagnoser` on them.
@@ -228,14 +244,15 @@ def fit_online_diagnoser(
     progress
         Progress bars and a one-line summary on stderr.
     training
-        ``"dgen"`` (default) or ``"excitation-mix"`` (`TRAININGS`).
+        ``"excitation-mix"`` (default) or ``"dgen"`` (`TRAININGS`).
     calibration
         ``"temperature"`` (default) or ``"top-label-long"`` (`CALIBRATIONS`): the recalibration
         of the group probabilities and the calibration runs it is fitted on.
     physics_inputs
         The normal models' physics inputs (``"command_lag"``, ``"valve_law"``:
-        `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``physics_inputs``);
-        ignored where ``params`` gives the normal models.
+        `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``physics_inputs``;
+        default: the training's `DEFAULT_PHYSICS_INPUTS`); ignored where ``params`` gives the
+        normal models.
     **params
         Parameters of `OnlineDiagnoser` (default: ``calibrator=TemperatureScaler()``, or
         ``TopLabelScaler()`` with ``calibration="top-label-long"``;
@@ -254,6 +271,8 @@ def fit_online_diagnoser(
 
     t0 = time.perf_counter()
     mix = _check_training(training) != "dgen"
+    if physics_inputs is None:
+        physics_inputs = DEFAULT_PHYSICS_INPUTS[training]
     data = simulate_online_campaigns(
         seed=seed, small=small, progress=progress, training=training, calibration=calibration
     )

@@ -237,6 +237,36 @@ def test_default_model_is_fitted_once_and_cached(tmp_path, monkeypatch, capsys):
     assert len(calls) == 2
 
 
+def test_fit_default_training_reaches_the_fitter_and_needs_default(tmp_path, monkeypatch, capsys):
+    from bayes_fdi.default_diagnoser import DEFAULT_TRAINING, TRAININGS
+
+    # the command line names the trainings without importing them: the same, the default first
+    assert model_fitting.DEFAULT_TRAININGS[0] == DEFAULT_TRAINING
+    assert set(model_fitting.DEFAULT_TRAININGS) == set(TRAININGS)
+    assert DEFAULT_TRAINING in model_fitting.default_model_path(small=False).name
+    calls = []
+
+    def fake_fitter(seed, small, progress, **options):
+        calls.append(options)
+        rng = np.random.default_rng(seed)
+        normal = xr.concat([recording(rng, 300, faults=()) for _ in range(2)], dim="run")
+        return StreamDouble().fit(normal.assign_coords(run=[0, 1]))
+
+    monkeypatch.setattr(model_fitting, "_default_fitter", lambda: fake_fitter)
+    out = str(tmp_path / "m.npz")
+    assert main(["fit", "--default", "--training", "dgen", "--out", out, "--quiet"]) == 0
+    assert "fitted on the dgen training campaigns" in capsys.readouterr().out
+    assert main(["fit", "--default", "--out", out, "--quiet"]) == 0
+    assert "fitted on the default training campaigns" in capsys.readouterr().out
+    assert calls == [{"training": "dgen"}, {}]
+    assert (
+        main(["fit", "--campaign", "damadics-benchmark", "--training", "dgen", "--out", out]) == 2
+    )
+    assert "--training needs --default" in capsys.readouterr().err
+    assert main(["fit", "--default", "--training", "chirp", "--out", out]) == 2
+    assert "invalid choice: 'chirp'" in capsys.readouterr().err
+
+
 def _day_file(path, rng, start=57000, n=1400):
     """A synthetic Lublin day file (33 columns): actuator 3 with an F offset in the f19 event."""
     from bayes_fdi.datasets.lublin import ACTUATOR_COLUMNS, ACTUATOR_RANGES, DAY_COLUMNS

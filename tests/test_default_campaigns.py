@@ -1,8 +1,8 @@
 """The default diagnoser's training campaigns (`sim/online-*.toml`, `bayes_fdi.default_diagnoser`).
 
-The default training is the DGen sines; the training "excitation-mix" spans the DGen sines and
-the three training excitation families over the DABLib operating ranges, never a family of the
-shift benchmark. Seeds are below 1000 and no two simulations share one.
+The default training "excitation-mix" spans the DGen sines and the three training excitation
+families over the DABLib operating ranges, never a family of the shift benchmark; the training
+"dgen" is the DGen sines alone. Seeds are below 1000 and no two simulations share one.
 """
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from bayes_fdi.campaigns.simulation import simulate_campaign
 from bayes_fdi.default_diagnoser import (
     CALIBRATION_AFTER_ONSET,
     CAMPAIGNS,
+    DEFAULT_PHYSICS_INPUTS,
+    DEFAULT_TRAINING,
     SET_SEED_OFFSETS,
     TRAININGS,
     online_campaigns,
@@ -56,8 +58,11 @@ def test_every_set_of_the_mix_spans_dgen_and_the_training_families(small):
         assert 0.3 < dgen / (48 * 900) < 0.5
 
 
-def test_the_default_training_is_the_dgen_sines_as_declared():
-    campaigns = online_campaigns()
+def test_the_default_training_is_the_mix_and_the_dgen_training_the_sines_as_declared():
+    assert DEFAULT_TRAINING == MIX and DEFAULT_PHYSICS_INPUTS[MIX] == ("command_lag",)
+    assert online_campaigns() == online_campaigns(training=MIX)
+    assert simulation_plan() == simulation_plan(training=MIX)
+    campaigns = online_campaigns(training="dgen")
     assert {k: tuple(c.name for c in v) for k, v in campaigns.items()} == CAMPAIGNS
     assert [(c.n_runs, c.duration) for cs in campaigns.values() for c in cs] == [
         (48, 900),
@@ -94,9 +99,9 @@ def test_a_training_family_campaign_simulates_its_generator_inputs():
 
 def test_a_seed_beyond_the_last_allowed_or_an_unknown_training_is_refused_by_name():
     with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 529\)"):
-        simulate_online_campaigns(seed=529, small=True, progress=False, training=MIX)
+        simulate_online_campaigns(seed=529, small=True, progress=False)
     with pytest.raises(ValueError, match=r"seed must be an integer in \[0, 549\)"):
-        simulate_online_campaigns(seed=549, small=True, progress=False)
+        simulate_online_campaigns(seed=549, small=True, progress=False, training="dgen")
     with pytest.raises(ValueError, match="training must be one of dgen, excitation-mix"):
         online_campaigns(training="chirp")
 
@@ -105,7 +110,10 @@ def test_the_long_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones
     # by default the calibration parts are the fault files' own runs; with "top-label-long" the
     # abrupt calibration runs last CALIBRATION_AFTER_ONSET s after the onset and the slow
     # incipient file gives the calibration set alone, with the calibration offset
-    default = [(part, c.name, c.duration, s) for part, c, s in simulation_plan(seed=3)]
+    # (the DGen training: one file per set)
+    default = [
+        (part, c.name, c.duration, s) for part, c, s in simulation_plan(seed=3, training="dgen")
+    ]
     assert default == [
         ("normal", "online-normal", 900, 104),
         ("train", "online-faults-abrupt", 600, 204),
@@ -115,7 +123,7 @@ def test_the_long_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones
         ("validation", "online-faults-incipient", 900, 354),
         ("calibration", "online-faults-incipient", 900, 454),
     ]
-    long = simulation_plan(seed=3, calibration="top-label-long")
+    long = simulation_plan(seed=3, training="dgen", calibration="top-label-long")
     assert [(part, c.name, c.duration, s) for part, c, s in long] == [
         *default[:3],
         ("calibration", "online-faults-abrupt", 120 + CALIBRATION_AFTER_ONSET, 404),
@@ -133,5 +141,5 @@ def test_the_long_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones
     with pytest.raises(ValueError, match="calibration must be one of temperature, top-label"):
         simulation_plan(calibration="isotonic")
     # the seeds of the long calibration stay below 1000 with the largest allowed seed
-    top = simulation_plan(seed=548, calibration="top-label-long")
+    top = simulation_plan(seed=548, training="dgen", calibration="top-label-long")
     assert max(s for _, _, s in top) < 1000

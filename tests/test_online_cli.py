@@ -18,6 +18,7 @@ from bayes_fdi.cli import main
 from bayes_fdi.datasets import load_lublin_example
 from bayes_fdi.deployment import fitting as model_fitting
 from bayes_fdi.diagnosis import OnlineDiagnoser
+from bayes_fdi.diagnosis.detection import CUSUM, TwoSpeedCUSUM
 
 #: Runs ``bayes-fdi diagnose`` in a fresh interpreter and prints the bayes_fdi modules it loaded.
 _DIAGNOSE_AND_LIST_MODULES = """
@@ -109,9 +110,16 @@ def test_fit_default_writes_a_model_that_diagnose_reads(cache, tmp_path, capsys)
     assert "OnlineDiagnoser fitted on the default training campaigns (small)" in (
         capsys.readouterr().out
     )
+    # the default training: the excitation mix, the command's lag as a normal-model input and
+    # the CUSUM (whose threshold holds better than the two-speed CUSUM's off the training
+    # excitation)
+    fitted = OnlineDiagnoser.load(model_file)
+    assert isinstance(fitted.detector_, CUSUM) and not isinstance(fitted.detector_, TwoSpeedCUSUM)
+    assert fitted.normal_models_.physics_inputs == ("command_lag",)
+    assert fitted.normal_models_.std_coverage == 0.9
     # same seed, same settings: the same model as the cached default (same stream)
     hour = load_lublin_example().isel(run=0, time=slice(0, 600))
-    a = OnlineDiagnoser.load(model_file).run(hour)
+    a = fitted.run(hour)
     b = OnlineDiagnoser.load(path).run(hour)
     for name in ("DD", "stat_X", "stat_F", "X_hat", "F_hat_std"):
         np.testing.assert_array_equal(a[name].values, b[name].values)

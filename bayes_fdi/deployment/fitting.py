@@ -13,9 +13,9 @@ A model file (`bayes_fdi.model_files.format`) is what ``bayes-fdi diagnose --mod
 `default_model` is the model ``bayes-fdi diagnose`` uses without ``--model``: fitted from the
 default campaigns on first use and cached in :func:`cache_dir` (``$BAYES_FDI_CACHE`` if set,
 else the platform's user cache folder, ``$XDG_CACHE_HOME/bayes_fdi`` or ``~/.cache/bayes_fdi`` on
-Linux), written atomically; later calls load it. Its file name holds the package version and the
-file-format version, so an upgrade fits a new one; delete the folder (or pass ``refit=True``,
-``bayes-fdi fit --default --out PATH``) to fit again.
+Linux), written atomically; later calls load it. Its file name holds the package version, the
+file-format version and the default training's name, so an upgrade fits a new one; delete the
+folder (or pass ``refit=True``, ``bayes-fdi fit --default --out PATH``) to fit again.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from bayes_fdi.datasets import CHANNELS, STATES, make_dataset
 
 __all__ = [
     "CACHE_ENV",
+    "DEFAULT_TRAININGS",
     "cache_dir",
     "configure_parser",
     "default_model",
@@ -50,6 +51,9 @@ __all__ = [
     "run_from_cli",
 ]
 
+#: The trainings of ``bayes-fdi fit --default --training``, the default first (those of
+#: `bayes_fdi.default_diagnoser`, named here so that the command line starts without it).
+DEFAULT_TRAININGS = ("excitation-mix", "dgen")
 #: Environment variable naming the cache folder of the default model.
 CACHE_ENV = "BAYES_FDI_CACHE"
 #: Environment variable asking for the small (quick) settings, as the notebooks use.
@@ -75,8 +79,8 @@ def default_model_path(*, small: bool | None = None) -> Path:
     from bayes_fdi import __version__
 
     small = _small() if small is None else small
-    suffix = "-small" if small else ""
-    name = f"online-diagnoser-{__version__}-f{model_files.FORMAT_VERSION}{suffix}.npz"
+    training, suffix = DEFAULT_TRAININGS[0], "-small" if small else ""
+    name = f"online-diagnoser-{__version__}-f{model_files.FORMAT_VERSION}-{training}{suffix}.npz"
     return cache_dir() / name
 
 
@@ -441,6 +445,11 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--small", action="store_true", help="with --default: the quick settings (a few minutes)"
     )
+    parser.add_argument(
+        "--training", choices=DEFAULT_TRAININGS, default=None,
+        help="with --default: the training campaigns (default excitation-mix: four excitation "
+        "families; dgen: the DAMADICS test generator's sines alone)",
+    )  # fmt: skip
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     add_reading_arguments(parser)
     add_cluster_arguments(parser)
@@ -456,10 +465,13 @@ def run_from_cli(args: argparse.Namespace) -> int:
         raise UsageError("--set needs --campaign")
     if args.normal_samples is not None and not args.normal:
         raise UsageError("--normal-samples needs --normal (the fault-free recordings)")
+    if args.training and not args.default:
+        raise UsageError("--training needs --default")
     if args.default:
-        fit = _default_fitter()
-        model = fit(seed=0 if args.seed is None else args.seed, small=args.small, progress=progress)
-        what = "the default training campaigns" + (" (small)" if args.small else "")
+        chosen = {"training": args.training} if args.training else {}
+        seed = 0 if args.seed is None else args.seed
+        model = _default_fitter()(seed=seed, small=args.small, progress=progress, **chosen)
+        what = f"the {args.training or 'default'} training campaigns" + " (small)" * args.small
     elif args.campaign:
         from bayes_fdi.campaigns.simulation import load_with_overrides
 
