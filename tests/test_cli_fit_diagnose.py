@@ -257,8 +257,8 @@ def test_fit_default_training_reaches_the_fitter_and_needs_default(tmp_path, mon
     assert main(["fit", "--default", "--training", "dgen", "--out", out, "--quiet"]) == 0
     assert "fitted on the dgen training campaigns" in capsys.readouterr().out
     assert main(["fit", "--default", "--out", out, "--quiet"]) == 0
-    assert "fitted on the default training campaigns" in capsys.readouterr().out
-    assert calls == [{"training": "dgen"}, {}]
+    assert "fitted on the excitation-mix training campaigns" in capsys.readouterr().out
+    assert calls == [{"training": "dgen"}, {"training": DEFAULT_TRAINING}]
     assert (
         main(["fit", "--campaign", "damadics-benchmark", "--training", "dgen", "--out", out]) == 2
     )

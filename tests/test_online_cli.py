@@ -107,7 +107,7 @@ def test_fit_default_writes_a_model_that_diagnose_reads(cache, tmp_path, capsys)
     path, *_ = cache
     model_file = tmp_path / "model.npz"
     assert main(["fit", "--default", "--small", "--out", str(model_file), "--quiet"]) == 0
-    assert "OnlineDiagnoser fitted on the default training campaigns (small)" in (
+    assert "OnlineDiagnoser fitted on the excitation-mix training campaigns (small)" in (
         capsys.readouterr().out
     )
     # the default training: the excitation mix, the command's lag as a normal-model input and

@@ -468,10 +468,10 @@ def run_from_cli(args: argparse.Namespace) -> int:
     if args.training and not args.default:
         raise UsageError("--training needs --default")
     if args.default:
-        chosen = {"training": args.training} if args.training else {}
+        training = args.training or DEFAULT_TRAININGS[0]
         seed = 0 if args.seed is None else args.seed
-        model = _default_fitter()(seed=seed, small=args.small, progress=progress, **chosen)
-        what = f"the {args.training or 'default'} training campaigns" + " (small)" * args.small
+        model = _default_fitter()(seed=seed, small=args.small, progress=progress, training=training)
+        what = f"the {training} training campaigns" + (" (small)" if args.small else "")
     elif args.campaign:
         from bayes_fdi.campaigns.simulation import load_with_overrides
 
