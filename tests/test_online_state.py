@@ -189,7 +189,10 @@ def test_the_0_1_0_whitener_and_normal_models_drop_their_caches(saved):
     # the std factors of 0.1.0 were fitted by maximum likelihood (std_coverage=None), and its
     # models took no physics inputs
     upgraded = DynamicNormalModels.upgrade_model_file(dict(unfitted), 1)
-    assert upgraded == {**unfitted, "std_coverage": None, "physics_inputs": ()}
+    assert upgraded == {
+        **unfitted, "std_coverage": None, "physics_inputs": (), "lag_speed_limits": False,
+        "lag_as_mean": False,
+    }  # fmt: skip
     # the fitted models' kernel parameters, rebuilt on loading, hold the values 0.1.0 passed
     # to its kernel (the scalars of its saved `_kernel_args`)
     args = saved["normal_models_"]["state"]["_kernel_args"]

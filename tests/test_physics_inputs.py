@@ -53,7 +53,39 @@ def test_fit_command_lag_recovers_the_time_constants():
     cv = np.repeat(rng.uniform(0.3, 0.9, size=(3, 40)), 25, axis=1)  # steps every 25 s
     s = rng.uniform(0.3, 0.5, size=cv.shape)
     x = 0.02 + 0.97 * lagged_command(cv, 2.0, 6.0) - 0.05 * s + rng.normal(0, 1e-3, cv.shape)
-    assert fit_command_lag(cv, x, s, grid=(1.0, 2.0, 4.0, 6.0, 10.0)) == (2.0, 6.0)
+    # no speed limit in these runs: none is fitted
+    grid, speeds = (1.0, 2.0, 4.0, 6.0, 10.0), (math.inf, 0.02, 0.05, 0.1)
+    assert fit_command_lag(cv, x, s, grid=grid, limits=speeds) == (2.0, 6.0, math.inf, math.inf)
+
+
+def test_fit_command_lag_recovers_the_speed_limits():
+    rng = np.random.default_rng(4)
+    cv = np.repeat(rng.uniform(0.1, 0.9, size=(4, 30)), 40, axis=1)  # steps of up to 0.8
+    s = rng.uniform(0.3, 0.5, size=cv.shape)
+    y = lagged_command(cv, 1.0, 2.0, 0.1, 0.03)
+    x = 0.02 + 0.97 * y - 0.05 * s + rng.normal(0, 1e-3, cv.shape)
+    grid, speeds = (0.5, 1.0, 2.0, 4.0), (math.inf, 0.01, 0.03, 0.1, 0.3)
+    assert fit_command_lag(cv, x, s, grid=grid, limits=speeds) == (1.0, 2.0, 0.1, 0.03)
+
+
+def test_a_large_step_is_travelled_at_the_limited_speed():
+    # up by 0.8 with a fast lag: the limit 0.1/s sets the travel until the lag's own step,
+    # a (1 - y), falls below it; then the first-order approach (closed form from there)
+    cv = np.concatenate([np.zeros(3), np.full(30, 0.8), np.full(40, 0.2)])
+    y = lagged_command(cv, 0.5, 0.5, 0.1, 0.05)
+    a = 1.0 - math.exp(-2.0)
+    np.testing.assert_allclose(y[3:10], 0.1 * np.arange(1, 8), rtol=1e-12)
+    k = 4 + int(np.argmax(a * (0.8 - y[3:33]) <= 0.1))  # the first step inside the limit
+    np.testing.assert_allclose(y[k:33], 0.8 - (0.8 - y[k - 1]) * (1 - a) ** np.arange(1, 34 - k),
+                               rtol=1e-12)  # fmt: skip
+    # down by 0.6 at 0.05/s
+    np.testing.assert_allclose(np.diff(y[32:40]), -0.05, rtol=1e-12)
+    # no limit (inf) is the plain lag, bit for bit
+    np.testing.assert_array_equal(
+        lagged_command(cv, 2.0, 7.0, math.inf, math.inf), lagged_command(cv, 2.0, 7.0)
+    )
+    with pytest.raises(ValueError, match="v_fall must be a positive speed"):
+        lagged_command(cv, 1.0, 1.0, 0.1, 0.0)
 
 
 def test_valve_law_is_the_actuator_models_flow():

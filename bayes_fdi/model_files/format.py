@@ -109,6 +109,9 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
+#: 11: the dynamic normal models' command lag may limit the stem's speed and the position model
+#: may learn X minus the lagged command (``lag_speed_limits``, ``lag_as_mean``: two more fields
+#: of their compiled predictor's parameters);
 #: 10: a fault isolator records how its isolability groups were found (``group_rule``; older
 #: files found them by the pairwise rule);
 #: 9: the dynamic normal models may take physics inputs (``physics_inputs``: the command's lag
@@ -122,7 +125,7 @@ FORMAT_NAME = "bayes_fdi.model"
 #: 4: the detection decision's hold (``hold``, the state's ``quiet`` count); 3: the online
 #: diagnoser's components own their states; 2: classes named by their stable registered names;
 #: 1 (bayes_fdi 0.1.0): classes named by ``module:QualName``.
-FORMAT_VERSION = 10
+FORMAT_VERSION = 11
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.

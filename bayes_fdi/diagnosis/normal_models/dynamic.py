@@ -6,8 +6,7 @@ residuals of 0.027 (X) and 0.056 (F) RMS on fault-free simulated runs, twenty an
 the sensor noise (0.0014), because the stem follows its command and rejects the 0.1 Hz
 pressure disturbance with a lag that a static map cannot represent; a fault must exceed that
 error to be seen. Measured on fault-free DGen runs (``docs/online.md``), two changes bring the
-error down to about the achievable level (a gradient-boosting model on the same inputs does no
-better):
+error to about the achievable level (gradient boosting on the same inputs does no better):
 
 1. **Position from increments.** ``X_hat = g1(u)`` with
    ``u = (CV, s, dCV_0 .. dCV_{D-1}, ds_0 .. ds_{D-1})``, ``s = sign(P1 - P2) sqrt(|P1 - P2|)``
@@ -28,19 +27,14 @@ are calibrated by cross-fitting (fault-free runs split by run, or by time block 
 fewer runs than folds): one factor per bin of the command speed ``|CV(t) - CV(t-1)|`` (causal),
 by maximum likelihood or by coverage of the out-of-fold residuals (``std_coverage``).
 
-**Rails.** The sensors clip at 0 and 1, and F' sits at its upper rail for much of a benchmark
-run. A measurement at a rail whose prediction is at the same rail carries no information about a
-change (the true value is only known to lie beyond the rail), so its standardised residual is 0
-(`standardised_residuals`). The out-of-fold standardised residuals are kept (``oof_z_``) for
-the detector's whitening and threshold.
+**Rails.** A measurement at a sensor's rail whose prediction is at the same rail carries no
+information about a change, so its standardised residual is 0 (`standardised_residuals`). The
+out-of-fold standardised residuals (``oof_z_``) serve the detector's whitening and threshold.
 
-Every prediction (`predict`, and the online diagnoser's per-second path) goes through one
-compiled kernel (`bayes_fdi.diagnosis.normal_models.dynamic_kernel`) with the fitted values as
-one named tuple (``params_``) and an explicit state (the last ``D`` values of CV and ``s``; before
-a run's first sample they are taken as held at its first value). Like every online component
-the models create their state (``init_state``), check it (``check_state``) and carry it:
-``update(sample, state)`` predicts one second and ``run(channels, state)`` a chunk, both
-returning the new state, so a recording gives the same numbers whole or second by second.
+Every prediction goes through one compiled kernel
+(`bayes_fdi.diagnosis.normal_models.dynamic_kernel`) with the fitted values (``params_``) and
+an explicit state: ``update(sample, state)`` predicts one second and ``run(channels, state)`` a
+chunk, so a recording gives the same numbers whole or second by second.
 """
 
 from __future__ import annotations
@@ -70,7 +64,10 @@ from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     predict_runs,
     predict_seconds,
 )
+from bayes_fdi.diagnosis.normal_models.evidence_widths import search_widths
+from bayes_fdi.diagnosis.normal_models.model_upgrades import upgrade_dynamic_models
 from bayes_fdi.diagnosis.normal_models.physics_inputs import (
+    SPEED_GRID,
     check_physics_inputs,
     fit_command_lag,
     flow_model_inputs,
@@ -127,6 +124,14 @@ class DynamicNormalModels(BaseEstimator):
         the command through the actuator's two-rate lag (time constants fitted on the runs:
         ``command_lag_``); with ``"valve_law"`` the flow model the valve law's flow at
         ``X_hat`` (T1 is then needed); see `bayes_fdi.diagnosis.normal_models.physics_inputs`.
+    lag_speed_limits
+        With ``"command_lag"``: the lag also limits the stem's speed in each direction, both
+        limits fitted on the runs (`~bayes_fdi.diagnosis.normal_models.physics_inputs.SPEED_GRID`;
+        default False: no limits).
+    lag_as_mean
+        With ``"command_lag"``: the position model learns ``X`` minus the lagged command, so
+        where its inputs are far from the training data it falls back on the lag rather than
+        on the data's mean (default False: it learns ``X``).
     random_state
         Seed of the subsets and folds.
 
@@ -170,6 +175,8 @@ class DynamicNormalModels(BaseEstimator):
         calibration_bins: int = 5,
         std_coverage: float | None = None,
         physics_inputs: tuple[str, ...] = (),
+        lag_speed_limits: bool = False,
+        lag_as_mean: bool = False,
         random_state: int | None = 0,
     ) -> None:
         self.n_differences = n_differences
@@ -181,6 +188,8 @@ class DynamicNormalModels(BaseEstimator):
         self.calibration_bins = calibration_bins
         self.std_coverage = std_coverage
         self.physics_inputs = physics_inputs
+        self.lag_speed_limits = lag_speed_limits
+        self.lag_as_mean = lag_as_mean
         self.random_state = random_state
 
     # ---------------------------------------------------------------- fitting
@@ -204,7 +213,10 @@ class DynamicNormalModels(BaseEstimator):
                 raise ValueError(f"{name} must be a non-empty grid of positive widths")
         if self.std_coverage is not None and not 0 < self.std_coverage < 1:
             raise ValueError(f"std_coverage must be None or in (0, 1), got {self.std_coverage!r}")
-        check_physics_inputs(self.physics_inputs)
+        lagged = "command_lag" in check_physics_inputs(self.physics_inputs)
+        for name in ("lag_speed_limits", "lag_as_mean"):
+            if not isinstance(getattr(self, name), bool) or (getattr(self, name) and not lagged):
+                raise ValueError(f"{name} must be False, or True with the 'command_lag' input")
 
     def fit(self, normal_runs: xr.Dataset) -> DynamicNormalModels:
         """Fit both models on fault-free runs and calibrate their predictive stds.
@@ -229,11 +241,14 @@ class DynamicNormalModels(BaseEstimator):
         grid = {c: np.asarray(normal_runs[c].transpose("run", "time").values, float)
                 for c in ("CV", "X", "F", "T1", "P1")}  # fmt: skip
         y = {c: grid[c].ravel() for c in OUTPUT_CHANNELS}
-        self.command_lag_ = None
+        self.command_lag_, x_mean = None, np.zeros(n_runs * n_times)  # x_mean: X's prior mean
         if "command_lag" in self.physics_inputs:  # checked by _check_params
-            self.command_lag_ = fit_command_lag(grid["CV"], grid["X"], U[:, :, 1])
+            limits = SPEED_GRID if self.lag_speed_limits else (math.inf,)
+            self.command_lag_ = fit_command_lag(grid["CV"], grid["X"], U[:, :, 1], limits=limits)
             lag = lagged_command(grid["CV"], *self.command_lag_)
             U = np.concatenate([U, lag[:, :, None]], axis=-1)
+            x_mean = lag.ravel() * float(self.lag_as_mean)
+        y["X - mean"] = y["X"] - x_mean
         U = U.reshape(n_runs * n_times, -1)
         s = U[:, 1]
         law = nominal_valve_law() if "valve_law" in self.physics_inputs else np.empty(0)
@@ -258,14 +273,20 @@ class DynamicNormalModels(BaseEstimator):
             return np.sort(rng.choice(rows, size=size, replace=False)) if rows.size > size else rows
 
         t0 = time.perf_counter()
-        wx, wf = self._search_widths(Z, y, subset(idx, int(self.evidence_max_samples)), flow_inputs)
+        rows = subset(idx, int(self.evidence_max_samples))
+        self.log_evidence_ = search_widths(
+            self.x_widths, self.f_widths, Z[rows], y["X - mean"][rows], y["F"][rows],
+            x_mean[rows], lambda xh: flow_inputs(xh, rows),
+        )  # fmt: skip
+        wx, wf = (max(self.log_evidence_[c], key=self.log_evidence_[c].get) for c in ("X", "F"))
+        self.widths_ = {"X": float(wx), "F": float(wf)}
         self.fit_seconds_["width_search"] = time.perf_counter() - t0
 
         def fit_pair(rows: np.ndarray) -> tuple[Any, Any]:
             from bayes_fdi.rvm import RVR
 
-            mx = RVR(width=wx).fit(Z[rows], y["X"][rows])
-            xh = np.clip(mx.predict(Z[rows]), *SENSOR_RANGE)
+            mx = RVR(width=wx).fit(Z[rows], y["X - mean"][rows])
+            xh = np.clip(mx.predict(Z[rows]) + x_mean[rows], *SENSOR_RANGE)
             mf = RVR(width=wf).fit(flow_inputs(xh, rows), y["F"][rows])
             return mx, mf
 
@@ -301,25 +322,6 @@ class DynamicNormalModels(BaseEstimator):
 
         self.training_size_ = choose_training_size(score, fit.size, n_all)
         return self.training_size_.rows
-
-    def _search_widths(self, Z, y, rows, flow_inputs) -> tuple[float, float]:
-        """The widths of largest evidence on the subsample ``rows`` (X first: the flow model's
-        inputs need X_hat); fills ``log_evidence_`` and ``widths_``."""
-        from bayes_fdi.rvm import RVR
-
-        self.log_evidence_ = {"X": {}, "F": {}}
-        for w in self.x_widths:
-            fitted = RVR(width=float(w)).fit(Z[rows], y["X"][rows])
-            self.log_evidence_["X"][float(w)] = fitted.log_evidence_
-        wx = max(self.log_evidence_["X"], key=self.log_evidence_["X"].get)
-        x_ev = RVR(width=wx).fit(Z[rows], y["X"][rows])
-        V_ev = flow_inputs(np.clip(x_ev.predict(Z[rows]), *SENSOR_RANGE), rows)
-        for w in self.f_widths:
-            fitted = RVR(width=float(w)).fit(V_ev, y["F"][rows])
-            self.log_evidence_["F"][float(w)] = fitted.log_evidence_
-        wf = max(self.log_evidence_["F"], key=self.log_evidence_["F"].get)
-        self.widths_ = {"X": float(wx), "F": float(wf)}
-        return wx, wf
 
     def _set_identity_scales(self, D: int) -> None:
         nb = int(self.calibration_bins)
@@ -393,6 +395,7 @@ class DynamicNormalModels(BaseEstimator):
             high=SENSOR_RANGE[1],
             command_lag=lag_rates(*self.command_lag_) if self.command_lag_ else np.empty(0),
             valve_law=np.ascontiguousarray(self.valve_law_),
+            lag_mean=float(getattr(self, "lag_as_mean", False)),
         )
 
     def _check_fitted(self) -> None:
@@ -474,24 +477,8 @@ class DynamicNormalModels(BaseEstimator):
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
-        """Saved attributes in today's layout: files of bayes_fdi 0.1.0 hold the compiled
-        kernel's arguments as ``_lean`` and ``_kernel_args``; today they are ``params_``; files
-        of format <= 4 fitted the std factors by maximum likelihood (``std_coverage=None``);
-        files of format <= 8 have no physics inputs."""
-        data = {k: v for k, v in data.items() if k not in ("_lean", "_kernel_args")}
-        data.setdefault("std_coverage", None)  # before the parameter: maximum likelihood
-        data.setdefault("physics_inputs", ())  # format <= 8
-        if "regressors_" in data:  # fitted without physics inputs
-            data.update({"command_lag_": None, "valve_law_": np.empty(0)} | data)
-        if "regressors_" in data and "training_size_" not in data:  # before the curve
-            data["training_size_"] = TrainingSize(int(data.get("n_train_samples_", 0)), None)
-        if "regressors_" in data and "params_" not in data:
-            models = cls.__new__(cls)
-            models.__dict__.update(data)
-            data["params_"] = models._kernel_params(
-                data["regressors_"]["X"], data["regressors_"]["F"]
-            )
-        return data
+        """Saved attributes in today's layout (`.model_upgrades.upgrade_dynamic_models`)."""
+        return upgrade_dynamic_models(cls, data)
 
     def predict(self, runs: xr.Dataset) -> xr.Dataset:
         """Predicted outputs and calibrated predictive stds (dims ``run``, ``time``).

@@ -100,16 +100,25 @@ class NormalModelsParams(NamedTuple):
     f_std_scale_all: float  #: std factor of F there
     low: float  #: lower rail of the predictions
     high: float  #: upper rail of the predictions
-    #: ``(2,)`` rates of the command lag (`~.physics_inputs.lag_rates`), or ``(0,)``: none
+    #: ``(4,)`` rates and speed limits of the command lag (`~.physics_inputs.lag_rates`), or
+    #: ``(0,)``: none
     command_lag: np.ndarray = np.empty(0)
     #: the valve law's constants (`~.physics_inputs.nominal_valve_law`), or ``(0,)``: none
     valve_law: np.ndarray = np.empty(0)
+    #: 1.0: the position model's output is added to the lagged command (it learnt the
+    #: difference); 0.0: it is the prediction itself
+    lag_mean: float = 0.0
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
-        """Files of format <= 8 have no physics inputs."""
+        """Files of format <= 8 have no physics inputs; of format <= 10, a command lag without
+        speed limits and a position model that learnt X itself."""
         data.setdefault("command_lag", np.empty(0))
         data.setdefault("valve_law", np.empty(0))
+        data.setdefault("lag_mean", 0.0)
+        lag = np.asarray(data["command_lag"], dtype=np.float64)
+        if lag.size == 2:  # format <= 10: a lag without speed limits
+            data["command_lag"] = np.concatenate([lag, [np.inf, np.inf]])
         return data
 
 
@@ -175,6 +184,8 @@ def predict_seconds(cv, p1, p2, t1, params, state, out):  # pragma: no cover - c
         for j in range(u.size):
             u[j] = (u[j] - params.input_mean[j]) / params.input_scale[j]
         xm, xv = rvr_predict(u, params.x_model, phi_x)
+        if lagged and params.lag_mean != 0.0:  # the model learnt X minus the lagged command
+            xm = xm + params.lag_mean * hist[0, n_d]
         xm = min(max(xm, params.low), params.high)
         v[0] = xm
         v[1] = s

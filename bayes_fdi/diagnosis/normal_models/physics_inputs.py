@@ -7,12 +7,17 @@ the actuator does instead:
 
 - **The command through the actuator's lag** (`lagged_command`): CV passed through a first-order
   lag whose time constant depends on the direction of travel (the chamber fills from the supply
-  one way and vents the other, at different speeds): per one-second sample
-  ``y(t) = y(t-1) + a (CV(t) - y(t-1))`` with ``a = 1 - exp(-1 s / tau)``, ``tau = tau_rise``
-  where ``CV(t) > y(t-1)`` and ``tau_fall`` elsewhere, ``y`` held at the run's first command
-  before it. Both time constants are estimated from the fault-free training runs
-  (`fit_command_lag`: the pair on a logarithmic grid whose lagged command, with ``s``,
-  explains X best by least squares). The position model takes ``y`` as one more input.
+  one way and vents the other, at different speeds), optionally with the stem's speed limited in
+  each direction (the air flows in and out through restrictions, so after a large step the stem
+  travels at a constant speed): per one-second sample
+  ``y(t) = y(t-1) + clip(a (CV(t) - y(t-1)), -v_fall, v_rise)`` with
+  ``a = 1 - exp(-1 s / tau)``, ``tau = tau_rise`` where ``CV(t) > y(t-1)`` and ``tau_fall``
+  elsewhere, ``y`` held at the run's first command before it. The time constants (and, when
+  asked for, the speed limits) are estimated from the fault-free training runs
+  (`fit_command_lag`: on logarithmic grids, the values whose lagged command, with ``s``,
+  explains X best by least squares; no limit where the runs never show one). The position
+  model takes ``y`` as one more input, or learns ``X - y``
+  (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``lag_as_mean``).
 - **The valve law** (`valve_law_flow`): the flow of the nominal valve (DABLib's
   equal-percentage characteristic ``Kv exp(-c x)``, linear above 97.5 % closing, the water's
   density at T1 and P1; no choking, bypass closed) at the predicted position, in the F sensor's
@@ -40,6 +45,7 @@ from bayes_fdi.actuator.valve import compiled_water_density
 __all__ = [
     "LAG_GRID",
     "PHYSICS_INPUTS",
+    "SPEED_GRID",
     "check_physics_inputs",
     "fit_command_lag",
     "flow_model_inputs",
@@ -57,6 +63,12 @@ __all__ = [
 PHYSICS_INPUTS: tuple[str, ...] = ("command_lag", "valve_law")
 #: Time constants (s) tried for each direction by `fit_command_lag`.
 LAG_GRID: tuple[float, ...] = tuple(float(v) for v in np.round(np.geomspace(0.25, 32.0, 22), 3))
+#: Stem speed limits (normalised travel per second) tried for each direction by
+#: `fit_command_lag`, no limit first (kept unless a limit explains the position better).
+SPEED_GRID: tuple[float, ...] = (
+    math.inf,
+    *(float(v) for v in np.geomspace(0.01, 0.5, 14).round(4)),
+)
 
 
 def check_physics_inputs(physics_inputs: Any) -> tuple[str, ...]:
@@ -75,19 +87,32 @@ def check_physics_inputs(physics_inputs: Any) -> tuple[str, ...]:
     return names
 
 
-def lag_rates(tau_rise: float, tau_fall: float) -> np.ndarray:
-    """``[a_rise, a_fall]``, ``a = 1 - exp(-1 s / tau)``: the per-second rates of `lag_step`."""
+def lag_rates(
+    tau_rise: float, tau_fall: float, v_rise: float = math.inf, v_fall: float = math.inf
+) -> np.ndarray:
+    """``[a_rise, a_fall, v_rise, v_fall]``, ``a = 1 - exp(-1 s / tau)``: the per-second rates
+    and speed limits of `lag_step` (``inf``: no limit)."""
     for name, tau in (("tau_rise", tau_rise), ("tau_fall", tau_fall)):
         if not (math.isfinite(float(tau)) and float(tau) > 0):
             raise ValueError(f"{name} must be a positive number of seconds, got {tau!r}")
-    return np.array([-math.expm1(-1.0 / float(tau_rise)), -math.expm1(-1.0 / float(tau_fall))])
+    for name, v in (("v_rise", v_rise), ("v_fall", v_fall)):
+        if not float(v) > 0:
+            raise ValueError(f"{name} must be a positive speed (or inf: no limit), got {v!r}")
+    a = [-math.expm1(-1.0 / float(tau_rise)), -math.expm1(-1.0 / float(tau_fall))]
+    return np.array([*a, float(v_rise), float(v_fall)])
 
 
 @njit(cache=True, error_model="numpy")
 def lag_step(y, c, rates):  # pragma: no cover - compiled
-    """One second of the two-rate lag: the new output from the last ``y`` and command ``c``."""
+    """One second of the two-rate lag with speed limits: the new output from the last ``y`` and
+    command ``c`` (``rates`` of `lag_rates`)."""
     a = rates[0] if c > y else rates[1]
-    return y + a * (c - y)
+    step = a * (c - y)
+    if step > rates[2]:
+        step = rates[2]
+    elif step < -rates[3]:
+        step = -rates[3]
+    return y + step
 
 
 @njit(cache=True, error_model="numpy")
@@ -103,8 +128,15 @@ def _lag_runs(cv, rates, out):  # pragma: no cover - compiled
             out[r, t] = y
 
 
-def lagged_command(cv: Any, tau_rise: float, tau_fall: float) -> np.ndarray:
-    """The command through the two-rate lag, ``(runs, n)`` (or ``(n,)``) like ``cv``.
+def lagged_command(
+    cv: Any,
+    tau_rise: float,
+    tau_fall: float,
+    v_rise: float = math.inf,
+    v_fall: float = math.inf,
+) -> np.ndarray:
+    """The command through the two-rate lag with speed limits, ``(runs, n)`` (or ``(n,)``) like
+    ``cv``.
 
     Before a run's first finite command the lag is held at it (its first output is that
     command); a NaN command gives NaN and leaves the lag where it was.
@@ -112,18 +144,37 @@ def lagged_command(cv: Any, tau_rise: float, tau_fall: float) -> np.ndarray:
     arr = np.asarray(cv, dtype=np.float64)
     grid = np.ascontiguousarray(np.atleast_2d(arr))
     out = np.empty_like(grid)
-    _lag_runs(grid, lag_rates(tau_rise, tau_fall), out)
+    _lag_runs(grid, lag_rates(tau_rise, tau_fall, v_rise, v_fall), out)
     return out.reshape(arr.shape)
 
 
-def fit_command_lag(
-    cv: Any, x: Any, s: Any, grid: tuple[float, ...] = LAG_GRID
-) -> tuple[float, float]:
-    """``(tau_rise, tau_fall)`` on ``grid`` whose lagged command best explains the position.
+def _position_sse(cv: np.ndarray, x: np.ndarray, s: np.ndarray, lag: tuple) -> float:
+    """Residual sum of squares of ``X ~ b0 + b1 y + b2 s`` with ``y`` the command through
+    ``lag`` (complete rows only)."""
+    y = lagged_command(cv, *lag)
+    ok = np.isfinite(y) & np.isfinite(x) & np.isfinite(s)
+    if ok.sum() < 10:
+        raise ValueError(f"only {int(ok.sum())} complete samples to fit the command lag")
+    A = np.column_stack([np.ones(int(ok.sum())), y[ok], s[ok]])
+    coef, *_ = np.linalg.lstsq(A, x[ok], rcond=None)
+    return float(np.sum((x[ok] - A @ coef) ** 2))
 
-    For each pair, the least-squares fit ``X ~ b0 + b1 y + b2 s`` of the fault-free samples
-    (``y`` the lagged command, ``s`` the pressure-drop root; rows with a NaN left out); the pair
-    of smallest residual sum of squares (the first on a tie).
+
+def fit_command_lag(
+    cv: Any,
+    x: Any,
+    s: Any,
+    grid: tuple[float, ...] = LAG_GRID,
+    limits: tuple[float, ...] = SPEED_GRID,
+) -> tuple[float, float, float, float]:
+    """``(tau_rise, tau_fall, v_rise, v_fall)`` whose lagged command best explains the position.
+
+    The residual sum of squares of the least-squares fit ``X ~ b0 + b1 y + b2 s`` of the
+    fault-free samples (``y`` the lagged command, ``s`` the pressure-drop root; rows with a NaN
+    left out) is minimised in three passes: the pair of time constants on ``grid`` without
+    speed limits, then the pair of speed limits on ``limits`` with those time constants, then the
+    time constants again with those limits. A value changes only where it lowers the sum (the
+    first on a tie), so runs that never show a limit keep none (``inf``, the grid's first).
 
     Parameters
     ----------
@@ -131,22 +182,31 @@ def fit_command_lag(
         ``(runs, n)`` command, position and pressure-drop root of fault-free runs.
     grid
         Time constants (s) tried for each direction.
+    limits
+        Speed limits (per second; ``inf``: none) tried for each direction.
     """
     cv, x, s = (np.asarray(a, dtype=np.float64) for a in (cv, x, s))
     if cv.shape != x.shape or cv.shape != s.shape or cv.ndim != 2:
         raise ValueError("cv, x and s must be (runs, n) arrays of one shape")
-    best, best_sse = None, math.inf
+    best: tuple = ()
+    best_sse = math.inf
     for tau_rise in grid:
         for tau_fall in grid:
-            y = lagged_command(cv, tau_rise, tau_fall)
-            ok = np.isfinite(y) & np.isfinite(x) & np.isfinite(s)
-            if ok.sum() < 10:
-                raise ValueError(f"only {int(ok.sum())} complete samples to fit the command lag")
-            A = np.column_stack([np.ones(int(ok.sum())), y[ok], s[ok]])
-            coef, *_ = np.linalg.lstsq(A, x[ok], rcond=None)
-            sse = float(np.sum((x[ok] - A @ coef) ** 2))
+            sse = _position_sse(cv, x, s, (tau_rise, tau_fall))
             if sse < best_sse:
-                best, best_sse = (float(tau_rise), float(tau_fall)), sse
+                best, best_sse = (float(tau_rise), float(tau_fall), math.inf, math.inf), sse
+    taus = best[:2]
+    for v_rise in limits:
+        for v_fall in limits:
+            sse = _position_sse(cv, x, s, (*taus, v_rise, v_fall))
+            if sse < best_sse:
+                best, best_sse = (*taus, float(v_rise), float(v_fall)), sse
+    fitted_limits = best[2:]
+    for tau_rise in grid:
+        for tau_fall in grid:
+            sse = _position_sse(cv, x, s, (tau_rise, tau_fall, *fitted_limits))
+            if sse < best_sse:
+                best, best_sse = (float(tau_rise), float(tau_fall), *fitted_limits), sse
     return best
 
 
