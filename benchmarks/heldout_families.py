@@ -3,6 +3,8 @@
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/heldout_families.py \
         [--model FILE | --small] [--training excitation-mix|dgen] \
         [--physics-inputs command_lag,valve_law] [--f-widths 0.05,0.1,0.2] \
+        [--std-coverage 0.95] [--lag-speed-limits] [--lag-as-mean] \
+        [--leave-out sine-sum|step-ramp|level-loop] \
         [--save FILE] [--runs 8] [--duration 900] [--fault-runs 1] [--fault-duration 600] \
         [--seed 900]
 
@@ -22,8 +24,10 @@ first detection to the run's end, and the share of detected seconds whose diagno
 the true fault (a group-level r_ti over the runs).
 
 Without ``--model`` the script fits the diagnoser (`fit_online_diagnoser` with ``--training``
-and ``--physics-inputs``, by default the training's own, ``""`` for none; ``--save``: write it
-to a model file, e.g. for the benchmark). Results
+and ``--physics-inputs``, by default the training's own, ``""`` for none; the normal models'
+``--std-coverage``, ``--lag-speed-limits`` and ``--lag-as-mean``, see `DynamicNormalModels`;
+``--leave-out FAMILY``: without that family's campaign files, which then plays an excitation the
+normal models never saw; ``--save``: write it to a model file, e.g. for the benchmark). Results
 go to stdout and ``benchmarks/out/heldout_families.json``.
 """
 
@@ -120,18 +124,41 @@ def _physics(args: argparse.Namespace) -> tuple[str, ...] | None:
 
 
 def _normal_models(args: argparse.Namespace) -> dict:
-    """``normal_models=`` of the fit when ``--f-widths`` is given (the mix's other settings)."""
-    if not args.f_widths:
+    """``normal_models=`` of the fit when ``--f-widths``, ``--std-coverage``,
+    ``--lag-speed-limits`` or ``--lag-as-mean`` is given (the training's other settings)."""
+    options = (args.f_widths, args.std_coverage, args.lag_speed_limits, args.lag_as_mean)
+    if not any(o not in ("", None, False) for o in options):
         return {}
     from bayes_fdi.default_diagnoser import DEFAULT_PHYSICS_INPUTS
     from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
 
     physics = _physics(args)
     physics = DEFAULT_PHYSICS_INPUTS[args.training] if physics is None else physics
+    coverage = args.std_coverage if args.std_coverage is not None else (
+        0.9 if args.training != "dgen" else None)  # fmt: skip
+    grid = tuple(float(w) for w in args.f_widths.split(",") if w)
+    widths = {"f_widths": grid} if grid else {}
     return {"normal_models": DynamicNormalModels(
-        f_widths=tuple(float(w) for w in args.f_widths.split(",")), physics_inputs=physics,
-        std_coverage=0.9 if args.training != "dgen" else None, random_state=0,
+        physics_inputs=physics, std_coverage=coverage, lag_speed_limits=args.lag_speed_limits,
+        lag_as_mean=args.lag_as_mean, random_state=0, **widths,
     )}  # fmt: skip
+
+
+def _leave_out(training: str, family: str) -> str:
+    """The name of ``training`` without the campaign files of ``family`` (registered in
+    `TRAININGS` and `DEFAULT_PHYSICS_INPUTS` under that name for this process)."""
+    from bayes_fdi.default_diagnoser import DEFAULT_PHYSICS_INPUTS, TRAININGS
+
+    if family not in FAMILIES[1:]:
+        raise SystemExit(f"--leave-out must be one of {', '.join(FAMILIES[1:])}")
+    kept = {k: tuple(f for f in files if not f[0].endswith(family))
+            for k, files in TRAININGS[training].items()}  # fmt: skip
+    if kept == TRAININGS[training]:
+        raise SystemExit(f"the training {training!r} has no campaign files of {family!r}")
+    name = f"{training}-without-{family}"
+    TRAININGS[name] = kept
+    DEFAULT_PHYSICS_INPUTS[name] = DEFAULT_PHYSICS_INPUTS[training]
+    return name
 
 
 def main() -> None:
@@ -141,6 +168,27 @@ def main() -> None:
     parser.add_argument("--training", default="excitation-mix", help="training of the diagnoser")
     parser.add_argument("--physics-inputs", default=None, help="comma-separated physics inputs")
     parser.add_argument("--f-widths", default="", help="flow model's width grid (comma-separated)")
+    parser.add_argument(
+        "--std-coverage",
+        type=float,
+        default=None,
+        help="coverage of the normal models' std factors (default: the training's)",
+    )
+    parser.add_argument(
+        "--lag-speed-limits",
+        action="store_true",
+        help="the command lag limits the stem's speed (fitted limits)",
+    )
+    parser.add_argument(
+        "--lag-as-mean",
+        action="store_true",
+        help="the position model learns X minus the lagged command",
+    )
+    parser.add_argument(
+        "--leave-out",
+        default=None,
+        help="fit without this training family's campaign files: sine-sum, step-ramp or level-loop",
+    )
     parser.add_argument("--save", help="write the fitted diagnoser to this model file")
     parser.add_argument("--runs", type=int, default=8)
     parser.add_argument("--duration", type=int, default=900)
@@ -162,10 +210,12 @@ def main() -> None:
         from bayes_fdi.default_diagnoser import fit_online_diagnoser
 
         t_fit = time.process_time()
+        normal_models = _normal_models(args)  # the named training's settings
+        if args.leave_out:
+            args.training = _leave_out(args.training, args.leave_out)
         diagnoser = fit_online_diagnoser(
             small=args.small, progress=False, training=args.training,
-            physics_inputs=_physics(args),
-            **_normal_models(args),
+            physics_inputs=_physics(args), **normal_models,
         )  # fmt: skip
         print(f"fitted in {time.process_time() - t_fit:.0f} CPU s; threshold "
               f"{diagnoser.threshold_:.2f}, DGN0 {', '.join(diagnoser.undetectable_) or 'none'}; "
