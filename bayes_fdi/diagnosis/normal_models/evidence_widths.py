@@ -5,6 +5,9 @@ subsample and records its log evidence, then, with the position model of the lar
 predicting ``X_hat``, the flow model at each width of its own grid (its inputs need ``X_hat``).
 `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` fits both at the widths of
 largest evidence.
+
+Written by hand: scikit-learn's searches score by cross-validation, not by a model's evidence,
+and cannot chain the flow model's inputs to the position model's predictions.
 """
 
 from __future__ import annotations

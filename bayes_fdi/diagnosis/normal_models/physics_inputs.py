@@ -1,4 +1,4 @@
-"""Physics-carrying inputs of the dynamic normal models (opt-in: ``physics_inputs=True``).
+"""Physics-carrying inputs of the dynamic normal models (opt-in: ``physics_inputs``).
 
 The dynamic normal models' default inputs (levels and one-second increments of the command and
 of the pressure-drop root) describe the excitation's pattern; after a command step the stem's
