@@ -31,6 +31,12 @@ def test_the_first_example_commissions_on_the_first_half_and_diagnoses_the_secon
     assert {"model.npz", "commissioning.md", "commissioning.json"} <= set(summary["files"])
     model = OnlineDiagnoser.load(clean / "model.npz")
     assert model.commissioning_["healthy"]["seconds"] == 1800
+    # the valve's own lag, with its speed limits, is an input of its normal models: the real
+    # valve follows a falling command at a limited speed, a rising one without one here
+    nm = model.normal_models_
+    assert nm.physics_inputs == ("command_lag",) and nm.lag_speed_limits and not nm.lag_as_mean
+    tau_rise, tau_fall, v_rise, v_fall = nm.command_lag_
+    assert 0 < tau_rise <= tau_fall and 0 < v_fall < 0.05 and v_rise == np.inf
     assert (clean / "commissioning.md").read_text().startswith("# Commissioning report")
 
 

@@ -53,13 +53,14 @@ SMALL: dict[str, Any] = {"plants": 1, "seeds": 1, "draws": 1, "horizon": 2400.0}
 def small_commission_options(seed: int = 0) -> dict[str, Any]:
     """Lighter commissioning for the quick version: fewer transplanted runs, lighter normal
     models (as the default diagnoser's quick version has them)."""
+    from bayes_fdi.commissioning.commission import NORMAL_MODEL_OPTIONS
     from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 
     return {
         "runs_per_fault": 3,
         "evaluation_runs": 1,
         "normal_models": DynamicNormalModels(
-            max_train_samples=800, calibration_folds=3, random_state=seed
+            max_train_samples=800, calibration_folds=3, random_state=seed, **NORMAL_MODEL_OPTIONS
         ),
     }
 
