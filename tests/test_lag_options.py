@@ -69,7 +69,7 @@ def test_speed_limits_are_the_simulated_stems_travel_speeds(steps):
 
 def test_lag_as_mean_prediction_is_the_regression_plus_the_lag(lag_mean_models):
     nm = lag_mean_models
-    assert nm.params_.lag_mean == 1.0
+    assert nm.params_.lag_as_mean is True
     test = simulate(step_ramp_inputs(1, 600, seed=42), seed=42)
     lag = lagged_command(test["CV"].values, *nm.command_lag_)[0]
     U = np.column_stack([dynamic_inputs(test, nm.n_differences)[0], lag])
@@ -106,6 +106,6 @@ def test_parameters_saved_before_the_options_keep_their_predictions():
     new = NormalModelsParams.upgrade_model_file(dict(old), 10)
     # no speed limits (inf: the lag's step is never clipped) and the plain position model
     np.testing.assert_array_equal(new["command_lag"], [0.5, 0.3, np.inf, np.inf])
-    assert new["lag_mean"] == 0.0
+    assert new["lag_as_mean"] is False
     none = NormalModelsParams.upgrade_model_file({}, 8)
-    assert none["command_lag"].size == 0 and none["lag_mean"] == 0.0
+    assert none["command_lag"].size == 0 and none["lag_as_mean"] is False

@@ -27,7 +27,8 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 from typing import Any, NamedTuple
 
 import xarray as xr
@@ -62,10 +63,9 @@ DETECTOR_K_SLOW = 0.1
 #: ``lag_speed_limits``). Chosen on a transplant library that no fit uses: on the real hour's
 #: first half it named more held-out seconds' groups right for each of three commissioning
 #: seeds (see the Commissioning page of the documentation).
-NORMAL_MODEL_OPTIONS: dict[str, Any] = {
-    "physics_inputs": ("command_lag",),
-    "lag_speed_limits": True,
-}
+NORMAL_MODEL_OPTIONS: Mapping[str, Any] = MappingProxyType(
+    {"physics_inputs": ("command_lag",), "lag_speed_limits": True}
+)
 #: Share of the healthy data the twin is fitted on; the rest checks its predictive.
 TWIN_FIT_SHARE = 0.8
 

@@ -247,7 +247,8 @@ class DynamicNormalModels(BaseEstimator):
             self.command_lag_ = fit_command_lag(grid["CV"], grid["X"], U[:, :, 1], limits=limits)
             lag = lagged_command(grid["CV"], *self.command_lag_)
             U = np.concatenate([U, lag[:, :, None]], axis=-1)
-            x_mean = lag.ravel() * float(self.lag_as_mean)
+            if self.lag_as_mean:
+                x_mean = lag.ravel()
         y["X - mean"] = y["X"] - x_mean
         U = U.reshape(n_runs * n_times, -1)
         s = U[:, 1]
@@ -395,7 +396,7 @@ class DynamicNormalModels(BaseEstimator):
             high=SENSOR_RANGE[1],
             command_lag=lag_rates(*self.command_lag_) if self.command_lag_ else np.empty(0),
             valve_law=np.ascontiguousarray(self.valve_law_),
-            lag_mean=float(getattr(self, "lag_as_mean", False)),
+            lag_as_mean=bool(self.lag_as_mean),
         )
 
     def _check_fitted(self) -> None:

@@ -105,9 +105,8 @@ class NormalModelsParams(NamedTuple):
     command_lag: np.ndarray = np.empty(0)
     #: the valve law's constants (`~.physics_inputs.nominal_valve_law`), or ``(0,)``: none
     valve_law: np.ndarray = np.empty(0)
-    #: 1.0: the position model's output is added to the lagged command (it learnt the
-    #: difference); 0.0: it is the prediction itself
-    lag_mean: float = 0.0
+    #: True: the position model learnt X minus the lagged command, which is added back
+    lag_as_mean: bool = False
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
@@ -115,7 +114,7 @@ class NormalModelsParams(NamedTuple):
         speed limits and a position model that learnt X itself."""
         data.setdefault("command_lag", np.empty(0))
         data.setdefault("valve_law", np.empty(0))
-        data.setdefault("lag_mean", 0.0)
+        data.setdefault("lag_as_mean", False)
         lag = np.asarray(data["command_lag"], dtype=np.float64)
         if lag.size == 2:  # format <= 10: a lag without speed limits
             data["command_lag"] = np.concatenate([lag, [np.inf, np.inf]])
@@ -184,8 +183,8 @@ def predict_seconds(cv, p1, p2, t1, params, state, out):  # pragma: no cover - c
         for j in range(u.size):
             u[j] = (u[j] - params.input_mean[j]) / params.input_scale[j]
         xm, xv = rvr_predict(u, params.x_model, phi_x)
-        if lagged and params.lag_mean != 0.0:  # the model learnt X minus the lagged command
-            xm = xm + params.lag_mean * hist[0, n_d]
+        if lagged and params.lag_as_mean:  # the model learnt X minus the lagged command
+            xm = xm + hist[0, n_d]
         xm = min(max(xm, params.low), params.high)
         v[0] = xm
         v[1] = s

@@ -172,9 +172,10 @@ def fit_command_lag(
     The residual sum of squares of the least-squares fit ``X ~ b0 + b1 y + b2 s`` of the
     fault-free samples (``y`` the lagged command, ``s`` the pressure-drop root; rows with a NaN
     left out) is minimised in three passes: the pair of time constants on ``grid`` without
-    speed limits, then the pair of speed limits on ``limits`` with those time constants, then the
-    time constants again with those limits. A value changes only where it lowers the sum (the
-    first on a tie), so runs that never show a limit keep none (``inf``, the grid's first).
+    speed limits, then the pair of speed limits on ``limits`` with those time constants, then
+    (where a limit was kept) the time constants again with those limits. A value changes only
+    where it lowers the sum (the first on a tie), so runs that never show a limit keep none
+    (``inf``); ``limits=(inf,)`` fits the time constants alone.
 
     Parameters
     ----------
@@ -198,10 +199,14 @@ def fit_command_lag(
     taus = best[:2]
     for v_rise in limits:
         for v_fall in limits:
+            if math.isinf(v_rise) and math.isinf(v_fall):
+                continue  # the first pass's own lag
             sse = _position_sse(cv, x, s, (*taus, v_rise, v_fall))
             if sse < best_sse:
                 best, best_sse = (*taus, float(v_rise), float(v_fall)), sse
     fitted_limits = best[2:]
+    if fitted_limits == (math.inf, math.inf):
+        return best  # no limit kept: the third pass would repeat the first
     for tau_rise in grid:
         for tau_fall in grid:
             sse = _position_sse(cv, x, s, (tau_rise, tau_fall, *fitted_limits))
