@@ -19,8 +19,8 @@ def healthy():
     return simulate(level_loop_inputs(1, 1500, seed=4), seed=4)
 
 
-@pytest.fixture(scope="module")
-def commissioned(healthy):
+def _small_commissioning() -> dict:
+    """Keywords of a quick commissioning: three faults, small libraries and normal models."""
     models = DynamicNormalModels(
         x_widths=(8.0,),
         f_widths=(0.1,),
@@ -29,8 +29,7 @@ def commissioned(healthy):
         calibration_folds=2,
         random_state=0,
     )
-    return commission(
-        healthy,
+    return dict(
         faults=("f1", "f18", "bias_X"),
         runs_per_fault=4,
         duration=400,
@@ -39,6 +38,11 @@ def commissioned(healthy):
         normal_models=models,
         progress=False,
     )
+
+
+@pytest.fixture(scope="module")
+def commissioned(healthy):
+    return commission(healthy, **_small_commissioning())
 
 
 def test_bad_healthy_data_is_refused_naming_the_problem(healthy):
@@ -156,3 +160,28 @@ def test_commissioned_groups_come_from_the_one_way_confusion_of_detected_seconds
     confusion = naming_confusion(labels[keep], named, faults)
     groups = isolability_groups(faults, confusion, threshold=diag.group_threshold)
     assert [list(g) for g in diag.groups_] == groups
+
+
+def test_a_forest_can_name_the_faults_and_travels_with_the_model_file(healthy, tmp_path):
+    from bayes_fdi.commissioning.report import render_report
+    from bayes_fdi.diagnosis.isolation import ForestClassifier
+
+    options = _small_commissioning()
+    with pytest.raises(ValueError, match="isolation must be one of tree, forest"):
+        commission(healthy, isolation="svm", **options)
+    diag, _, report = commission(healthy, isolation="forest", **options)
+    assert isinstance(diag.isolator_.classifier_, ForestClassifier)
+    assert report["isolation_classifier"] == "forest"
+    assert "random forest" in render_report(report)
+    f18 = next(r for r in report["expected"] if r["fault"] == "f18")
+    assert f18["detected_share"] == 1.0 and f18["named_share"] > 0.5
+    # the model file holds the forest as arrays; the reloaded model gives the same stream
+    diag.save(tmp_path / "forest.npz")
+    back = OnlineDiagnoser.load(tmp_path / "forest.npz")
+    bypass = healthy.copy()
+    bypass["F"] = bypass["F"] + 0.1 * (bypass["time"] >= 900)
+    channels = ["CV", "P1", "P2", "T1", "X", "F"]
+    a, b = diag.run(bypass[channels]), back.run(bypass[channels])
+    assert a["DD"].values[0, 900:].any()
+    np.testing.assert_array_equal(a["group_proba"].values, b["group_proba"].values)
+    np.testing.assert_array_equal(a["state"].values, b["state"].values)

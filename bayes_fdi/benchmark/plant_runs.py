@@ -33,7 +33,7 @@ from bayes_fdi.benchmark.real_hour import commissioning_summary
 from bayes_fdi.benchmark.scenarios import SCENARIOS, BenchmarkScenario
 from bayes_fdi.datasets import CHANNELS
 
-__all__ = ["COMMISSIONING_SECONDS", "HELDOUT_SECONDS", "plant_benchmark"]
+__all__ = ["COMMISSIONING_SECONDS", "HELDOUT_SECONDS", "plant_benchmark", "plant_case_row"]
 
 #: Healthy seconds a plant is commissioned on, and held out for the checks.
 COMMISSIONING_SECONDS, HELDOUT_SECONDS = 3600, 1800
@@ -75,25 +75,7 @@ def _scenario_cases(
     rows = []
     for model, diagnoser in models.items():
         one = zeroed(diagnoser.run(run).isel(run=0))
-        t = np.asarray(one["time"].values)
-        row = {
-            "plant": plant.index,
-            "scenario": scenario.name,
-            "fault": scenario.fault,
-            "mode": scenario.mode,
-            "size": scenario.size,
-            "seed": k,
-            "run_seed": scenario_seed(plant.index, k, position),
-            "model": model,
-            **score_case(
-                one,
-                scenario.fault,
-                t_on=scenario.t_on,
-                t_from=scenario.t_from,
-                t_hor=scenario.t_hor,
-                strength=scenario.strength_at(t),
-            ),
-        }
+        row = {**plant_case_row(plant, scenario, k, one), "model": model}
         if healthy is not None and model == "commissioned" and noise is not None:
             clean = zeroed(diagnoser.run(healthy).isel(run=0))
             row["effect"] = innovation_effect(
@@ -106,6 +88,32 @@ def _scenario_cases(
             )
         rows.append(row)
     return rows
+
+
+def plant_case_row(
+    plant: PerturbedPlant, scenario: BenchmarkScenario, k: int, one: Any
+) -> dict[str, Any]:
+    """The scored row of one diagnosed scenario run on ``plant`` with its ``k``-th seed
+    (``one``: the decision stream, its time counted in the case's frame): the case's
+    identification and `score_case`'s indices."""
+    t = np.asarray(one["time"].values)
+    return {
+        "plant": plant.index,
+        "scenario": scenario.name,
+        "fault": scenario.fault,
+        "mode": scenario.mode,
+        "size": scenario.size,
+        "seed": k,
+        "run_seed": scenario_seed(plant.index, k, POSITION[scenario.name]),
+        **score_case(
+            one,
+            scenario.fault,
+            t_on=scenario.t_on,
+            t_from=scenario.t_from,
+            t_hor=scenario.t_hor,
+            strength=scenario.strength_at(t),
+        ),
+    }
 
 
 def plant_benchmark(

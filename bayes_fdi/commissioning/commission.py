@@ -40,6 +40,7 @@ from bayes_fdi.progress import busy
 
 __all__ = [
     "DETECTOR_K_SLOW",
+    "ISOLATION_CLASSIFIERS",
     "LIBRARY_FAULTS",
     "NORMAL_MODEL_OPTIONS",
     "Commissioning",
@@ -66,6 +67,11 @@ DETECTOR_K_SLOW = 0.1
 NORMAL_MODEL_OPTIONS: Mapping[str, Any] = MappingProxyType(
     {"physics_inputs": ("command_lag",), "lag_speed_limits": True}
 )
+#: The isolation classifiers `commission` offers: ``"tree"`` (default), the k-means tree of
+#: RVCs whose probabilities multiply along its paths; ``"forest"``, a random forest
+#: (`~bayes_fdi.diagnosis.isolation.ForestClassifier`), which names the library's faults right
+#: more often but is confident about faults outside it (see the Commissioning page).
+ISOLATION_CLASSIFIERS: tuple[str, ...] = ("tree", "forest")
 #: Share of the healthy data the twin is fitted on; the rest checks its predictive.
 TWIN_FIT_SHARE = 0.8
 
@@ -131,6 +137,7 @@ def commission(
     normal_models: Any = None,
     normal_samples: int | str = 2000,
     twin: Any = None,
+    isolation: str = "tree",
     seed: int = 0,
     progress: bool = True,
 ) -> Commissioning:
@@ -158,6 +165,9 @@ def commission(
     twin
         Unfitted digital twin, cloned before fitting (default:
         ``ActuatorTwin(random_state=seed)``; e.g. fewer fitted parameters for a quick check).
+    isolation
+        The isolation classifier, one of `ISOLATION_CLASSIFIERS`: ``"tree"``, the k-means
+        tree of RVCs, or ``"forest"``, a random forest of 300 trees.
     seed
         Seed of everything drawn (the twin's draws, the libraries, the folds).
     progress
@@ -172,10 +182,15 @@ def commission(
     from bayes_fdi.calibration import TemperatureScaler
     from bayes_fdi.diagnosis import OnlineDiagnoser
     from bayes_fdi.diagnosis.detection import TwoSpeedCUSUM
+    from bayes_fdi.diagnosis.isolation import ForestClassifier
     from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
     from bayes_fdi.diagnosis.online.training import stack_runs
     from bayes_fdi.twin import ActuatorTwin, transplant_library
 
+    if isolation not in ISOLATION_CLASSIFIERS:
+        raise ValueError(
+            f"isolation must be one of {', '.join(ISOLATION_CLASSIFIERS)}, got {isolation!r}"
+        )
     t_start = time.perf_counter()
     runs = check_healthy(stack_runs(healthy))
     duration = int(min(duration, runs.sizes["time"] - 60))
@@ -210,6 +225,9 @@ def commission(
             normal_models,
             detector=TwoSpeedCUSUM(k_slow=DETECTOR_K_SLOW),
             calibrator=TemperatureScaler(),
+            isolation_classifier=(
+                ForestClassifier(random_state=seed) if isolation == "forest" else None
+            ),
             random_state=seed,
         ).fit(runs)
         fit_commissioned_isolation(diagnoser, *libraries)
@@ -246,6 +264,7 @@ def commission(
             "false_alarm_hours": float(diagnoser.false_alarm_hours),
         },
         "groups": [list(g) for g in diagnoser.groups_],
+        "isolation_classifier": isolation,
         "group_rule": GROUP_RULE,
         "group_threshold": float(diagnoser.group_threshold),
         "undetectable": list(diagnoser.undetectable_),

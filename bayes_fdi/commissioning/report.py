@@ -185,9 +185,27 @@ def render_report(report: Mapping[str, Any]) -> str:
         "",
         *[f"- {g}" for g in groups],
         "",
+        *_classifier_lines(report),
         *_expected_section(report),
     ]
     return "\n".join(lines) + "\n"
+
+
+def _classifier_lines(report: Mapping[str, Any]) -> list[str]:
+    """Which classifier names the groups (reports written before the choice: the tree)."""
+    if report.get("isolation_classifier", "tree") == "forest":
+        return [
+            "The faults are named by a random forest of the isolation signatures. It names the "
+            "library's faults right more often than the k-means tree of relevance vector "
+            "classifiers, but may name a fault outside the library, or one listed as not "
+            "detectable here, as a group with a probability near 1.",
+            "",
+        ]
+    return [
+        "The faults are named by the k-means tree of relevance vector classifiers (the "
+        "probabilities multiply along its paths).",
+        "",
+    ]
 
 
 def write_report(report: Mapping[str, Any], stem: str | os.PathLike) -> tuple[Path, Path]:

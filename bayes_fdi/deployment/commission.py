@@ -26,16 +26,23 @@ def commission_and_save(
     *,
     seed: int = 0,
     normal_samples: int | str = 2000,
+    isolation: str = "tree",
     progress: bool = True,
 ) -> Any:
     """Commission on ``healthy`` and write the model file ``out`` with its report beside it
     (``out`` without its suffix, plus ``.md`` and ``.json``); returns the `Commissioning`
-    (``normal_samples`` as `~bayes_fdi.commissioning.commission`'s)."""
+    (``normal_samples`` and ``isolation`` as `~bayes_fdi.commissioning.commission`'s)."""
     from bayes_fdi import model_files
     from bayes_fdi.commissioning import commission
     from bayes_fdi.commissioning.report import write_report
 
-    done = commission(healthy, seed=seed, normal_samples=normal_samples, progress=progress)
+    done = commission(
+        healthy,
+        seed=seed,
+        normal_samples=normal_samples,
+        isolation=isolation,
+        progress=progress,
+    )
     model_files.save(done.diagnoser, out)
     write_report(done.report, Path(out).with_suffix(""))
     return done
@@ -60,6 +67,14 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of every draw (default 0)")
     add_normal_samples_argument(parser)
+    parser.add_argument(
+        "--isolation",
+        choices=("tree", "forest"),
+        default="tree",
+        help="isolation classifier: the k-means tree of RVCs (default) or a random forest, "
+        "which names the library's faults right more often but is confident about faults "
+        "outside it",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress")
     add_reading_arguments(parser)
 
@@ -76,6 +91,7 @@ def run_from_cli(args: argparse.Namespace) -> int:
         args.out,
         seed=args.seed,
         normal_samples=args.normal_samples or 2000,
+        isolation=args.isolation,
         progress=not args.quiet,
     )
     report = done.report

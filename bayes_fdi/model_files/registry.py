@@ -61,6 +61,7 @@ PERSISTED: dict[str, str] = {
     "HierarchicalClassifier": "bayes_fdi.diagnosis.isolation:HierarchicalClassifier",
     "TreeNode": "bayes_fdi.diagnosis.isolation:TreeNode",
     "SVMClassifier": "bayes_fdi.diagnosis.isolation:SVMClassifier",
+    "ForestClassifier": "bayes_fdi.diagnosis.isolation:ForestClassifier",
     "FaultIsolator": "bayes_fdi.diagnosis.isolation:FaultIsolator",
     "ClassNovelty": "bayes_fdi.diagnosis.isolation:ClassNovelty",
     "SignatureWindow": "bayes_fdi.diagnosis.isolation:SignatureWindow",

@@ -15,6 +15,8 @@
   training signatures a signature is.
 - `bayes_fdi.diagnosis.isolation.compiled_tree`: `LeanTree`, the compiled predictor of a tree
   of RVCs.
+- `bayes_fdi.diagnosis.isolation.forest`: `ForestClassifier`, a random forest kept as arrays
+  with a compiled predictor (a commissioned valve's isolation classifier).
 
 May import `bayes_fdi.rvm`, `bayes_fdi.datasets`, `bayes_fdi.diagnosis.normal_models`,
 `bayes_fdi.diagnosis.component_state` and the foundation.
@@ -29,6 +31,7 @@ from bayes_fdi.diagnosis.isolation.features import (
     register_feature,
     window_bounds,
 )
+from bayes_fdi.diagnosis.isolation.forest import ForestClassifier
 from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator, IsolationOutput
 from bayes_fdi.diagnosis.isolation.signatures import (
     ISOLATION_FEATURES,
@@ -47,6 +50,7 @@ __all__ = [
     "PAPER_TREE",
     "ClassNovelty",
     "FaultIsolator",
+    "ForestClassifier",
     "HierarchicalClassifier",
     "IsolationOutput",
     "LeanTree",
