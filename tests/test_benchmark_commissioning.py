@@ -227,3 +227,15 @@ def test_the_real_hour_part(detection_only, tmp_path):
     _, md = write_commissioning_report(results, tmp_path)
     text = md.read_text()
     assert "## The real hour" in text and "Group-level confusion" in text
+
+
+def test_the_isolation_option_belongs_to_the_commissioning_benchmark(tmp_path, capsys):
+    from bayes_fdi.cli import build_parser, main
+
+    out = str(tmp_path / "b")
+    args = build_parser("benchmark").parse_args(
+        ["benchmark", "--out", out, "--commissioning", "--isolation", "forest"]
+    )
+    assert args.isolation == "forest"
+    assert main(["benchmark", "--out", out, "--isolation", "forest"]) == 2
+    assert "--isolation belongs to --commissioning" in capsys.readouterr().err

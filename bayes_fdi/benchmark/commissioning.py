@@ -188,6 +188,7 @@ def run_from_cli(args: argparse.Namespace) -> int:
     from bayes_fdi.default_diagnoser import fit_online_diagnoser
 
     size = SMALL if args.small else FULL
+    isolation = getattr(args, "isolation", None) or "tree"
     n_plants = size["plants"] if args.plants is None else args.plants
     n_seeds = size["seeds"] if args.seeds is None else args.seeds
     if not 0 <= n_plants <= MAX_PLANTS:
@@ -206,9 +207,17 @@ def run_from_cli(args: argparse.Namespace) -> int:
         n_seeds=n_seeds,
         draws=size["draws"],
         scenarios=scenarios,
-        commission_options=small_commission_options() if args.small else None,
+        commission_options={
+            **(small_commission_options() if args.small else {}),
+            "isolation": isolation,
+        },
         progress=not args.quiet,
-        settings={"small": bool(args.small), "default_fit_wall_s": fit_s, "horizon": horizon},
+        settings={
+            "small": bool(args.small),
+            "default_fit_wall_s": fit_s,
+            "horizon": horizon,
+            "isolation": isolation,
+        },
     )
     total = time.perf_counter() - t0
     sys.stderr.write(

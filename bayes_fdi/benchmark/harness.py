@@ -383,6 +383,8 @@ def run_from_cli(args: argparse.Namespace) -> int:
         return commissioning.run_from_cli(args)
     if args.plants is not None:
         raise UsageError("--plants belongs to --commissioning")
+    if getattr(args, "isolation", None) is not None:
+        raise UsageError("--isolation belongs to --commissioning")
     if getattr(args, "shift", False):
         from bayes_fdi.benchmark import shift
 

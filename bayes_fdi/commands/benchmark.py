@@ -56,6 +56,13 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         help=f"with --commissioning: perturbed plants (default {PLANTS_FULL}; "
         f"{PLANTS_SMALL} with --small)",
     )
+    parser.add_argument(
+        "--isolation",
+        choices=("tree", "forest"),
+        default=None,
+        help="with --commissioning: the commissioned diagnosers' isolation classifier (default "
+        "tree: the k-means tree of RVCs; forest: a random forest)",
+    )
 
 
 def run_from_cli(args: argparse.Namespace) -> int:
