@@ -231,11 +231,13 @@ def test_the_real_hour_part(detection_only, tmp_path):
 
 def test_the_isolation_option_belongs_to_the_commissioning_benchmark(tmp_path, capsys):
     from bayes_fdi.cli import build_parser, main
+    from bayes_fdi.commissioning.commission import ISOLATION_CLASSIFIERS
 
     out = str(tmp_path / "b")
-    args = build_parser("benchmark").parse_args(
-        ["benchmark", "--out", out, "--commissioning", "--isolation", "forest"]
-    )
-    assert args.isolation == "forest"
+    for name in ISOLATION_CLASSIFIERS:
+        args = build_parser("benchmark").parse_args(
+            ["benchmark", "--out", out, "--commissioning", "--isolation", name]
+        )
+        assert args.isolation == name
     assert main(["benchmark", "--out", out, "--isolation", "forest"]) == 2
     assert "--isolation belongs to --commissioning" in capsys.readouterr().err

@@ -127,15 +127,17 @@ def test_commission_seconds_that_leave_nothing_is_a_usage_error(tmp_path, capsys
 
 def test_the_isolation_classifier_is_chosen_by_name(tmp_path, capsys):
     from bayes_fdi.cli import build_parser
+    from bayes_fdi.commissioning.commission import ISOLATION_CLASSIFIERS
 
     healthy = tmp_path / "valve.nc"
     simulate(level_loop_inputs(1, 700, seed=13), seed=13).to_netcdf(healthy)
     out = str(tmp_path / "m.npz")
     args = build_parser("commission").parse_args(["commission", str(healthy), "--out", out])
     assert args.isolation == "tree"
-    args = build_parser("commission").parse_args(
-        ["commission", str(healthy), "--out", out, "--isolation", "forest"]
-    )
-    assert args.isolation == "forest"
+    for name in ISOLATION_CLASSIFIERS:  # every classifier commissioning offers, by its name
+        args = build_parser("commission").parse_args(
+            ["commission", str(healthy), "--out", out, "--isolation", name]
+        )
+        assert args.isolation == name
     assert main(["commission", str(healthy), "--out", out, "--isolation", "svm"]) == 2
     assert "invalid choice: 'svm'" in capsys.readouterr().err

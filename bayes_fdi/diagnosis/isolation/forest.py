@@ -92,7 +92,7 @@ class ForestClassifier(ClassifierMixin, BaseEstimator):
         ).fit(X, y)
         self.classes_ = forest.classes_
         roots, feature, threshold, left, right = [0], [], [], [], []
-        offsets, classes, proba = [0], [], []
+        counts, classes, proba = [], [], []
         for tree in (e.tree_ for e in forest.estimators_):
             start = roots[-1]
             leaf = tree.children_left == -1
@@ -101,22 +101,21 @@ class ForestClassifier(ClassifierMixin, BaseEstimator):
             left.append(np.where(leaf, -1, tree.children_left + start).astype(np.int32))
             right.append(np.where(leaf, -1, tree.children_right + start).astype(np.int32))
             value = np.asarray(tree.value[:, 0, :], dtype=np.float64)
-            for n in range(tree.node_count):
-                if leaf[n]:
-                    share = value[n] / value[n].sum()
-                    keep = np.flatnonzero(share > 0.0)
-                    classes.append(keep.astype(np.int32))
-                    proba.append(share[keep])
-                    offsets.append(offsets[-1] + keep.size)
-                else:
-                    offsets.append(offsets[-1])
+            share = value / value.sum(axis=1, keepdims=True)
+            share[~leaf] = 0.0  # a split node holds no proportions
+            node, cls = np.nonzero(share > 0.0)  # row by row: each leaf's entries together
+            counts.append(np.bincount(node, minlength=tree.node_count))
+            classes.append(cls.astype(np.int32))
+            proba.append(share[node, cls])
             roots.append(start + tree.node_count)
         self.roots_ = np.asarray(roots, dtype=np.int64)
         self.feature_ = np.concatenate(feature)
         self.threshold_ = np.concatenate(threshold)
         self.left_ = np.concatenate(left)
         self.right_ = np.concatenate(right)
-        self.leaf_offsets_ = np.asarray(offsets, dtype=np.int64)
+        self.leaf_offsets_ = np.concatenate([[0], np.cumsum(np.concatenate(counts))]).astype(
+            np.int64
+        )
         self.leaf_class_ = np.concatenate(classes)
         self.leaf_proba_ = np.concatenate(proba)
         return self
@@ -143,8 +142,8 @@ class ForestClassifier(ClassifierMixin, BaseEstimator):
 
     def predict(self, X: Any) -> np.ndarray:
         """The most probable class of each row."""
-        check_is_fitted(self, "roots_")
-        return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
+        proba = self.predict_proba(X)  # first: it refuses an unfitted forest
+        return self.classes_[np.argmax(proba, axis=1)]
 
 
 @njit(cache=True)
