@@ -12,6 +12,9 @@ PICalc code and summary as ``bayes-fdi benchmark --commissioning``):
   this raises it.
 - ``--runs-per-fault N``: more transplanted runs per fault in each library (12 by default),
   on the same healthy hour: more signatures of the same background.
+- ``--temperature-bounds LOW,HIGH``: the bounds of the group probabilities' calibration
+  temperature (``commission``'s ``temperature_bounds``; 1,50 by default, which never
+  sharpens them; 0.02,50 lets the calibration sharpen them as it did before).
 - ``--hours H``: commissioning on H hours of the plant's healthy data instead of one: the
   libraries are transplanted into windows spread over more varied healthy data (set-points and
   demand drift move the valve over a wider range).
@@ -23,7 +26,8 @@ undetectable). ``--json PATH`` writes every scenario's indices.
 
 Run: ``OMP_NUM_THREADS=1 PYTHONPATH=. python benchmarks/commissioned_isolation.py
 [--plants 0,1,2,3,4] [--seeds 2] [--library twin|true] [--hours 1] [--runs-per-fault 12]
-[--commission-seed 0] [--json PATH]`` (about 2.5 CPU min per plant and hour).
+[--commission-seed 0] [--isolation tree|forest] [--temperature-bounds 1,50] [--json PATH]``
+(about 2.5 CPU min per plant and hour).
 """
 
 from __future__ import annotations
@@ -76,8 +80,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs-per-fault", type=int, default=12)
     parser.add_argument("--commission-seed", type=int, default=0)
     parser.add_argument("--isolation", choices=("tree", "forest"), default="tree")
+    parser.add_argument(
+        "--temperature-bounds",
+        default="1,50",
+        help="bounds of the calibration temperature, LOW,HIGH (commission's temperature_bounds)",
+    )
     parser.add_argument("--json", default=None, help="write every scenario's indices here")
     args = parser.parse_args(argv)
+    bounds = tuple(float(b) for b in args.temperature_bounds.split(","))
 
     from bayes_fdi.benchmark.commissioning_summary import (
         big_abrupt_by_plant,
@@ -91,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     scenarios = [s for s in SCENARIOS if s.mode == "abrupt" and s.size == "big"]
     print(
         f"isolation: {args.isolation}; library: {args.library}; {args.hours:g} h healthy; "
-        f"{args.runs_per_fault} runs per fault; commissioning seed {args.commission_seed}; "
+        f"{args.runs_per_fault} runs per fault; temperature bounds {bounds}; "
+        f"commissioning seed {args.commission_seed}; "
         f"{args.seeds} seeds; "
         f"load average {os.getloadavg()[0]:.1f}",
         flush=True,
@@ -113,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
                 healthy,
                 runs_per_fault=args.runs_per_fault,
                 isolation=args.isolation,
+                temperature_bounds=bounds,
                 seed=args.commission_seed,
                 progress=False,
             )
@@ -138,13 +150,16 @@ def main(argv: list[str] | None = None) -> int:
                 r_ti.setdefault(r["fault"], []).append(max(r["indices"]["r_ti"], 0.0))
         medians = [float(np.median(v)) for v in r_ti.values()]
         wrong = confident_wrong_share(rows)["share"]
+        fitted = result.report["calibration"]["temperature"]
+        temperature = "none" if fitted is None else f"{fitted:.3g}"
         print(
             f"plant {index}: detected {len(entry['detected'])} of {entry['scenarios']}, "
             f"r_ti >= 0.9 on {len(entry['isolated'])} "
             f"({', '.join(s.split()[0] for s in entry['isolated']) or '-'}); median r_ti of "
             f"the {len(medians)} isolable detected faults "
             f"{np.median(medians) if medians else float('nan'):.2f}; {len(diagnoser.groups_)} "
-            f"groups; confident wrong group in {100 * wrong:.2f} % of the faulty seconds; "
+            f"groups; calibration temperature {temperature}; confident wrong group in "
+            f"{100 * wrong:.2f} % of the faulty seconds; "
             f"commissioning {commissioning_cpu:.0f} CPU s",
             flush=True,
         )

@@ -237,15 +237,24 @@ def test_brier_and_log_loss_closed_forms():
 
 
 # ------------------------------------------------------------------------------ temperature
-def test_temperature_scaling_recovers_known_temperature(rng):
-    n, k = 20_000, 5
+def _tempered(logits: np.ndarray, temperature: float) -> np.ndarray:
+    """``softmax(logits / temperature)`` row by row."""
+    p = np.exp((logits - logits.max(axis=1, keepdims=True)) / temperature)
+    return p / p.sum(axis=1, keepdims=True)
+
+
+def _softmax_labels(rng, n: int, k: int):
+    """Logits ``(n, k)``, their softmax and labels drawn from it: a calibrated model's data."""
     logits = rng.normal(scale=2.0, size=(n, k))
-    p_true = np.exp(logits - logits.max(axis=1, keepdims=True))
-    p_true /= p_true.sum(axis=1, keepdims=True)
+    p_true = _tempered(logits, 1.0)
     y = (rng.random(n)[:, None] > np.cumsum(p_true, axis=1)).sum(axis=1).clip(max=k - 1)
+    return logits, p_true, y
+
+
+def test_temperature_scaling_recovers_known_temperature(rng):
+    logits, p_true, y = _softmax_labels(rng, 20_000, 5)
     # an over-confident model reports softmax(logits / 0.5); the right fix is T = 0.5 back... i.e. 2
-    hot = np.exp((logits - logits.max(axis=1, keepdims=True)) / 0.5)
-    hot /= hot.sum(axis=1, keepdims=True)
+    hot = _tempered(logits, 0.5)
     ts = TemperatureScaler().fit(hot, y)
     # maximum likelihood on 20 000 runs: the inverse temperature's standard error is about
     # 1 / sqrt(n * Fisher information) ~ 0.5 %; 5 % is 10 se and still tells 2 from 1.5 or 2.5
@@ -265,6 +274,25 @@ def test_temperature_scaling_recovers_known_temperature(rng):
     ts2 = TemperatureScaler(input="logits").fit(logits / 0.5, y)
     # the same likelihood, minimised to Brent's tolerance 1e-8 in 1/T from another start
     assert ts2.temperature_ == pytest.approx(ts.temperature_, rel=1e-3)
+
+
+def test_a_lower_bound_of_one_softens_but_never_sharpens(rng):
+    logits, _, y = _softmax_labels(rng, 20_000, 5)
+    # an under-confident model reports softmax(logits / 2): its maximum-likelihood fix is
+    # T = 0.5 (within 5 %, ten standard errors on 20 000 runs, as above)
+    cold = _tempered(logits, 2.0)
+    free = TemperatureScaler().fit(cold, y)
+    assert free.temperature_ == pytest.approx(0.5, rel=0.05) and not free.at_bound_
+    # bounded below by 1: the NLL is convex in 1/T with its minimum outside the interval, so
+    # the bounded optimum is the bound (Brent's tolerance 1e-8 on 1/T) and flagged
+    floor = TemperatureScaler(bounds=(1.0, 50.0)).fit(cold, y)
+    assert floor.temperature_ == pytest.approx(1.0, abs=1e-6) and floor.at_bound_
+    np.testing.assert_allclose(floor.transform(cold), cold, atol=1e-6)
+    # an over-confident model is still softened as without the bound
+    hot = _tempered(logits, 0.5)
+    bounded, unbounded = TemperatureScaler(bounds=(1.0, 50.0)).fit(hot, y), TemperatureScaler()
+    assert bounded.temperature_ == pytest.approx(unbounded.fit(hot, y).temperature_, rel=1e-6)
+    assert not bounded.at_bound_
 
 
 def test_temperature_of_calibrated_model_is_one(rng):

@@ -131,6 +131,30 @@ def test_the_report_says_when_the_laplace_check_failed(commissioned, pareto_k, w
     assert ("as indicative only" in text) is warned
 
 
+def test_the_group_probabilities_are_softened_never_sharpened(commissioned, healthy):
+    diag, _, report = commissioned
+    scaler = diag.isolator_.calibrator_
+    assert report["calibration"] == {
+        "temperature": scaler.temperature_,
+        "bounds": [1.0, 50.0],
+        "at_bound": scaler.at_bound_,
+    }
+    assert scaler.bounds == (1.0, 50.0) and scaler.temperature_ >= 1.0
+    text = render_report(report)
+    assert f"with temperature {scaler.temperature_:.3g} (bounds 1 to 50" in text
+    # a fit that stopped at the lower bound says why the probabilities were left as they are
+    at_one = dict(report, calibration={"temperature": 1.0, "bounds": [1.0, 50.0], "at_bound": True})
+    assert "stopped at its lower bound" in render_report(at_one)
+    assert "stopped at its lower bound" not in text or scaler.at_bound_
+    # reports written before the calibration was recorded render without the line
+    older = {k: v for k, v in report.items() if k != "calibration"}
+    assert "calibrated on held-out transplants with temperature" not in render_report(older)
+    # bad bounds are refused before anything is fitted
+    for bounds in [(2.0, 1.0), (0.0, 50.0), (1.0, float("inf"))]:
+        with pytest.raises(ValueError, match="temperature_bounds must satisfy"):
+            commission(healthy, temperature_bounds=bounds, progress=False)
+
+
 def test_commissioned_groups_come_from_the_one_way_confusion_of_detected_seconds(
     commissioned, healthy
 ):
@@ -172,6 +196,7 @@ def test_a_forest_can_name_the_faults_and_travels_with_the_model_file(healthy, t
     diag, _, report = commission(healthy, isolation="forest", **options)
     assert isinstance(diag.isolator_.classifier_, ForestClassifier)
     assert report["isolation_classifier"] == "forest"
+    assert report["calibration"]["temperature"] >= 1.0  # a forest's shares are never sharpened
     assert "random forest" in render_report(report)
     f18 = next(r for r in report["expected"] if r["fault"] == "f18")
     assert f18["detected_share"] == 1.0 and f18["named_share"] > 0.5

@@ -10,7 +10,8 @@
    reading) onto the healthy data, with parameters drawn from the twin's posterior: one
    library trains the isolation, one finds the isolability groups, one calibrates the group
    probabilities (disjoint parameter and noise draws: seeds ``10 seed + 1, 2, 3``; 12 runs
-   per fault, both signs of a signed fault in each profile);
+   per fault, both signs of a signed fault in each profile) with a temperature that may
+   soften them, never sharpen them (`TEMPERATURE_BOUNDS`);
 4. fits the online diagnoser (`bayes_fdi.diagnosis.OnlineDiagnoser`) with the valve's own normal
    models (the command through the valve's own lag and speed limits among their inputs,
    `NORMAL_MODEL_OPTIONS`), detector threshold and input envelope on all the healthy data, and
@@ -43,6 +44,7 @@ __all__ = [
     "ISOLATION_CLASSIFIERS",
     "LIBRARY_FAULTS",
     "NORMAL_MODEL_OPTIONS",
+    "TEMPERATURE_BOUNDS",
     "Commissioning",
     "commission",
 ]
@@ -69,9 +71,17 @@ NORMAL_MODEL_OPTIONS: Mapping[str, Any] = MappingProxyType(
 )
 #: The isolation classifiers `commission` offers: ``"tree"`` (default), the k-means tree of
 #: RVCs whose probabilities multiply along its paths; ``"forest"``, a random forest
-#: (`~bayes_fdi.diagnosis.isolation.ForestClassifier`), which names the library's faults right
-#: more often but is confident about faults outside it (see the Commissioning page).
+#: (`~bayes_fdi.diagnosis.isolation.ForestClassifier`), which names more faults' groups right
+#: on the perturbed plants, with as few confident wrong answers (see the Commissioning page).
 ISOLATION_CLASSIFIERS: tuple[str, ...] = ("tree", "forest")
+#: Bounds of the temperature that calibrates the group probabilities
+#: (`~bayes_fdi.calibration.TemperatureScaler`): at least 1, so the calibration softens the
+#: classifier's probabilities or leaves them, never sharpens them. Its transplants share the
+#: background of the library the classifier learnt (the same healthy data), where a random
+#: forest's trees agree less than they deserve; the sharpening fitted there (temperatures
+#: 0.47-0.58 on two perturbed plants outside the benchmark) made the forest name new data's
+#: faults confidently wrong (see the Commissioning page).
+TEMPERATURE_BOUNDS: tuple[float, float] = (1.0, 50.0)
 #: Share of the healthy data the twin is fitted on; the rest checks its predictive.
 TWIN_FIT_SHARE = 0.8
 
@@ -126,6 +136,18 @@ def _training_size_report(models: Any) -> dict[str, Any]:
     }
 
 
+def _calibration_report(diagnoser: Any, bounds: tuple[float, float]) -> dict[str, Any]:
+    """The group probabilities' calibration: its temperature (None without one: a single
+    group, or no classified fault), bounds and whether the fit stopped at a bound."""
+    isolator = getattr(diagnoser, "isolator_", None)
+    scaler = None if isolator is None else isolator.calibrator_
+    return {
+        "temperature": None if scaler is None else float(scaler.temperature_),
+        "bounds": [float(b) for b in bounds],
+        "at_bound": None if scaler is None else bool(scaler.at_bound_),
+    }
+
+
 def commission(
     healthy: xr.Dataset | Sequence[xr.Dataset],
     *,
@@ -138,6 +160,7 @@ def commission(
     normal_samples: int | str = 2000,
     twin: Any = None,
     isolation: str = "tree",
+    temperature_bounds: tuple[float, float] = TEMPERATURE_BOUNDS,
     seed: int = 0,
     progress: bool = True,
 ) -> Commissioning:
@@ -168,6 +191,9 @@ def commission(
     isolation
         The isolation classifier, one of `ISOLATION_CLASSIFIERS`: ``"tree"``, the k-means
         tree of RVCs, or ``"forest"``, a random forest of 300 trees.
+    temperature_bounds
+        Bounds ``(low, high)`` of the group probabilities' calibration temperature
+        (`TEMPERATURE_BOUNDS`; ``(0.02, 50)`` lets it sharpen them too).
     seed
         Seed of everything drawn (the twin's draws, the libraries, the folds).
     progress
@@ -190,6 +216,11 @@ def commission(
     if isolation not in ISOLATION_CLASSIFIERS:
         raise ValueError(
             f"isolation must be one of {', '.join(ISOLATION_CLASSIFIERS)}, got {isolation!r}"
+        )
+    low, high = (float(b) for b in temperature_bounds)
+    if not 0 < low < high < float("inf"):
+        raise ValueError(
+            f"temperature_bounds must satisfy 0 < low < high < inf, got {temperature_bounds!r}"
         )
     t_start = time.perf_counter()
     runs = check_healthy(stack_runs(healthy))
@@ -224,7 +255,7 @@ def commission(
         diagnoser = OnlineDiagnoser(
             normal_models,
             detector=TwoSpeedCUSUM(k_slow=DETECTOR_K_SLOW),
-            calibrator=TemperatureScaler(),
+            calibrator=TemperatureScaler(bounds=(low, high)),
             isolation_classifier=(
                 ForestClassifier(random_state=seed) if isolation == "forest" else None
             ),
@@ -265,6 +296,7 @@ def commission(
         },
         "groups": [list(g) for g in diagnoser.groups_],
         "isolation_classifier": isolation,
+        "calibration": _calibration_report(diagnoser, (low, high)),
         "group_rule": GROUP_RULE,
         "group_threshold": float(diagnoser.group_threshold),
         "undetectable": list(diagnoser.undetectable_),

@@ -191,14 +191,40 @@ def render_report(report: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _calibration_lines(report: Mapping[str, Any]) -> list[str]:
+    """The group probabilities' calibration temperature (reports written before it was
+    recorded: nothing)."""
+    cal = report.get("calibration")
+    if not cal or cal.get("temperature") is None:
+        return []
+    low, high = cal["bounds"]
+    text = (
+        f"The group probabilities are calibrated on held-out transplants with temperature "
+        f"{format_number(cal['temperature'], '.3g')} (bounds {format_number(low, 'g')} to "
+        f"{format_number(high, 'g')}; above 1 softens them)."
+    )
+    if cal.get("at_bound") and cal["temperature"] <= low * (1 + 1e-6):
+        text += (
+            " The fit stopped at its lower bound: the held-out transplants asked for sharper "
+            "probabilities, which are not given, since those transplants share the background "
+            "of the data the classifier learnt."
+        )
+    return [text, ""]
+
+
 def _classifier_lines(report: Mapping[str, Any]) -> list[str]:
-    """Which classifier names the groups (reports written before the choice: the tree)."""
+    """Which classifier names the groups (reports written before the choice: the tree), and
+    the calibration of its group probabilities."""
+    return _classifier_choice_lines(report) + _calibration_lines(report)
+
+
+def _classifier_choice_lines(report: Mapping[str, Any]) -> list[str]:
     if report.get("isolation_classifier", "tree") == "forest":
         return [
-            "The faults are named by a random forest of the isolation signatures. It names the "
-            "library's faults right more often than the k-means tree of relevance vector "
-            "classifiers, but may name a fault outside the library, or one listed as not "
-            "detectable here, as a group with a probability near 1.",
+            "The faults are named by a random forest of the isolation signatures (its "
+            "probability of a group: the share of its trees that name it, calibrated as "
+            "below). It names the library's faults right more often than the k-means tree of "
+            "relevance vector classifiers.",
             "",
         ]
     return [

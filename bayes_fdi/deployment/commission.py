@@ -72,8 +72,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         choices=("tree", "forest"),
         default="tree",
         help="isolation classifier: the k-means tree of RVCs (default) or a random forest, "
-        "which names the library's faults right more often but is confident about faults "
-        "outside it",
+        "which names more faults' groups right on the perturbed plants",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress")
     add_reading_arguments(parser)
