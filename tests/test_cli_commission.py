@@ -92,6 +92,8 @@ def test_diagnose_commissions_on_the_first_seconds_of_each_recording(tmp_path):
                 str(tmp_path / "valve.nc"),
                 "--commission-seconds",
                 "1800",
+                "--isolation",
+                "forest",
                 "--out",
                 str(tmp_path / "d"),
                 "--quiet",
@@ -105,6 +107,9 @@ def test_diagnose_commissions_on_the_first_seconds_of_each_recording(tmp_path):
     assert summary["seconds"] == 600 and summary["model"]["commissioned_on_seconds"] == 1800
     assert (folder / "model.npz").exists()
     assert np.isclose(summary["start"], 1800.0)
+    report = json.loads((folder / "commissioning.json").read_text())
+    assert report["isolation_classifier"] == "forest"  # the option reaches the commissioning
+    assert "random forest" in (folder / "commissioning.md").read_text()
 
 
 def test_commission_seconds_that_leave_nothing_is_a_usage_error(tmp_path, capsys):
@@ -141,3 +146,31 @@ def test_the_isolation_classifier_is_chosen_by_name(tmp_path, capsys):
         assert args.isolation == name
     assert main(["commission", str(healthy), "--out", out, "--isolation", "svm"]) == 2
     assert "invalid choice: 'svm'" in capsys.readouterr().err
+
+
+def test_diagnose_chooses_the_commissioned_isolation_and_refuses_it_without_commissioning(
+    tmp_path, capsys
+):
+    from bayes_fdi.cli import build_parser
+    from bayes_fdi.commissioning.commission import ISOLATION_CLASSIFIERS
+
+    recording = tmp_path / "valve.nc"
+    simulate(level_loop_inputs(1, 700, seed=13), seed=13).to_netcdf(recording)
+    out = ["--out", str(tmp_path / "d")]
+    parse = build_parser("diagnose").parse_args
+    args = parse(["diagnose", str(recording), "--commission-seconds", "650", *out])
+    assert args.isolation is None  # the commissioning's default, the tree
+    for name in ISOLATION_CLASSIFIERS:  # every classifier commissioning offers, by its name
+        args = parse(["diagnose", "--example", "--isolation", name, *out])
+        assert args.isolation == name
+    assert main(["diagnose", "--example", "--isolation", "svm", *out]) == 2
+    assert "invalid choice: 'svm'" in capsys.readouterr().err
+    # a model that is not commissioned here has no classifier to choose (refused before the
+    # model file is read)
+    (tmp_path / "m.npz").write_bytes(b"")
+    for extra in ([str(recording)], ["--example", "--model", str(tmp_path / "m.npz")]):
+        status = main(["diagnose", *extra, "--isolation", "forest", *out])
+        assert status == 2
+        assert "--isolation chooses the classifier of a model commissioned here" in (
+            capsys.readouterr().err
+        )

@@ -48,6 +48,7 @@ class _Job(NamedTuple):
     progress: bool
     model_info: dict
     commission_seconds: int | None  #: commission on the first seconds, diagnose the rest
+    isolation: str  #: the commissioned model's isolation classifier
 
 
 def _read(path: str | None, reading: Mapping[str, Any], chunk_seconds: int) -> xr.Dataset:
@@ -82,7 +83,9 @@ def _diagnose_job(job: _Job) -> RecordingResult:
     diagnoser, info, attachments = job.diagnoser, job.model_info, None
     if job.commission_seconds is not None:
         healthy, recording = split_healthy(recording, job.commission_seconds, job.name)
-        done, info, attachments = commission_in_place(healthy, progress=job.progress)
+        done, info, attachments = commission_in_place(
+            healthy, progress=job.progress, isolation=job.isolation
+        )
         diagnoser = done.diagnoser
     elif job.reading.get("check_units", True):
         _check_ranges(diagnoser, recording, job.reading.get("units") or "normalised", job.name)
@@ -120,18 +123,23 @@ def _check_ranges(diagnoser: Any, recording: xr.Dataset, units: Any, name: str) 
         print(f"note: {note}: expect 'mismatch' (commission this valve)", file=sys.stderr)
 
 
-def diagnose_example(out: str | os.PathLike, **options: Any) -> list[RecordingResult]:
-    """The first example: commission on the first half of the shipped Lublin hour, diagnose the
-    second half (``EXAMPLE_NAME``) and the same half with the bypass valve half opened (f18,
-    strength 0.5) from 300 s into it, transplanted with the commissioned twin's parameters
-    (``EXAMPLE_NAME-f18``). ``options``: those of `diagnose_recording`."""
+def diagnose_example(
+    out: str | os.PathLike, *, isolation: str = "tree", **options: Any
+) -> list[RecordingResult]:
+    """The first example: commission on the first half of the shipped Lublin hour (with the
+    isolation classifier ``isolation``), diagnose the second half (``EXAMPLE_NAME``) and the
+    same half with the bypass valve half opened (f18, strength 0.5) from 300 s into it,
+    transplanted with the commissioned twin's parameters (``EXAMPLE_NAME-f18``). ``options``:
+    those of `diagnose_recording`."""
     from bayes_fdi.actuator import Fault
     from bayes_fdi.datasets import load_lublin_example
     from bayes_fdi.twin import transplant
 
     hour = load_lublin_example()
     first, second = split_healthy(hour, 1800, EXAMPLE_NAME)
-    done, info, attachments = commission_in_place(first, progress=options.get("progress", True))
+    done, info, attachments = commission_in_place(
+        first, progress=options.get("progress", True), isolation=isolation
+    )
     faulty = transplant(second, [Fault("f18", 0.5, onset=300.0)], done.twin.parameters_)
     info = {**info, "file": f"../{EXAMPLE_NAME}/model.npz"}
     return [
@@ -168,12 +176,16 @@ def split_healthy(recording: xr.Dataset, seconds: int, name: str) -> tuple[xr.Da
     return recording.isel(time=slice(0, cut)), recording.isel(time=slice(cut, None))
 
 
-def commission_in_place(healthy: xr.Dataset, *, progress: bool, seed: int = 0) -> tuple:
-    """Commission on ``healthy``: the diagnoser, its ``summary.json`` entry, and the files it
-    adds to the recording's folder (``model.npz``, ``commissioning.md``, ``commissioning.json``)."""
+def commission_in_place(
+    healthy: xr.Dataset, *, progress: bool, seed: int = 0, isolation: str = "tree"
+) -> tuple:
+    """Commission on ``healthy`` (with the isolation classifier ``isolation``, one of
+    `~bayes_fdi.commissioning.commission.ISOLATION_CLASSIFIERS`): the diagnoser, its
+    ``summary.json`` entry, and the files it adds to the recording's folder (``model.npz``,
+    ``commissioning.md``, ``commissioning.json``)."""
     from bayes_fdi.commissioning import commission
 
-    done = commission(healthy, seed=seed, progress=progress)
+    done = commission(healthy, seed=seed, progress=progress, isolation=isolation)
     return (done, *_commission_files(done))
 
 
@@ -210,12 +222,14 @@ def diagnose_files(
     scheduler: str | None = None,
     model_info: Mapping[str, Any] | None = None,
     commission_seconds: int | None = None,
+    isolation: str = "tree",
 ) -> list[RecordingResult]:
     """Diagnose recording files (``None``: the shipped Lublin hour), one task per recording.
 
     ``commission_seconds``: each recording's first seconds are declared healthy, a model is
     commissioned on them (`commission_in_place`; ``diagnoser`` is then unused) and the rest is
-    diagnosed with it; the model and its report go into the recording's folder.
+    diagnosed with it (its isolation classifier: ``isolation``); the model and its report go
+    into the recording's folder.
 
     ``reading`` holds the reader's options (`bayes_fdi.datasets.readers.read_recording`);
     netCDF recordings are read lazily in chunks when dask is installed.
@@ -248,6 +262,7 @@ def diagnose_files(
                 progress and serial,
                 info,
                 commission_seconds,
+                isolation,
             )
         )
     return run_tasks(
@@ -310,6 +325,14 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "healthy, and diagnose the rest with it (the model and its report are written beside "
         "the results)",
     )
+    parser.add_argument(
+        "--isolation",
+        choices=("tree", "forest"),
+        default=None,
+        help="with --commission-seconds or --example: the commissioned model's isolation "
+        "classifier, the k-means tree of RVCs (default) or a random forest (as bayes-fdi "
+        "commission --isolation)",
+    )
     parser.add_argument("--no-figure", action="store_true", help="do not draw timeline.png")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     add_reading_arguments(parser)
@@ -328,6 +351,13 @@ def run_from_cli(args: argparse.Namespace) -> int:
     paths: list[str | None] = list(args.recordings)
     if not paths and not args.example:
         raise UsageError("give one or more recordings, or --example for the shipped Lublin hour")
+    commissions = args.commission_seconds is not None or (args.example and not args.model)
+    if args.isolation is not None and not commissions:
+        raise UsageError(
+            "--isolation chooses the classifier of a model commissioned here: it belongs to "
+            "--commission-seconds or --example (without --model)"
+        )
+    isolation = args.isolation or "tree"
     reading = reading_options(args)
     t0 = time.perf_counter()
     os.makedirs(args.out, exist_ok=True)
@@ -338,7 +368,7 @@ def run_from_cli(args: argparse.Namespace) -> int:
     }
     results: list[RecordingResult] = []
     if args.example and not args.model:
-        results += diagnose_example(args.out, **common)
+        results += diagnose_example(args.out, isolation=isolation, **common)
     elif args.example:
         paths.append(None)
     diagnoser, info = None, {}
@@ -360,6 +390,7 @@ def run_from_cli(args: argparse.Namespace) -> int:
             scheduler=args.scheduler,
             model_info=info,
             commission_seconds=args.commission_seconds,
+            isolation=isolation,
             **common,
         )
     for r in results:
