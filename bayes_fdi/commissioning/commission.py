@@ -79,8 +79,8 @@ ISOLATION_CLASSIFIERS: tuple[str, ...] = ("tree", "forest")
 #: classifier's probabilities or leaves them, never sharpens them. Its transplants share the
 #: background of the library the classifier learnt (the same healthy data), where a random
 #: forest's trees agree less than they deserve; the sharpening fitted there (temperatures
-#: 0.47-0.58 on two perturbed plants outside the benchmark) made the forest name new data's
-#: faults confidently wrong (see the Commissioning page).
+#: 0.47-0.59 on two perturbed plants outside the benchmark, two commissioning seeds) made the
+#: forest name new data's faults confidently wrong (see the Commissioning page).
 TEMPERATURE_BOUNDS: tuple[float, float] = (1.0, 50.0)
 #: Share of the healthy data the twin is fitted on; the rest checks its predictive.
 TWIN_FIT_SHARE = 0.8

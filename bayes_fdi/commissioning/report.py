@@ -203,7 +203,7 @@ def _calibration_lines(report: Mapping[str, Any]) -> list[str]:
         f"{format_number(cal['temperature'], '.3g')} (bounds {format_number(low, 'g')} to "
         f"{format_number(high, 'g')}; above 1 softens them)."
     )
-    if cal.get("at_bound") and cal["temperature"] <= low * (1 + 1e-6):
+    if cal.get("at_bound") and cal["temperature"] <= low * (1 + 1e-3):  # the scaler's tolerance
         text += (
             " The fit stopped at its lower bound: the held-out transplants asked for sharper "
             "probabilities, which are not given, since those transplants share the background "
@@ -222,9 +222,10 @@ def _classifier_choice_lines(report: Mapping[str, Any]) -> list[str]:
     if report.get("isolation_classifier", "tree") == "forest":
         return [
             "The faults are named by a random forest of the isolation signatures (its "
-            "probability of a group: the share of its trees that name it, calibrated as "
-            "below). It names the library's faults right more often than the k-means tree of "
-            "relevance vector classifiers.",
+            "probability of a fault: the fault's share of the training signatures in the leaf "
+            "the signature reaches, averaged over its trees; a group's, the sum over its "
+            "faults, calibrated as below). It names the library's faults right more often "
+            "than the k-means tree of relevance vector classifiers.",
             "",
         ]
     return [
