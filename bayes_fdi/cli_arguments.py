@@ -7,6 +7,7 @@
   :func:`input_file`, :func:`output_file` (e.g. ``output_file(".nc")``), :func:`output_folder`,
   :func:`positive_int`, :func:`non_negative_int`, :func:`non_negative_float`. A bad value is an
   argparse error: usage line, one-line message, exit status 2.
+- `ISOLATION_CHOICES`: the choices of every ``--isolation`` option.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from collections.abc import Callable
 from bayes_fdi.atomic import check_output_path
 
 __all__ = [
+    "ISOLATION_CHOICES",
     "UsageError",
     "input_file",
     "non_negative_float",
@@ -27,6 +29,12 @@ __all__ = [
     "output_folder",
     "positive_int",
 ]
+
+
+#: The isolation classifiers a command can commission with: the names of
+#: `bayes_fdi.commissioning.commission.ISOLATION_CLASSIFIERS`, written here so that parsing a
+#: command line imports no model code (the tests hold the two equal).
+ISOLATION_CHOICES: tuple[str, ...] = ("tree", "forest")
 
 
 class UsageError(ValueError):

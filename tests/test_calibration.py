@@ -325,6 +325,10 @@ def test_temperature_scaler_rejects_bad_input():
     with pytest.raises(ValueError, match="classes"):
         TemperatureScaler(classes=[0, 1, 2]).fit(np.array([[0.5, 0.5]]), [0])
     assert TemperatureScaler(floor=1e-9).get_params()["floor"] == 1e-9
+    p, y = np.array([[0.7, 0.3], [0.2, 0.8]]), [0, 1]
+    for bounds in [(2.0, 1.0), (0.0, 50.0), (1.0, np.inf), (np.nan, 2.0)]:
+        with pytest.raises(ValueError, match=r"bounds must satisfy 0 < low < high < inf"):
+            TemperatureScaler(bounds=bounds).fit(p, y)
 
 
 # ------------------------------------------------------------------------------ nodes

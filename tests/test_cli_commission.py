@@ -152,7 +152,10 @@ def test_diagnose_chooses_the_commissioned_isolation_and_refuses_it_without_comm
     tmp_path, capsys
 ):
     from bayes_fdi.cli import build_parser
+    from bayes_fdi.cli_arguments import ISOLATION_CHOICES
     from bayes_fdi.commissioning.commission import ISOLATION_CLASSIFIERS
+
+    assert ISOLATION_CHOICES == ISOLATION_CLASSIFIERS  # the options' choices, the library's names
 
     recording = tmp_path / "valve.nc"
     simulate(level_loop_inputs(1, 700, seed=13), seed=13).to_netcdf(recording)

@@ -6,7 +6,8 @@ calibrated when its 95 % predictive intervals contain about 95 % of fault-free m
 
 - `bayes_fdi.calibration.metrics`: ECE (top-label, classwise, bootstrap intervals, noise floor),
   log loss, Brier score, reliability diagrams.
-- `bayes_fdi.calibration.temperature`: temperature scaling (`TemperatureScaler`).
+- `bayes_fdi.calibration.temperature`: temperature scaling (`TemperatureScaler`, and
+  `check_temperature_bounds` for its search interval).
 - `bayes_fdi.calibration.top_label`: a temperature and a beta map of the top class
   (`TopLabelScaler`), which bends the reliability curve.
 - `bayes_fdi.calibration.dirichlet`: Dirichlet calibration and vector scaling (`DirichletScaler`).
@@ -39,7 +40,7 @@ from bayes_fdi.calibration.metrics import (
 )
 from bayes_fdi.calibration.nodes import NodeCalibration, node_calibration
 from bayes_fdi.calibration.recalibration import cross_val_log_loss
-from bayes_fdi.calibration.temperature import TemperatureScaler
+from bayes_fdi.calibration.temperature import TemperatureScaler, check_temperature_bounds
 from bayes_fdi.calibration.top_label import TopLabelScaler
 from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
 
@@ -54,6 +55,7 @@ __all__ = [
     "TemperatureScaler",
     "TopLabelScaler",
     "brier",
+    "check_temperature_bounds",
     "cross_val_log_loss",
     "crps_gaussian",
     "expected_calibration_error",

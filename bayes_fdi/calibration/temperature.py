@@ -16,7 +16,16 @@ from sklearn.base import BaseEstimator
 
 from bayes_fdi.calibration.recalibration import class_indices, log_probabilities, log_softmax
 
-__all__ = ["TemperatureScaler"]
+__all__ = ["TemperatureScaler", "check_temperature_bounds"]
+
+
+def check_temperature_bounds(bounds: Any, *, name: str = "bounds") -> tuple[float, float]:
+    """``(low, high)`` of a temperature search as floats, refused unless ``0 < low < high``
+    and both are finite (``name``: the argument's name in the message)."""
+    low, high = (float(b) for b in bounds)
+    if not 0 < low < high < np.inf:
+        raise ValueError(f"{name} must satisfy 0 < low < high < inf, got {bounds!r}")
+    return low, high
 
 
 class TemperatureScaler(BaseEstimator):
@@ -75,9 +84,7 @@ class TemperatureScaler(BaseEstimator):
         """Fit the temperature on held-out ``(proba_or_logits, y)``."""
         z = self._logits(proba_or_logits)
         y_idx, cls = class_indices(y, z.shape[0], self.classes, z.shape[1])
-        t_lo, t_hi = (float(b) for b in self.bounds)
-        if not 0 < t_lo < t_hi:
-            raise ValueError(f"bounds must satisfy 0 < low < high, got {self.bounds}")
+        t_lo, t_hi = check_temperature_bounds(self.bounds)
         rows = np.arange(z.shape[0])
 
         def nll(beta: float) -> float:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+from bayes_fdi.cli_arguments import ISOLATION_CHOICES
+
 __all__ = ["configure_parser", "run_from_cli"]
 
 #: Perturbed plants of the commissioning benchmark: full and ``--small`` (as its settings,
@@ -58,7 +60,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--isolation",
-        choices=("tree", "forest"),
+        choices=ISOLATION_CHOICES,
         default=None,
         help="with --commissioning: the commissioned diagnosers' isolation classifier (default "
         "tree: the k-means tree of RVCs; forest: a random forest)",

@@ -205,7 +205,7 @@ def commission(
     """
     from sklearn.base import clone
 
-    from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.calibration import TemperatureScaler, check_temperature_bounds
     from bayes_fdi.diagnosis import OnlineDiagnoser
     from bayes_fdi.diagnosis.detection import TwoSpeedCUSUM
     from bayes_fdi.diagnosis.isolation import ForestClassifier
@@ -217,11 +217,7 @@ def commission(
         raise ValueError(
             f"isolation must be one of {', '.join(ISOLATION_CLASSIFIERS)}, got {isolation!r}"
         )
-    low, high = (float(b) for b in temperature_bounds)
-    if not 0 < low < high < float("inf"):
-        raise ValueError(
-            f"temperature_bounds must satisfy 0 < low < high < inf, got {temperature_bounds!r}"
-        )
+    low, high = check_temperature_bounds(temperature_bounds, name="temperature_bounds")
     t_start = time.perf_counter()
     runs = check_healthy(stack_runs(healthy))
     duration = int(min(duration, runs.sizes["time"] - 60))

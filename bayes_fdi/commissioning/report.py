@@ -186,6 +186,7 @@ def render_report(report: Mapping[str, Any]) -> str:
         *[f"- {g}" for g in groups],
         "",
         *_classifier_lines(report),
+        *_calibration_lines(report),
         *_expected_section(report),
     ]
     return "\n".join(lines) + "\n"
@@ -213,12 +214,7 @@ def _calibration_lines(report: Mapping[str, Any]) -> list[str]:
 
 
 def _classifier_lines(report: Mapping[str, Any]) -> list[str]:
-    """Which classifier names the groups (reports written before the choice: the tree), and
-    the calibration of its group probabilities."""
-    return _classifier_choice_lines(report) + _calibration_lines(report)
-
-
-def _classifier_choice_lines(report: Mapping[str, Any]) -> list[str]:
+    """Which classifier names the groups (reports written before the choice: the tree)."""
     if report.get("isolation_classifier", "tree") == "forest":
         return [
             "The faults are named by a random forest of the isolation signatures (its "

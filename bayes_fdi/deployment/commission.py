@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from bayes_fdi.cli_arguments import input_file, output_file
+from bayes_fdi.cli_arguments import ISOLATION_CHOICES, input_file, output_file
 
 __all__ = ["commission_and_save", "configure_parser", "run_from_cli"]
 
@@ -69,7 +69,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     add_normal_samples_argument(parser)
     parser.add_argument(
         "--isolation",
-        choices=("tree", "forest"),
+        choices=ISOLATION_CHOICES,
         default="tree",
         help="isolation classifier: the k-means tree of RVCs (default) or a random forest, "
         "which names more faults' groups right on the perturbed plants",

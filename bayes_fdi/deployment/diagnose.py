@@ -22,7 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.cli_arguments import UsageError, input_file
+from bayes_fdi.cli_arguments import ISOLATION_CHOICES, UsageError, input_file
 from bayes_fdi.deployment.recording import (
     DEFAULT_CHUNK_SECONDS,
     RecordingResult,
@@ -327,7 +327,7 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--isolation",
-        choices=("tree", "forest"),
+        choices=ISOLATION_CHOICES,
         default=None,
         help="with --commission-seconds or --example: the commissioned model's isolation "
         "classifier, the k-means tree of RVCs (default) or a random forest (as bayes-fdi "
