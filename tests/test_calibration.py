@@ -21,6 +21,7 @@ from bayes_fdi.calibration import (
     pit_histogram,
     pit_values,
     plot_pit_histogram,
+    probability_rows,
     reliability_diagram,
 )
 
@@ -223,6 +224,23 @@ def test_ece_rejects_bad_input(kwargs, msg):
     p = args.pop("proba")
     with pytest.raises(ValueError, match=msg):
         expected_calibration_error(y, p, classes=[0, 1], **args)
+
+
+def test_probabilities_off_the_unit_interval_by_rounding_are_held_there():
+    # as a forest's leaf shares averaged over its trees and summed over a group can be
+    over = np.array([[np.nextafter(1.0, 2.0), 0.0]])
+    held = probability_rows(over)
+    np.testing.assert_array_equal(held, [[1.0, 0.0]])
+    assert over[0, 0] > 1.0  # the caller's array is left as it was
+    assert np.isfinite(expected_calibration_error([0], over, classes=[0, 1]).value)
+    ts = TemperatureScaler().fit(np.array([[0.7, 0.3], [0.2, 0.8]]), [0, 1])
+    np.testing.assert_allclose(ts.transform(over), ts.transform(held), rtol=0, atol=0)
+    # more than rounding is an error naming how far
+    for bad in ([[1.0 + 1e-6, -1e-6]], [[-1e-6, 1.0 + 1e-6]]):
+        with pytest.raises(ValueError, match=r"must lie in \[0, 1\] \(an entry lies 1e-06 outside"):
+            probability_rows(np.array(bad))
+        with pytest.raises(ValueError, match=r"must lie in \[0, 1\]"):
+            ts.transform(np.array(bad))
 
 
 # ------------------------------------------------------------------------------ scores

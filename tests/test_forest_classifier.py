@@ -8,6 +8,7 @@ from sklearn.ensemble import RandomForestClassifier
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from bayes_fdi import model_files
+from bayes_fdi.calibration import TemperatureScaler
 from bayes_fdi.diagnosis.isolation import FaultIsolator, ForestClassifier
 
 
@@ -86,6 +87,38 @@ def test_the_isolator_runs_it_second_by_second_as_over_the_whole():
     # held-out rows of these well-separated classes are named right
     right = iso.faults_[np.argmax(whole.fault_proba[:40], axis=1)] == yv[:40]
     assert right.mean() >= 0.9
+
+
+def test_a_group_named_unanimously_is_calibrated_without_error():
+    # f1 and f2 look alike, so they form one group; where the forest names that group, the
+    # faults' shares averaged over 100 trees sum to 1 + one ulp in some rows, which the
+    # calibration used to refuse as a probability above 1
+    def alike(n, seed):
+        rng = np.random.default_rng(seed)
+        y = np.array([f"f{k}" for k in rng.integers(1, 5, n)])
+        X = rng.standard_normal((n, 10))
+        X[(y == "f1") | (y == "f2"), 0] += 3.0
+        X[y == "f3", 2] += 3.0
+        X[y == "f4", 4] += 3.0
+        return X, y
+
+    X, y = alike(800, 6)
+    Xv, yv = alike(4000, 7)
+    iso = FaultIsolator(
+        ForestClassifier(n_estimators=100, random_state=0),
+        calibrator=TemperatureScaler(bounds=(1.0, 50.0)),
+        random_state=0,
+    )
+    iso.fit(X, y, validation=(Xv, yv), calibration=(Xv, yv))
+    assert iso.groups_ == (("f1", "f2"), ("f3",), ("f4",))
+    raw = iso.fault_proba(Xv) @ iso.membership_
+    assert (raw > 1.0).any()  # the case this test is about
+    held = iso.summed_groups(iso.fault_proba(Xv))
+    assert held.max() == 1.0 and held.min() >= 0.0
+    np.testing.assert_allclose(held, raw, rtol=0, atol=4 * np.finfo(float).eps)
+    out = iso.run(Xv)
+    assert np.all((out.group_proba >= 0) & (out.group_proba <= 1))
+    np.testing.assert_allclose(out.group_proba.sum(axis=1), 1.0, rtol=0, atol=1e-12)
 
 
 @parametrize_with_checks([ForestClassifier(n_estimators=10, random_state=0)])

@@ -5,7 +5,8 @@ diagnoses as ``f2`` with probability 0.8, about 80 % really are ``f2``. A normal
 calibrated when its 95 % predictive intervals contain about 95 % of fault-free measurements.
 
 - `bayes_fdi.calibration.metrics`: ECE (top-label, classwise, bootstrap intervals, noise floor),
-  log loss, Brier score, reliability diagrams.
+  log loss, Brier score, reliability diagrams, and `probability_rows`, the check of a
+  probability matrix they and the recalibrators share.
 - `bayes_fdi.calibration.temperature`: temperature scaling (`TemperatureScaler`, and
   `check_temperature_bounds` for its search interval).
 - `bayes_fdi.calibration.top_label`: a temperature and a beta map of the top class
@@ -32,10 +33,12 @@ from bayes_fdi.calibration.intervals import (
     plot_pit_histogram,
 )
 from bayes_fdi.calibration.metrics import (
+    PROBABILITY_ROUNDING,
     ECEResult,
     brier,
     expected_calibration_error,
     log_loss,
+    probability_rows,
     reliability_diagram,
 )
 from bayes_fdi.calibration.nodes import NodeCalibration, node_calibration
@@ -47,6 +50,7 @@ from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
 __all__ = [
     "DEFAULT_LEVELS",
     "DEFAULT_REG_GRID",
+    "PROBABILITY_ROUNDING",
     "CoverageResult",
     "DirichletScaler",
     "ECEResult",
@@ -65,5 +69,6 @@ __all__ = [
     "pit_histogram",
     "pit_values",
     "plot_pit_histogram",
+    "probability_rows",
     "reliability_diagram",
 ]

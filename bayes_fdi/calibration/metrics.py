@@ -27,11 +27,13 @@ from typing import Any, NamedTuple
 import numpy as np
 
 __all__ = [
+    "PROBABILITY_ROUNDING",
     "ECEResult",
     "brier",
     "check_proba",
     "expected_calibration_error",
     "log_loss",
+    "probability_rows",
     "reliability_diagram",
 ]
 
@@ -39,6 +41,38 @@ __all__ = [
 # --------------------------------------------------------------------------------------
 # input checking
 # --------------------------------------------------------------------------------------
+#: How far a probability may lie outside [0, 1] by rounding alone. Probabilities that are sums
+#: or means of probabilities (a forest's leaf shares averaged over its trees, a group's faults
+#: summed) can exceed 1 or fall below 0 by a few units in the last place, about 1e-16 each;
+#: 1e-9 leaves room for sums of millions of terms and is far below any stated probability's
+#: meaning. Such entries are set to the bound they crossed.
+PROBABILITY_ROUNDING = 1e-9
+
+
+def probability_rows(proba: Any, name: str = "proba") -> np.ndarray:
+    """Rows of probabilities ``(n, n_classes)`` as float64, validated.
+
+    Every entry finite and in [0, 1] up to `PROBABILITY_ROUNDING` (an entry outside by less is
+    rounding and is set to 0 or 1; by more, an error), every row summing to 1 within 1e-6.
+
+    Raises
+    ------
+    ValueError
+        naming ``name`` and what is wrong with it.
+    """
+    p = np.array(proba, dtype=np.float64)
+    if not np.all(np.isfinite(p)):
+        raise ValueError(f"{name} contains NaN or inf")
+    if np.any(p < -PROBABILITY_ROUNDING) or np.any(p > 1 + PROBABILITY_ROUNDING):
+        worst = float(max(-p.min(initial=0.0), p.max(initial=1.0) - 1.0))
+        raise ValueError(f"{name} must lie in [0, 1] (an entry lies {worst:.3g} outside)")
+    np.clip(p, 0.0, 1.0, out=p)
+    if p.ndim == 2 and not np.allclose(p.sum(axis=1), 1.0, atol=1e-6):
+        worst = float(np.max(np.abs(p.sum(axis=1) - 1.0)))
+        raise ValueError(f"rows of {name} must sum to 1 (largest deviation {worst:.3g})")
+    return p
+
+
 def check_proba(
     y_true: Any, proba: Any, classes: Sequence | None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -53,13 +87,7 @@ def check_proba(
         raise ValueError(f"y_true has {y.shape[0]} samples but proba has {p.shape[0]} rows")
     if p.shape[0] == 0:
         raise ValueError("no samples: y_true and proba are empty")
-    if not np.all(np.isfinite(p)):
-        raise ValueError("proba contains NaN or inf")
-    if np.any(p < 0) or np.any(p > 1):
-        raise ValueError("proba must lie in [0, 1]")
-    if not np.allclose(p.sum(axis=1), 1.0, atol=1e-6):
-        worst = float(np.max(np.abs(p.sum(axis=1) - 1.0)))
-        raise ValueError(f"rows of proba must sum to 1 (largest deviation {worst:.3g})")
+    p = probability_rows(p, "proba")
     cls = np.unique(y) if classes is None else np.asarray(classes)
     if cls.ndim != 1 or len(np.unique(cls)) != len(cls):
         raise ValueError("classes must be a 1-D sequence of distinct labels")

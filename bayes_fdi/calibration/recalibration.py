@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from bayes_fdi.calibration.metrics import check_proba
+from bayes_fdi.calibration.metrics import check_proba, probability_rows
 
 __all__ = [
     "LOG_LOSS_RTOL",
@@ -47,9 +47,9 @@ def log_softmax(z: np.ndarray) -> np.ndarray:
 def log_probabilities(values: Any, *, input: str, floor: float) -> np.ndarray:
     """A recalibrator's input as log-probabilities, validated.
 
-    ``input="proba"``: rows of probabilities (finite, in [0, 1], summing to 1), raised to
-    ``floor`` before the logarithm; ``input="logits"``: unnormalised log-probabilities, taken
-    as they are (finite). At least two class columns.
+    ``input="proba"``: rows of probabilities (`probability_rows`: finite, in [0, 1] up to
+    rounding, summing to 1), raised to ``floor`` before the logarithm; ``input="logits"``:
+    unnormalised log-probabilities, taken as they are (finite). At least two class columns.
     """
     a = np.asarray(values, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] < 2:
@@ -62,10 +62,7 @@ def log_probabilities(values: Any, *, input: str, floor: float) -> np.ndarray:
         raise ValueError(f"input must be 'proba' or 'logits', got {input!r}")
     if not 0 < floor < 1:
         raise ValueError("floor must lie in (0, 1)")
-    if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > 1):
-        raise ValueError("probabilities must be finite and lie in [0, 1]")
-    if not np.allclose(a.sum(axis=1), 1.0, atol=1e-6):
-        raise ValueError("rows of the probabilities must sum to 1")
+    a = probability_rows(a, "probabilities")
     return np.log(np.maximum(a, floor))
 
 

@@ -273,7 +273,7 @@ class FaultIsolator:
         if self.calibrator is not None and calibration is not None and len(self.groups_) > 1:
             Xc, yc = np.asarray(calibration[0], float), np.asarray(calibration[1]).astype(str)
             known = np.isin(yc, faults)
-            gp = self.fault_proba(Xc[known]) @ self.membership_
+            gp = self.summed_groups(self.fault_proba(Xc[known]))
             group_of = {f: self.group_labels_[j] for j, g in enumerate(self.groups_) for f in g}
             labels = np.array([group_of[f] for f in yc[known]])
             cal = clone(self.calibrator)
@@ -291,6 +291,15 @@ class FaultIsolator:
         if X.shape[0] == 0:
             return np.empty((0, self.faults_.size))
         return np.asarray(self.classifier_.predict_proba(X), dtype=np.float64)
+
+    def summed_groups(self, fault_proba: np.ndarray) -> np.ndarray:
+        """Uncalibrated group probabilities ``(n, n_groups)``: each group's faults summed.
+
+        A sum of probabilities that add up to 1 can exceed 1 by rounding (a forest that names
+        one group unanimously, its leaf shares averaged over the trees): the sums are held in
+        [0, 1], which moves them by a few units in the last place at most.
+        """
+        return np.clip(fault_proba @ self.membership_, 0.0, 1.0)
 
     def temperature(self) -> float | None:
         """The calibrator's temperature when it is a temperature scaling (compiled path)."""
@@ -367,7 +376,7 @@ class FaultIsolator:
         if ok.any():
             group_of = self.group_of_
             p = self.fault_proba(feats[ok])
-            gp = p @ self.membership_
+            gp = self.summed_groups(p)
             g = self.calibrator_.transform(gp) if self.calibrator_ is not None else gp
             with np.errstate(invalid="ignore", divide="ignore"):
                 share = np.where(gp[:, group_of] > 0, p / gp[:, group_of], 1.0)
