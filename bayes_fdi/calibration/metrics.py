@@ -41,11 +41,8 @@ __all__ = [
 # --------------------------------------------------------------------------------------
 # input checking
 # --------------------------------------------------------------------------------------
-#: How far a probability may lie outside [0, 1] by rounding alone. Probabilities that are sums
-#: or means of probabilities (a forest's leaf shares averaged over its trees, a group's faults
-#: summed) can exceed 1 or fall below 0 by a few units in the last place, about 1e-16 each;
-#: 1e-9 leaves room for sums of millions of terms and is far below any stated probability's
-#: meaning. Such entries are set to the bound they crossed.
+#: How far a probability may lie outside [0, 1] by rounding alone (a mean or sum of probabilities
+#: can by a few units in the last place, ~1e-16 each); such entries are set to the bound.
 PROBABILITY_ROUNDING = 1e-9
 
 
