@@ -81,7 +81,8 @@ def test_commissioning_gives_a_diagnoser_of_this_valve_with_its_report(commissio
     names = [p["name"] for p in report["twin"]["parameters"]]
     assert "kv" in names
     # the normal models' training samples are reported (here a fixed subset of 400)
-    assert report["normal_models"] == {
+    sizes = {k: report["normal_models"][k] for k in ("rows", "available", "curve", "text")}
+    assert sizes == {
         "rows": 400,
         "available": 1500,
         "curve": [],
@@ -118,6 +119,37 @@ def test_the_report_says_what_the_undetectable_rule_measured(commissioned):
     text = render_report(report)
     assert "fewer than half of their training transplants" in text
     assert "bias_X (1 of 4)" in text  # 4 training runs per fault in this commissioning
+
+
+def test_the_report_gives_the_normal_models_predictive_stds(commissioned, healthy):
+    from bayes_fdi.commissioning.report import STD_FACTOR_WARNING
+
+    diag, _, report = commissioned
+    models = diag.normal_models_
+    got = report["normal_models"]
+    # the median over the healthy data of the models' own predictions, and their cross-fit
+    predicted = models.predict(healthy)
+    for c in ("X", "F"):
+        assert got["median_std"][c] == float(np.nanmedian(predicted[f"{c}_hat_std"].values))
+        assert got["std_factor"][c] == models.std_scale_all_[c]
+    text = render_report(report)
+    x, f = got["median_std"]["X"], got["median_std"]["F"]
+    assert f"predictive standard deviations are {x:.4f} (X) and {f:.4f} (F) of full scale" in text
+    fx, ff = got["std_factor"]["X"], got["std_factor"]["F"]
+    assert f"widened {fx:.2f} and {ff:.2f} times" in text
+    assert ("**Wide intervals.**" in text) is (max(fx, ff) > STD_FACTOR_WARNING)
+    # a cross-fit that needed wide intervals for F is said in words, naming the factor
+    wide = dict(got, std_factor={"X": 1.2, "F": 8.16})
+    text = render_report(dict(report, normal_models=wide))
+    assert "much worse than the models' posteriors allow for F (8.2 times)" in text
+    assert "X (1.2 times)" not in text
+    at = dict(got, std_factor={"X": STD_FACTOR_WARNING, "F": 1.0})
+    assert "**Wide intervals.**" not in render_report(dict(report, normal_models=at))
+    # reports written before the deviations were recorded render without them
+    old = {k: v for k, v in got.items() if k not in ("median_std", "std_factor")}
+    text = render_report(dict(report, normal_models=old))
+    assert f"The normal models of X and F were {got['text']}." in text
+    assert "predictive standard deviations" not in text
 
 
 @pytest.mark.parametrize(("pareto_k", "warned"), [(1.05, True), (0.7, False), (0.3, False)])

@@ -32,6 +32,7 @@ from collections.abc import Mapping, Sequence
 from types import MappingProxyType
 from typing import Any, NamedTuple
 
+import numpy as np
 import xarray as xr
 
 from bayes_fdi.commissioning.expectations import expected_performance
@@ -123,16 +124,23 @@ def _twin_report(twin: Any, check: Any) -> dict[str, Any]:
     return out
 
 
-def _training_size_report(models: Any) -> dict[str, Any]:
-    """The normal models' training samples and the learning curve that chose them."""
+def _normal_models_report(models: Any, runs: Any) -> dict[str, Any]:
+    """The normal models' training samples (and the learning curve that chose them), and their
+    predictive standard deviations on the healthy data: the median, and the cross-fitted factor
+    that made them honest on held-out stretches (``std_factor``)."""
     size = getattr(models, "training_size_", None)
     if size is None:  # normal models of another kind
         return {}
+    predicted = models.predict(runs)
     return {
         "rows": int(size.rows),
         "available": size.available,
         "curve": [point._asdict() for point in size.curve],
         "text": size.describe(),
+        "median_std": {
+            c: float(np.nanmedian(predicted[f"{c}_hat_std"].values)) for c in ("X", "F")
+        },
+        "std_factor": {c: float(v) for c, v in getattr(models, "std_scale_all_", {}).items()},
     }
 
 
@@ -282,7 +290,7 @@ def commission(
             "duration": int(duration),
             "seeds": [10 * seed + k for k in (1, 2, 3)],
         },
-        "normal_models": _training_size_report(diagnoser.normal_models_),
+        "normal_models": _normal_models_report(diagnoser.normal_models_, runs),
         "detection": {
             "detector": type(diagnoser.detector_).__name__,
             "k": float(diagnoser.detector_.k),
