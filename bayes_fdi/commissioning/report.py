@@ -160,9 +160,9 @@ def _normal_models_lines(report: Mapping[str, Any]) -> list[str]:
         return lines
     lines.append(
         f"Their predictive standard deviations are {std['X']:.4f} (X) and {std['F']:.4f} (F) of "
-        "full scale (median over the healthy data): their posteriors' widened "
-        f"{factor['X']:.2f} and {factor['F']:.2f} times, as much as held-out stretches of the "
-        "healthy data needed (cross-fit)."
+        "full scale (median over the healthy data): the posteriors' own, widened "
+        f"{factor['X']:.2f} and {factor['F']:.2f} times so that stretches of the healthy data "
+        "held out of the fit fall inside their intervals (cross-fit)."
     )
     wide = [c for c in ("X", "F") if factor[c] > STD_FACTOR_WARNING]
     if wide:
