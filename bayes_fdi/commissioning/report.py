@@ -157,7 +157,7 @@ def _normal_models_lines(report: Mapping[str, Any]) -> list[str]:
     lines = ["", f"The normal models of X and F were {text}."] if text else []
     std, factor = models.get("median_std"), models.get("std_factor")
     if not std or not factor:
-        return lines
+        return [*lines, ""] if lines else lines
     lines.append(
         f"Their predictive standard deviations are {std['X']:.4f} (X) and {std['F']:.4f} (F) of "
         "full scale (median over the healthy data): the posteriors' own, widened "
@@ -177,7 +177,7 @@ def _normal_models_lines(report: Mapping[str, Any]) -> list[str]:
             "simulated plants, three hours instead of one brought these factors from 3.4-8.2 "
             "to 1.4-1.7).",
         ]
-    return lines
+    return [*lines, ""]
 
 
 def render_report(report: Mapping[str, Any]) -> str:
