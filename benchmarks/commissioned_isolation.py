@@ -40,6 +40,7 @@ import time
 import numpy as np
 
 import bayes_fdi.twin as twin_module
+from bayes_fdi.cli_arguments import ISOLATION_CHOICES
 
 
 def _plant_rows(plant, diagnoser, scenarios, n_seeds):
@@ -79,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--hours", type=float, default=1.0, help="healthy hours commissioned on")
     parser.add_argument("--runs-per-fault", type=int, default=12)
     parser.add_argument("--commission-seed", type=int, default=0)
-    parser.add_argument("--isolation", choices=("tree", "forest"), default="tree")
+    parser.add_argument("--isolation", choices=ISOLATION_CHOICES, default="tree")
     parser.add_argument(
         "--temperature-bounds",
         default="1,50",

@@ -232,9 +232,11 @@ def test_probabilities_off_the_unit_interval_by_rounding_are_held_there():
     held = probability_rows(over)
     np.testing.assert_array_equal(held, [[1.0, 0.0]])
     assert over[0, 0] > 1.0  # the caller's array is left as it was
-    assert np.isfinite(expected_calibration_error([0], over, classes=[0, 1]).value)
+    ece = expected_calibration_error([0, 1], np.vstack([over, [0.3, 0.7]]), classes=[0, 1])
+    same = expected_calibration_error([0, 1], np.vstack([held, [0.3, 0.7]]), classes=[0, 1])
+    assert ece.value == same.value == pytest.approx(0.15)  # |1 - 1| and |1 - 0.7|, halved
     ts = TemperatureScaler().fit(np.array([[0.7, 0.3], [0.2, 0.8]]), [0, 1])
-    np.testing.assert_allclose(ts.transform(over), ts.transform(held), rtol=0, atol=0)
+    np.testing.assert_array_equal(ts.transform(over), ts.transform(held))
     # more than rounding is an error naming how far
     for bad in ([[1.0 + 1e-6, -1e-6]], [[-1e-6, 1.0 + 1e-6]]):
         with pytest.raises(ValueError, match=r"must lie in \[0, 1\] \(an entry lies 1e-06 outside"):
