@@ -168,3 +168,17 @@ def test_rvm_knows_nothing_of_actuators():
 def test_modules_stay_small(module, path):
     """One module a concept, under about 500 lines."""
     assert len(path.read_text().splitlines()) <= 520
+
+
+def test_no_module_defines_a_top_level_function_or_class_twice():
+    """A second definition silently replaces the first (ruff does not flag it where nothing
+    uses the first in between): every module-level ``def`` and ``class`` name appears once."""
+    bad = []
+    for module, path in MODULES:
+        seen: dict[str, int] = {}
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                if node.name in seen:
+                    bad.append(f"{module}: {node.name} (lines {seen[node.name]}, {node.lineno})")
+                seen.setdefault(node.name, node.lineno)
+    assert bad == []
