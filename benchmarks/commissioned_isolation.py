@@ -15,6 +15,10 @@ PICalc code and summary as ``bayes-fdi benchmark --commissioning``):
 - ``--temperature-bounds LOW,HIGH``: the bounds of the group probabilities' calibration
   temperature (``commission``'s ``temperature_bounds``; 1,50 by default, which never
   sharpens them; 0.02,50 lets the calibration sharpen them as it did before).
+- ``--detect-rate R``: a fault detected in fewer than this share of its training
+  transplants is declared undetectable (``commission``'s ``detect_rate``, 0.5 by default as
+  in the simulator-trained diagnoser; 0.25 classifies the faults that only their large sizes
+  make detectable).
 - ``--hours H``: commissioning on H hours of the plant's healthy data instead of one: the
   libraries are transplanted into windows spread over more varied healthy data (set-points and
   demand drift move the valve over a wider range).
@@ -26,7 +30,8 @@ undetectable). ``--json PATH`` writes every scenario's indices.
 
 Run: ``OMP_NUM_THREADS=1 PYTHONPATH=. python benchmarks/commissioned_isolation.py
 [--plants 0,1,2,3,4] [--seeds 2] [--library twin|true] [--hours 1] [--runs-per-fault 12]
-[--commission-seed 0] [--isolation tree|forest] [--temperature-bounds 1,50] [--json PATH]``
+[--commission-seed 0] [--isolation tree|forest] [--temperature-bounds 1,50]
+[--detect-rate 0.5] [--json PATH]``
 (about 2.5 CPU min per plant and hour).
 """
 
@@ -86,6 +91,13 @@ def main(argv: list[str] | None = None) -> int:
         default="1,50",
         help="bounds of the calibration temperature, LOW,HIGH (commission's temperature_bounds)",
     )
+    parser.add_argument(
+        "--detect-rate",
+        type=float,
+        default=None,
+        help="share of its training transplants below which a fault is declared undetectable "
+        "(commission's detect_rate; default its DETECT_RATE)",
+    )
     parser.add_argument("--json", default=None, help="write every scenario's indices here")
     args = parser.parse_args(argv)
     bounds = tuple(float(b) for b in args.temperature_bounds.split(","))
@@ -97,12 +109,14 @@ def main(argv: list[str] | None = None) -> int:
     from bayes_fdi.benchmark.plant_runs import HELDOUT_SECONDS
     from bayes_fdi.benchmark.plants import draw_plant, healthy_run
     from bayes_fdi.benchmark.scenarios import SCENARIOS
-    from bayes_fdi.commissioning import commission
+    from bayes_fdi.commissioning import DETECT_RATE, commission
 
+    detect_rate = DETECT_RATE if args.detect_rate is None else args.detect_rate
     scenarios = [s for s in SCENARIOS if s.mode == "abrupt" and s.size == "big"]
     print(
         f"isolation: {args.isolation}; library: {args.library}; {args.hours:g} h healthy; "
         f"{args.runs_per_fault} runs per fault; temperature bounds {bounds}; "
+        f"detect rate {detect_rate:g}; "
         f"commissioning seed {args.commission_seed}; "
         f"{args.seeds} seeds; "
         f"load average {os.getloadavg()[0]:.1f}",
@@ -126,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
                 runs_per_fault=args.runs_per_fault,
                 isolation=args.isolation,
                 temperature_bounds=bounds,
+                detect_rate=detect_rate,
                 seed=args.commission_seed,
                 progress=False,
             )

@@ -111,14 +111,47 @@ def test_commissioned_diagnosers_detect_with_the_two_speed_cusum(commissioned, t
     assert repr(back.detector_) == repr(diag.detector_)
 
 
-def test_the_report_says_what_the_undetectable_rule_measured(commissioned):
+def test_the_report_says_what_the_undetectable_rule_measured(commissioned, healthy):
+    from bayes_fdi.commissioning import DETECT_RATE
     from bayes_fdi.commissioning.report import render_report
 
-    report = dict(commissioned.report, undetectable=["bias_X"])
+    diag, _, report = commissioned
+    # the rule, recorded: a fault detected in fewer than half of its training transplants (or
+    # with fewer than 5 signatures) is not classified
+    assert report["detect_rate"] == diag.detect_rate == DETECT_RATE == 0.5
+    for fault, rate in report["detection_rates"].items():
+        if rate < DETECT_RATE:
+            assert fault in report["undetectable"]
+    classified = {f for g in diag.groups_ for f in g}
+    assert all(report["detection_rates"][f] >= DETECT_RATE for f in classified)
+    report = dict(report, undetectable=["bias_X"])
     report["detection_rates"] = dict(report["detection_rates"], bias_X=0.25)
     text = render_report(report)
     assert "fewer than half of their training transplants" in text
     assert "bias_X (1 of 4)" in text  # 4 training runs per fault in this commissioning
+    # reports written before the rate was recorded had the same half
+    older = {k: v for k, v in report.items() if k != "detect_rate"}
+    assert render_report(older) == text
+    assert "fewer than a quarter of their" in render_report(dict(report, detect_rate=0.25))
+    assert "fewer than 30% of their" in render_report(dict(report, detect_rate=0.3))
+    # a bad rate is refused before anything is fitted
+    for rate, match in [(-0.1, "lie in"), (1.5, "lie in"), (float("nan"), "lie in"),
+                        (True, "be a number"), ("0.3", "be a number")]:  # fmt: skip
+        with pytest.raises(ValueError, match=f"detect_rate must {match}"):
+            commission(healthy, detect_rate=rate, progress=False)
+
+
+def test_a_lower_detect_rate_classifies_more_of_the_same_faults(commissioned, healthy):
+    # the same seed draws the same libraries and fits the same detection, so the detection
+    # rates are the same; at rate 0 only the signature count (at least 5) can leave a fault
+    # unclassified, so its undetectable faults are among those of the rate 0.5
+    diag, _, report = commission(healthy, **_small_commissioning(), detect_rate=0.0)
+    assert report["detect_rate"] == diag.detect_rate == 0.0
+    assert report["detection_rates"] == commissioned.report["detection_rates"]
+    assert set(report["undetectable"]) <= set(commissioned.report["undetectable"])
+    assert {f for g in diag.groups_ for f in g} | set(report["undetectable"]) == {
+        "f1", "f18", "bias_X"
+    }  # fmt: skip
 
 
 def test_the_report_gives_the_normal_models_predictive_stds(commissioned, healthy):

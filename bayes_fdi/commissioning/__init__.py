@@ -13,7 +13,19 @@ deployment commands (``bayes-fdi commission``, ``diagnose --commission-seconds``
 benchmark build on it.
 """
 
-from bayes_fdi.commissioning.commission import LIBRARY_FAULTS, Commissioning, commission
+from bayes_fdi.commissioning.commission import (
+    DETECT_RATE,
+    LIBRARY_FAULTS,
+    Commissioning,
+    commission,
+)
 from bayes_fdi.commissioning.healthy import check_healthy, operating_range
 
-__all__ = ["LIBRARY_FAULTS", "Commissioning", "check_healthy", "commission", "operating_range"]
+__all__ = [
+    "DETECT_RATE",
+    "LIBRARY_FAULTS",
+    "Commissioning",
+    "check_healthy",
+    "commission",
+    "operating_range",
+]

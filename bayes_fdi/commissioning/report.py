@@ -20,6 +20,10 @@ from bayes_fdi.twin.laplace import RELIABLE_PARETO_K
 
 __all__ = ["render_report", "write_report"]
 
+#: The undetectable rule's share of training transplants in a report that does not record it
+#: (written before ``commission`` took its ``detect_rate``): the diagnoser's default, half.
+OLD_DETECT_RATE = 0.5
+
 
 def _summary(report: Mapping[str, Any]) -> list[str]:
     expected = report["expected"]
@@ -56,11 +60,18 @@ def _summary(report: Mapping[str, Any]) -> list[str]:
             f"{f} ({round(rates[f] * runs)} of {runs})" if f in rates else f
             for f in report["undetectable"]
         ]
+        share = _detect_share(report.get("detect_rate", OLD_DETECT_RATE))
         lines.append(
-            "- Detected in fewer than half of their training transplants (strengths 0.1-1, half "
-            "of them incipient), so not classified: " + ", ".join(named) + "."
+            f"- Detected in fewer than {share} of their training transplants (strengths 0.1-1, "
+            "half of them incipient), so not classified: " + ", ".join(named) + "."
         )
     return [*lines, ""]
+
+
+def _detect_share(rate: float) -> str:
+    """The undetectable rule's share of transplants in words ("a quarter", "half", "30%")."""
+    words = {0.25: "a quarter", 0.5: "half"}
+    return words.get(float(rate), format_percent(float(rate), 0))
 
 
 def _laplace_warning(pareto_k: float) -> list[str]:
