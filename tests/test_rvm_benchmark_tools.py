@@ -5,28 +5,16 @@ No timing is asserted here: speed targets live in the benchmark itself.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from benchmark_scripts import load_benchmark
 from sklearn.metrics.pairwise import pairwise_kernels
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
-
-
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-bench = _load("rvm_fit")
-worker = _load("rvm_worker")
+bench = load_benchmark("rvm_fit")
+worker = load_benchmark("rvm_worker")
 
 
 def _row(method, n, cpu, rmse, *, status="ok", rmse_f=None, peak=100.0, base=50.0):
@@ -315,7 +303,7 @@ def test_floor_counts_the_fits_products_and_iterations_without_changing_it(monke
     first column and one per addition (additions counted separately, at the carried factors'
     update), the fit itself unchanged, and the solver's functions restored afterwards (counts
     only: no timing asserted)."""
-    floor = _load("rvm_floor")
+    floor = load_benchmark("rvm_floor")
     import bayes_fdi.rvm.sbl.gaussian as gaussian_module  # the module whose decision is counted
     from bayes_fdi.rvm import RVR
     from bayes_fdi.rvm.sbl import Design, TrackedFactors
