@@ -154,6 +154,15 @@ def test_a_lower_detect_rate_classifies_more_of_the_same_faults(commissioned, he
     }  # fmt: skip
 
 
+def test_the_report_separates_its_paragraphs_by_one_blank_line(commissioned):
+    text = render_report(commissioned.report)
+    assert "\n\n\n" not in text
+    # the healthy data's table, one blank line, the normal models, one blank line, the twin
+    assert "| F |" in text and "\n\nThe normal models of X and F were" in text
+    older = {k: v for k, v in commissioned.report.items() if k != "normal_models"}
+    assert "\n\n\n" not in render_report(older)
+
+
 def test_the_report_gives_the_normal_models_predictive_stds(commissioned, healthy):
     from bayes_fdi.commissioning.report import STD_FACTOR_WARNING
 

@@ -186,7 +186,7 @@ def _normal_models_lines(report: Mapping[str, Any]) -> list[str]:
                 "(on two simulated plants, three hours instead of one brought these factors "
                 "from 3.4-8.2 to 1.4-1.7).",
             ]
-    return ["", *lines, ""] if lines else []
+    return [*lines, ""] if lines else []  # the table before them ends with its own newline
 
 
 def render_report(report: Mapping[str, Any]) -> str:
