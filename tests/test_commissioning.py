@@ -135,9 +135,10 @@ def test_the_report_says_what_the_undetectable_rule_measured(commissioned, healt
     assert "fewer than a quarter of their" in render_report(dict(report, detect_rate=0.25))
     assert "fewer than 30% of their" in render_report(dict(report, detect_rate=0.3))
     # a bad rate is refused before anything is fitted
-    for rate, match in [(-0.1, "lie in"), (1.5, "lie in"), (float("nan"), "lie in"),
-                        (True, "be a number"), ("0.3", "be a number")]:  # fmt: skip
-        with pytest.raises(ValueError, match=f"detect_rate must {match}"):
+    for rate, match in [(-0.1, "is out of range"), (1.5, "is out of range"),
+                        (float("nan"), "is out of range"), (True, "must be a real number"),
+                        ("0.3", "must be a real number")]:  # fmt: skip
+        with pytest.raises(ValueError, match=f"detect_rate {match}"):
             commission(healthy, detect_rate=rate, progress=False)
 
 

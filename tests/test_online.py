@@ -353,3 +353,23 @@ def test_evidence_names_the_residual_that_raised_the_detection_and_its_sign(fitt
         after = dd[run] & (s["time"].values >= onset[run] + 30)
         values, counts = np.unique(ev[run][after], return_counts=True)
         assert word in values[np.argmax(counts)], (run, dict(zip(values, counts, strict=True)))
+
+
+def test_settings_that_are_not_real_numbers_or_out_of_range_are_refused_by_name():
+    from bayes_fdi.diagnosis.online.checks import NUMERIC_SETTINGS, check_settings
+
+    params = OnlineDiagnoser().get_params()
+    check_settings(params)  # the defaults pass
+    assert check_settings(dict(params, detect_rate=np.float64(0.25), glr_window=30)) is None
+    for name in NUMERIC_SETTINGS:
+        for bad in (True, "0.5", None):
+            with pytest.raises(ValueError, match=f"{name} must be a real number, got {bad!r}"):
+                check_settings(dict(params, **{name: bad}))
+    for name, bad in [("detect_rate", 1.5), ("detect_rate", float("nan")), ("p_fault", -0.1),
+                      ("coverage", 1.0), ("false_alarm_hours", 0.0), ("glr_window", 2.5),
+                      ("max_signatures_per_fault", 1)]:  # fmt: skip
+        with pytest.raises(ValueError, match=f"{name} is out of range"):
+            check_settings(dict(params, **{name: bad}))
+    # a fit refuses them too, before fitting anything
+    with pytest.raises(ValueError, match="detect_rate must be a real number"):
+        OnlineDiagnoser(detect_rate=True).fit(None)

@@ -229,6 +229,7 @@ def commission(
     from bayes_fdi.diagnosis.detection import TwoSpeedCUSUM
     from bayes_fdi.diagnosis.isolation import ForestClassifier
     from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
+    from bayes_fdi.diagnosis.online.checks import check_settings
     from bayes_fdi.diagnosis.online.training import stack_runs
     from bayes_fdi.twin import ActuatorTwin, transplant_library
 
@@ -237,10 +238,19 @@ def commission(
             f"isolation must be one of {', '.join(ISOLATION_CLASSIFIERS)}, got {isolation!r}"
         )
     low, high = check_temperature_bounds(temperature_bounds, name="temperature_bounds")
-    if isinstance(detect_rate, bool) or not isinstance(detect_rate, int | float):
-        raise ValueError(f"detect_rate must be a number in [0, 1], got {detect_rate!r}")
-    if not 0.0 <= detect_rate <= 1.0:  # NaN fails too
-        raise ValueError(f"detect_rate must lie in [0, 1], got {detect_rate!r}")
+    if normal_models is None:
+        normal_models = DynamicNormalModels(
+            max_train_samples=normal_samples, random_state=seed, **NORMAL_MODEL_OPTIONS
+        )
+    diagnoser = OnlineDiagnoser(
+        normal_models,
+        detector=TwoSpeedCUSUM(k_slow=DETECTOR_K_SLOW),
+        calibrator=TemperatureScaler(bounds=(low, high)),
+        isolation_classifier=ForestClassifier(random_state=seed) if isolation == "forest" else None,
+        detect_rate=detect_rate,
+        random_state=seed,
+    )
+    check_settings(diagnoser.get_params())  # refused before anything is fitted
     t_start = time.perf_counter()
     runs = check_healthy(stack_runs(healthy))
     duration = int(min(duration, runs.sizes["time"] - 60))
@@ -266,21 +276,8 @@ def commission(
         ]
     seconds["library"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    if normal_models is None:
-        normal_models = DynamicNormalModels(
-            max_train_samples=normal_samples, random_state=seed, **NORMAL_MODEL_OPTIONS
-        )
     with busy("commissioning: fitting the normal models, detector and isolation", enabled=progress):
-        diagnoser = OnlineDiagnoser(
-            normal_models,
-            detector=TwoSpeedCUSUM(k_slow=DETECTOR_K_SLOW),
-            calibrator=TemperatureScaler(bounds=(low, high)),
-            isolation_classifier=(
-                ForestClassifier(random_state=seed) if isolation == "forest" else None
-            ),
-            detect_rate=detect_rate,
-            random_state=seed,
-        ).fit(runs)
+        diagnoser.fit(runs)
         fit_commissioned_isolation(diagnoser, *libraries)
     seconds["diagnoser"] = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -9,16 +9,29 @@ fails when it is loaded, naming the value, rather than when it diagnoses.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-__all__ = ["check_fitted_values", "check_settings"]
+__all__ = ["NUMERIC_SETTINGS", "check_fitted_values", "check_settings"]
+
+
+#: The numeric settings `check_settings` checks, each of which must be a real number.
+NUMERIC_SETTINGS: tuple[str, ...] = (
+    "false_alarm_hours", "cusum_k", "glr_window", "p_fault", "novelty_ratio", "coverage",
+    "detect_rate", "input_margin", "max_signatures_per_fault",
+)  # fmt: skip
 
 
 def check_settings(params: Mapping[str, Any]) -> None:
-    """Refuse out-of-range settings (``get_params()`` of an `OnlineDiagnoser`)."""
+    """Refuse settings that are not real numbers (a bool, a string) or out of range
+    (``get_params()`` of an `OnlineDiagnoser`); the error names the setting."""
+    for name in NUMERIC_SETTINGS:
+        value = params[name]
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise ValueError(f"{name} must be a real number, got {value!r}")
     checks = {
         "false_alarm_hours": params["false_alarm_hours"] > 0,
         "cusum_k": params["cusum_k"] >= 0,
