@@ -83,7 +83,9 @@ def variance_since_detection(values: np.ndarray, detected: np.ndarray) -> np.nda
 def family_seconds(diagnoser, runs, window: int, covariates: str) -> dict[str, np.ndarray]:
     """The uncalibrated group probabilities, true groups and excitation covariates of the
     detected seconds after the onset of every run of one campaign."""
-    stream = diagnoser.run(runs[["CV", "P1", "P2", "T1", "X", "F"]])
+    from bayes_fdi.datasets import CHANNELS
+
+    stream = diagnoser.run(runs[list(CHANNELS)])
     proba = stream["group_proba"].transpose("run", "time", "group").values
     dd = stream["DD"].transpose("run", "time").values.astype(bool)
     labels = [str(g) for g in stream["group"].values]
@@ -162,81 +164,82 @@ def main() -> None:
         diagnoser = load_online_model(args.model)
     else:
         diagnoser = fit_online_diagnoser(seed=args.seed, progress=False)
+    model_scaler = diagnoser.isolator_.calibrator_
     temperature = diagnoser.isolator_.temperature()
     if temperature is None:
         raise SystemExit("the model's group probabilities are not recalibrated by a temperature")
     diagnoser.isolator_.calibrator_ = None  # the classifier's own group probabilities
     campaigns = simulate_online_campaigns(seed=args.seed, progress=False)["calibration"]
     labels = list(diagnoser.isolator_.group_labels_)
+    classes = list(range(len(labels)))
     families = [str(ds.attrs["campaign"]) for ds in campaigns]
     seconds = [family_seconds(diagnoser, ds, args.window, args.covariates) for ds in campaigns]
+    # the DGen family's runs with a seed neither the training nor the benchmark uses: the
+    # nominal benchmark's excitation
+    held = family_seconds(
+        diagnoser,
+        simulate_campaign(
+            load_campaign(campaign_file(DGEN_FILE)), seed=args.heldout_seed, progress=False
+        ),
+        args.window,
+        args.covariates,
+    )
     names, cov_floor = COVARIATES[args.covariates], COVARIATE_FLOOR[args.covariates]
-    floor = 1e-12  # TemperatureScaler's default floor
-    log_p = [np.log(np.maximum(s["proba"], floor)) for s in seconds]
-    design = [
-        np.column_stack([np.ones(len(s["true"])), np.log(np.maximum(s["cov"], cov_floor))])
-        for s in seconds
-    ]
+    for s in (*seconds, held):
+        s["log_p"] = np.log(np.maximum(s["proba"], model_scaler.floor))
+        s["design"] = np.column_stack(
+            [np.ones(s["true"].size), np.log(np.maximum(s["cov"], cov_floor))]
+        )
+
+    def pooled(key: str, parts) -> np.ndarray:
+        return np.concatenate([seconds[j][key] for j in parts])
+
     rows = []
     for k, family in enumerate(families):
-        true = seconds[k]["true"]
-        own = scaled(log_p[k], np.full(true.size, np.log(temperature)))
+        s = seconds[k]
         others = [j for j in range(len(families)) if j != k]
-        pooled = [np.concatenate([a[j] for j in others]) for a in (log_p, design)]
-        pooled_true = np.concatenate([seconds[j]["true"] for j in others])
-        pooled_proba = np.concatenate([seconds[j]["proba"] for j in others])
-        one = TemperatureScaler(classes=list(range(len(labels)))).fit(pooled_proba, pooled_true)
-        one_t = float(one.temperature_)
-        w = fit_input_temperature(pooled[0], pooled_true, pooled[1])
-        by_input = scaled(log_p[k], design[k] @ w)
+        one = TemperatureScaler(classes=classes).fit(
+            pooled("proba", others), pooled("true", others)
+        )
+        w = fit_input_temperature(
+            pooled("log_p", others), pooled("true", others), pooled("design", others)
+        )
         rows.append({
             "family": family,
-            "seconds": int(true.size),
-            "covariate_medians": dict(zip(names, np.median(seconds[k]["cov"], 0).tolist(),
-                                          strict=True)),
-            "own_temperature": scores(own, true, list(range(len(labels)))),
-            "left_out_temperature": one_t,
-            "left_out": scores(scaled(log_p[k], np.full(true.size, np.log(one_t))), true,
-                               list(range(len(labels)))),
+            "seconds": int(s["true"].size),
+            "covariate_medians": dict(zip(names, np.median(s["cov"], 0).tolist(), strict=True)),
+            "own_temperature": scores(model_scaler.transform(s["proba"]), s["true"], classes),
+            "left_out_temperature": float(one.temperature_),
+            "left_out": scores(one.transform(s["proba"]), s["true"], classes),
             "left_out_input_weights": w.tolist(),
-            "left_out_input": scores(by_input, true, list(range(len(labels)))),
+            "left_out_input": scores(scaled(s["log_p"], s["design"] @ w), s["true"], classes),
         })  # fmt: skip
-    all_true = np.concatenate([s["true"] for s in seconds])
-    all_own = scaled(np.concatenate(log_p), np.full(all_true.size, np.log(temperature)))
-    # the DGen family's runs with a seed neither the training nor the benchmark uses: the
-    # nominal benchmark's excitation, scored with both temperatures fitted on all seven files
-    heldout_runs = simulate_campaign(
-        load_campaign(campaign_file(DGEN_FILE)), seed=args.heldout_seed, progress=False
+    everything = range(len(families))
+    all_true = pooled("true", everything)
+    all_own = model_scaler.transform(pooled("proba", everything))
+    # both temperatures fitted on all seven files, scored on the held-out DGen runs
+    w_all = fit_input_temperature(
+        pooled("log_p", everything), all_true, pooled("design", everything)
     )
-    held = family_seconds(diagnoser, heldout_runs, args.window, args.covariates)
-    held_log_p = np.log(np.maximum(held["proba"], floor))
-    held_design = np.column_stack(
-        [np.ones(len(held["true"])), np.log(np.maximum(held["cov"], cov_floor))]
-    )
-    w_all = fit_input_temperature(np.concatenate(log_p), all_true, np.concatenate(design))
-    classes = list(range(len(labels)))
     heldout = {
         "seed": args.heldout_seed,
         "seconds": int(held["true"].size),
-        "model_temperature": scores(
-            scaled(held_log_p, np.full(held["true"].size, np.log(temperature))),
-            held["true"],
-            classes,
-        ),
+        "model_temperature": scores(model_scaler.transform(held["proba"]), held["true"], classes),
         "input_weights": w_all.tolist(),
-        "input_temperature": scores(scaled(held_log_p, held_design @ w_all), held["true"], classes),
+        "input_temperature": scores(scaled(held["log_p"], held["design"] @ w_all), held["true"],
+                                    classes),
         "input_temperature_in_sample": [
-            scores(scaled(log_p[k], design[k] @ w_all), seconds[k]["true"], classes)["ece"]
-            for k in range(len(families))
+            scores(scaled(s["log_p"], s["design"] @ w_all), s["true"], classes)["ece"]
+            for s in seconds
         ],
-    }
+    }  # fmt: skip
     result = {
         "model_temperature": temperature,
         "groups": labels,
         "window": args.window,
         "covariates": args.covariates,
         "seed": args.seed,
-        "all": scores(all_own, all_true, list(range(len(labels)))),
+        "all": scores(all_own, all_true, classes),
         "families": rows,
         "heldout_dgen": heldout,
         "cpu_seconds": time.process_time() - t0,
