@@ -132,7 +132,7 @@ def test_the_report_says_what_the_undetectable_rule_measured(commissioned, healt
     # reports written before the rate was recorded had the same half
     older = {k: v for k, v in report.items() if k != "detect_rate"}
     assert render_report(older) == text
-    assert "fewer than a quarter of their" in render_report(dict(report, detect_rate=0.25))
+    assert "fewer than 25% of their" in render_report(dict(report, detect_rate=0.25))
     assert "fewer than 30% of their" in render_report(dict(report, detect_rate=0.3))
     # a bad rate is refused before anything is fitted
     for rate, match in [(-0.1, "is out of range"), (1.5, "is out of range"),

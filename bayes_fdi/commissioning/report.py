@@ -69,9 +69,8 @@ def _summary(report: Mapping[str, Any]) -> list[str]:
 
 
 def _detect_share(rate: float) -> str:
-    """The undetectable rule's share of transplants in words ("a quarter", "half", "30%")."""
-    words = {0.25: "a quarter", 0.5: "half"}
-    return words.get(float(rate), format_percent(float(rate), 0))
+    """The undetectable rule's share of transplants: "half", or a percentage ("25%")."""
+    return "half" if float(rate) == 0.5 else format_percent(float(rate), 0)
 
 
 def _laplace_warning(pareto_k: float) -> list[str]:
