@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.benchmark.collection import CONFIDENT
+from bayes_fdi.benchmark.collection import confident_wrong
 from bayes_fdi.benchmark.report import DETECTABLE_DEFLECTION
 from bayes_fdi.scoring.decision_signals import decision_high, decision_signals, rising_edges
 from bayes_fdi.scoring.picalc import picalc
@@ -43,18 +43,6 @@ def zeroed(stream: xr.Dataset) -> xr.Dataset:
     """The stream of one run with its time counted from its first sample (the case's frame)."""
     t = np.asarray(stream["time"].values, dtype=np.float64)
     return stream.assign_coords(time=t - t[0])
-
-
-def _confident_wrong(one: xr.Dataset, true_group: int | None) -> np.ndarray:
-    """Seconds whose most probable group is above `CONFIDENT` and is not the true fault's."""
-    proba = one["group_proba"].transpose("time", "group").values
-    if proba.shape[1] == 0:  # a detection-only diagnoser names no group
-        return np.zeros(proba.shape[0], dtype=bool)
-    filled = np.where(np.isfinite(proba), proba, 0.0)  # undefined rows are never confident
-    wrong = filled.max(axis=1) > CONFIDENT
-    if true_group is not None:
-        wrong &= filled.argmax(axis=1) != true_group
-    return wrong
 
 
 def score_case(
@@ -84,11 +72,15 @@ def score_case(
     dict
         ``indices`` (PICalc's, group level: PID = the true fault's group is indicated; a fault
         the diagnoser declares undetectable has PID = not DD), ``faulty_seconds``,
-        ``confident_wrong_seconds`` (faulty seconds whose most probable group is above
-        `CONFIDENT` and not the true fault's; for a fault in no group every confident answer
-        is wrong), ``true_group`` (its label, ``"DGN0"`` for an undetectable fault, None for a
-        fault the diagnoser does not know) and ``states`` (faulty seconds per diagnosed state
-        while DD is on, and `NOT_DETECTED`).
+        ``confident_wrong_seconds`` (faulty seconds answered with a group other than the true
+        fault's at a probability above `~bayes_fdi.benchmark.collection.CONFIDENT`; for a
+        fault in no group every confident answer is wrong),
+        ``confident_wrong_probabilities_seconds`` (faulty seconds whose most probable group
+        is above it and wrong, the seconds answered "unknown" included; see
+        `~bayes_fdi.benchmark.collection.confident_wrong`), ``true_group`` (its label,
+        ``"DGN0"`` for an undetectable fault, None for a fault the diagnoser does not know)
+        and ``states`` (faulty seconds per diagnosed state while DD is on, and
+        `NOT_DETECTED`).
     """
     t = np.asarray(one["time"].values, dtype=np.float64)
     sig = decision_signals(one, fault)
@@ -114,11 +106,12 @@ def score_case(
     named = state[faulty & sig.dd]
     states = {str(s): int(n) for s, n in zip(*np.unique(named, return_counts=True), strict=True)}
     states[NOT_DETECTED] = int((faulty & ~sig.dd).sum())
-    wrong = _confident_wrong(one, sig.true_group)
+    answers, wrong = confident_wrong(one, sig.true_group)
     return {
         "indices": indices,
         "faulty_seconds": int(faulty.sum()),
-        "confident_wrong_seconds": int((wrong & faulty).sum()),
+        "confident_wrong_seconds": int((answers & faulty).sum()),
+        "confident_wrong_probabilities_seconds": int((wrong & faulty).sum()),
         "true_group": true_label,
         "states": states,
     }

@@ -21,7 +21,13 @@ from bayes_fdi.benchmark.scenarios import BenchmarkScenario
 from bayes_fdi.scoring.decision_signals import decision_signals
 from bayes_fdi.scoring.picalc import first_detection, picalc
 
-__all__ = ["CALIBRATION_SECONDS_PER_RUN", "CONFIDENT", "RunCollector", "group_calibration"]
+__all__ = [
+    "CALIBRATION_SECONDS_PER_RUN",
+    "CONFIDENT",
+    "RunCollector",
+    "confident_wrong",
+    "group_calibration",
+]
 
 #: Each run contributes at most this many detected faulty seconds (evenly spaced) to the
 #: calibration sample, so the day-long ramps (84 600 faulty s) do not outweigh the abrupt
@@ -32,6 +38,45 @@ CALIBRATION_SECONDS_PER_RUN = 600
 CONFIDENT = 0.9
 
 
+def confident_wrong(one: xr.Dataset, true_group: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """The seconds of a stream that name a wrong group confidently, counted two ways.
+
+    Parameters
+    ----------
+    one
+        The decision stream of one run (`bayes_fdi.diagnosis.OnlineDiagnoser.run`).
+    true_group
+        Index of the true fault's group among the stream's groups (None for a fault in no
+        group: every confident group is wrong).
+
+    Returns
+    -------
+    answers, probabilities
+        Boolean arrays over the seconds. ``answers``: the diagnoser's answer (``state``) is a
+        group other than the true one with ``probability`` above `CONFIDENT`, what the SEVA
+        output says. ``probabilities``: the most probable column of ``group_proba`` is above
+        `CONFIDENT` and wrong, also in the seconds the diagnoser answers "unknown" or
+        "mismatch", where the stream still carries the isolation's probabilities (an upper
+        bound of ``answers``).
+    """
+    proba = one["group_proba"].transpose("time", "group").values
+    n = proba.shape[0]
+    if proba.shape[1] == 0:  # a detection-only diagnoser names no group
+        return np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
+    known = np.isfinite(proba).all(axis=1)
+    filled = np.where(known[:, None], proba, 0.0)  # undefined rows are never confident
+    wrong = filled.max(axis=1) > CONFIDENT
+    if true_group is not None:
+        wrong &= filled.argmax(axis=1) != true_group
+    indicated = np.asarray(one["indicated"].transpose("time", "group").values, dtype=bool)
+    probability = np.asarray(one["probability"].values, dtype=np.float64)
+    named = indicated.copy()
+    if true_group is not None:
+        named[:, true_group] = False
+    answers = named.any(axis=1) & (np.nan_to_num(probability, nan=0.0) > CONFIDENT)
+    return answers, wrong
+
+
 class RunCollector:
     """Accumulates per-run indices, calibration samples and counts over the batches.
 
@@ -39,8 +84,10 @@ class RunCollector:
     ``rows`` (one per run: fault, mode, size, seed, PICalc indices, ``first_detection``:
     `bayes_fdi.scoring.picalc.first_detection`'s ``t_dt_first`` and ``dd_permanent``;
     ``alarm_at_onset``: DD on at the last second before the fault),
-    ``faulty_seconds`` and
-    ``confident_wrong`` (seconds of a fault with a wrong group above `CONFIDENT`),
+    ``faulty_seconds``,
+    ``confident_wrong`` (faulty seconds answered with a wrong group above `CONFIDENT`) and
+    ``confident_wrong_probabilities`` (faulty seconds whose most probable group is above it and
+    wrong, the seconds answered "unknown" included; see `confident_wrong`),
     ``model_std`` (median predictive std of X and F before each fault) and the calibration
     sample (``proba``, ``true``, ``cluster``: at most `CALIBRATION_SECONDS_PER_RUN` detected
     faulty seconds per run) with the stream's group ``labels`` and ``attrs``.
@@ -55,6 +102,7 @@ class RunCollector:
         self.attrs: dict[str, Any] = {}
         self.faulty_seconds = 0
         self.confident_wrong = 0
+        self.confident_wrong_probabilities = 0
         self.model_std: dict[str, list[float]] = {"X": [], "F": []}
         self.rng = np.random.default_rng(seed)
 
@@ -96,13 +144,10 @@ class RunCollector:
         faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
         proba = one["group_proba"].transpose("time", "group").values
         known = np.isfinite(proba).all(axis=1)
-        filled = np.where(known[:, None], proba, 0.0)  # undefined rows are never confident
-        top, pred = filled.max(axis=1), filled.argmax(axis=1)
-        wrong = top > CONFIDENT
-        if sig.true_group is not None:
-            wrong &= pred != sig.true_group
+        answers, wrong = confident_wrong(one, sig.true_group)
         self.faulty_seconds += int(faulty.sum())
-        self.confident_wrong += int((wrong & faulty).sum())
+        self.confident_wrong += int((answers & faulty).sum())
+        self.confident_wrong_probabilities += int((wrong & faulty).sum())
         fault_free = (t >= scenario.t_on) & (t < scenario.t_from)
         for c in ("X", "F"):
             std = one[f"{c}_hat_std"].values[fault_free]

@@ -237,6 +237,8 @@ def run_benchmark(
         "seconds": col.confident_wrong,
         "faulty_seconds": col.faulty_seconds,
         "share": col.confident_wrong / max(col.faulty_seconds, 1),
+        "probabilities_seconds": col.confident_wrong_probabilities,
+        "probabilities_share": col.confident_wrong_probabilities / max(col.faulty_seconds, 1),
     }
     results["model_std"] = {c: float(np.median(v)) if v else None for c, v in col.model_std.items()}
     results["effects"] = fault_effects(scenarios, inputs=effects_inputs)
