@@ -108,6 +108,8 @@ def test_runner_writes_the_contracts_json_and_the_report(tiny_run):
     report = (out / "benchmark.md").read_text()
     assert "Not the benchmark's numbers" in report and "## Targets" in report
     assert "f14 abrupt big" in report and "Published DAMADICS results" in report
+    rms = data["innovation_rms"]
+    assert f"innovations have an RMS of {rms['X']:.2f} (X) and {rms['F']:.2f} (F)" in report
     for name in ("f1-abrupt-big", "f14-abrupt-big"):
         assert (out / "timelines" / f"{name}.png").stat().st_size > 10_000
     assert (out / "reliability.png").exists()
@@ -141,6 +143,32 @@ def test_runner_indices_equal_picalc_on_the_diagnosers_own_stream(tiny_run, doub
     assert results["scenarios"][0]["first_detection"] == first
     assert first["dd_permanent"] in (0.0, 1.0)
     assert (first["t_dt_first"] == want["t_dt"]) == (first["dd_permanent"] == 1.0)
+
+
+def test_rows_count_the_confident_wrong_seconds_of_the_diagnosers_own_stream(tiny_run, double):
+    from bayes_fdi.benchmark.collection import confident_wrong
+
+    _, results = tiny_run
+    total, rms = 0, {"X": [], "F": []}
+    for row in results["scenarios"]:
+        s = BY_NAME[f"{row['fault']} {row['mode']} {row['size']}"]
+        run = simulate_scenario(s, [row["seed"]])[["CV", "P1", "P2", "T1", "X", "F"]]
+        one = double.run(run).isel(run=0)
+        t = one.time.values
+        faulty = (t >= s.t_from) & (t < s.t_hor)
+        answers, _ = confident_wrong(one, decision_signals(one, s.fault).true_group)
+        named = one.state.values.astype(str)[answers & faulty]
+        assert row["faulty_seconds"] == faulty.sum() == s.t_hor - s.t_from
+        assert row["confident_wrong_seconds"] == named.size
+        assert sum(row["confident_wrong_named"].values()) == named.size
+        assert set(row["confident_wrong_named"]) == set(named.tolist())
+        total += named.size
+        fault_free = (t >= s.t_on) & (t < s.t_from)
+        for c in ("X", "F"):
+            rms[c].append(np.sqrt(np.mean(one[f"r_{c}"].values[fault_free] ** 2)))
+    assert results["confident_wrong"]["seconds"] == total
+    for c in ("X", "F"):  # the median over the runs of the innovations' RMS before the fault
+        assert results["innovation_rms"][c] == pytest.approx(np.median(rms[c]), rel=1e-12)
 
 
 def test_dgn0_scenario_indices_obey_pid_equals_not_dd(tiny_run):

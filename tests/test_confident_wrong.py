@@ -14,6 +14,7 @@ import xarray as xr
 from bayes_fdi.benchmark.collection import CONFIDENT, confident_wrong
 from bayes_fdi.benchmark.commissioning_summary import confident_wrong_share
 from bayes_fdi.benchmark.report import _calibration_lines
+from bayes_fdi.benchmark.report_wrong import WRONG_SCENARIOS_SHOWN, wrong_by_scenario
 from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis.online.stream import decide
 
@@ -126,12 +127,51 @@ def test_the_reports_give_the_probabilities_count_only_where_it_differs():
         "mean_confidence": 0.7,
         "n_bootstrap": 20,
     }
-    differs = " ".join(_calibration_lines({"calibration": cal, "confident_wrong": share}))
+    differs = " ".join(
+        _calibration_lines({"calibration": cal, "confident_wrong": share, "scenarios": []})
+    )
     assert "wrong group: 10.00 % of all faulty seconds; counting" in differs
     assert "unknown or mismatch by their most probable group, 30.00 %." in differs
     same = {**share, "probabilities_seconds": 1, "probabilities_share": 0.1}
-    text = " ".join(_calibration_lines({"calibration": cal, "confident_wrong": same}))
+    text = " ".join(
+        _calibration_lines({"calibration": cal, "confident_wrong": same, "scenarios": []})
+    )
     assert "wrong group: 10.00 % of all faulty seconds." in text and "counting" not in text
     old = {k: share[k] for k in ("seconds", "faulty_seconds", "share")}  # an older results file
-    text = " ".join(_calibration_lines({"calibration": cal, "confident_wrong": old}))
+    text = " ".join(
+        _calibration_lines({"calibration": cal, "confident_wrong": old, "scenarios": []})
+    )
     assert "wrong group: 10.00 % of all faulty seconds." in text
+
+
+def _row(fault, mode, size, seconds, named):
+    return {
+        "fault": fault,
+        "mode": mode,
+        "size": size,
+        "confident_wrong_seconds": seconds,
+        "confident_wrong_named": named,
+    }
+
+
+def test_the_report_says_in_which_scenarios_the_confident_wrong_seconds_lie():
+    f18_1 = _row("f18", "incipient", None, 600, {"f13": 600})  # seed 1
+    f18_2 = _row("f18", "incipient", None, 300, {"f13": 200, "f10|f16": 100})  # seed 2
+    f2 = _row("f2", "incipient", None, 50, {"f11|f15": 50})
+    f1 = _row("f1", "abrupt", "big", 40, {"f10|f16": 40})
+    f7 = _row("f7", "abrupt", "big", 10, {"f13": 10})
+    f9 = _row("f9", "incipient", None, 1, {"f13": 1})
+    f4 = _row("f4", "abrupt", "big", 0, {})
+    assert WRONG_SCENARIOS_SHOWN == 3  # f7 and f9 are left out of the first sentence
+    assert wrong_by_scenario([f18_1, f18_2, f2, f1, f7, f9, f4]) == (  # 1001 s in all
+        " Where they lie, most first: f18 incipient 90 % (named f13 800 s, f10|f16 100 s); "
+        "f2 incipient 5 % (named f11|f15 50 s); f1 abrupt big 4 % (named f10|f16 40 s)."
+    )
+    assert wrong_by_scenario([f9, f7]) == (
+        " Where they lie, most first: f7 abrupt big 91 % (named f13 10 s); "
+        "f9 incipient 9 % (named f13 1 s)."
+    )
+    assert wrong_by_scenario([f18_1, f9]).endswith("; f9 incipient under 1 % (named f13 1 s).")
+    assert wrong_by_scenario([f4]) == ""  # no confident wrong second
+    old = [{k: v for k, v in r.items() if not k.startswith("confident")} for r in (f18_1, f2)]
+    assert wrong_by_scenario(old) == ""  # results written before the per-run counts

@@ -83,12 +83,16 @@ class RunCollector:
     `add` scores one run's decision stream; the attributes hold what the benchmark reports:
     ``rows`` (one per run: fault, mode, size, seed, PICalc indices, ``first_detection``:
     `bayes_fdi.scoring.picalc.first_detection`'s ``t_dt_first`` and ``dd_permanent``;
-    ``alarm_at_onset``: DD on at the last second before the fault),
+    ``alarm_at_onset``: DD on at the last second before the fault; ``faulty_seconds``,
+    ``confident_wrong_seconds`` and ``confident_wrong_named``, the wrong groups those seconds
+    named and how often),
     ``faulty_seconds``,
     ``confident_wrong`` (faulty seconds answered with a wrong group above `CONFIDENT`) and
     ``confident_wrong_probabilities`` (faulty seconds whose most probable group is above it and
     wrong, the seconds answered "unknown" included; see `confident_wrong`),
-    ``model_std`` (median predictive std of X and F before each fault) and the calibration
+    ``model_std`` (median predictive std of X and F before each fault), ``innovation_rms``
+    (per run, the RMS of the whitened innovations of X and F before the fault: near 1 where the
+    normal models fit as on their training data, larger where they do not) and the calibration
     sample (``proba``, ``true``, ``cluster``: at most `CALIBRATION_SECONDS_PER_RUN` detected
     faulty seconds per run) with the stream's group ``labels`` and ``attrs``.
     """
@@ -104,6 +108,7 @@ class RunCollector:
         self.confident_wrong = 0
         self.confident_wrong_probabilities = 0
         self.model_std: dict[str, list[float]] = {"X": [], "F": []}
+        self.innovation_rms: dict[str, list[float]] = {"X": [], "F": []}
         self.rng = np.random.default_rng(seed)
 
     def add(self, scenario: BenchmarkScenario, seed: int, one: xr.Dataset) -> dict[str, Any]:
@@ -125,6 +130,9 @@ class RunCollector:
         first = first_detection(
             t, sig.dd, t_on=scenario.t_on, t_from=scenario.t_from, t_hor=scenario.t_hor
         )
+        faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
+        answers, wrong = confident_wrong(one, sig.true_group)
+        named = np.asarray(one["state"].values).astype(str)[answers & faulty]
         row = {
             "fault": scenario.fault,
             "mode": scenario.mode,
@@ -133,6 +141,11 @@ class RunCollector:
             "indices": indices,
             "first_detection": first,
             "alarm_at_onset": alarm_at_onset(t, sig.dd, t_from=scenario.t_from),
+            "faulty_seconds": int(faulty.sum()),
+            "confident_wrong_seconds": int(named.size),
+            "confident_wrong_named": {
+                str(g): int(n) for g, n in zip(*np.unique(named, return_counts=True), strict=True)
+            },
         }
         self.rows.append(row)
         labels = [str(g) for g in one["group"].values]
@@ -141,10 +154,8 @@ class RunCollector:
             self.attrs = {k: one.attrs.get(k) for k in ("groups", "undetectable")}
         elif labels != self.labels:
             raise ValueError("run_benchmark: the stream's groups changed between runs")
-        faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
         proba = one["group_proba"].transpose("time", "group").values
         known = np.isfinite(proba).all(axis=1)
-        answers, wrong = confident_wrong(one, sig.true_group)
         self.faulty_seconds += int(faulty.sum())
         self.confident_wrong += int((answers & faulty).sum())
         self.confident_wrong_probabilities += int((wrong & faulty).sum())
@@ -153,6 +164,9 @@ class RunCollector:
             std = one[f"{c}_hat_std"].values[fault_free]
             if np.isfinite(std).any():
                 self.model_std[c].append(float(np.nanmedian(std)))
+            innovations = one[f"r_{c}"].values[fault_free]
+            if np.isfinite(innovations).any():
+                self.innovation_rms[c].append(float(np.sqrt(np.nanmean(innovations**2))))
         keep = np.flatnonzero(faulty & sig.dd & known)
         if sig.true_group is not None and keep.size:
             if keep.size > CALIBRATION_SECONDS_PER_RUN:

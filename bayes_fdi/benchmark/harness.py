@@ -207,7 +207,8 @@ def run_benchmark(
         What ``benchmark.json`` holds: ``"scenarios"`` (one row per scenario and seed:
         ``fault``, ``mode``, ``size``, ``seed``, ``indices``), ``"real_hour"`` (``seconds``,
         ``alarms``, ``clear_share``), ``"fault_free"``, ``"calibration"``, ``"effects"``,
-        ``"confident_wrong"``, ``"model_std"``, ``"timing"``, ``"settings"``.
+        ``"confident_wrong"``, ``"model_std"``, ``"innovation_rms"`` (median over the runs of
+        the whitened innovations' RMS before the fault), ``"timing"``, ``"settings"``.
     """
     from bayes_fdi.benchmark.report import write_report
 
@@ -241,6 +242,9 @@ def run_benchmark(
         "probabilities_share": col.confident_wrong_probabilities / max(col.faulty_seconds, 1),
     }
     results["model_std"] = {c: float(np.median(v)) if v else None for c, v in col.model_std.items()}
+    results["innovation_rms"] = {
+        c: float(np.median(v)) if v else None for c, v in col.innovation_rms.items()
+    }
     results["effects"] = fault_effects(scenarios, inputs=effects_inputs)
     results["scenario_table"] = [_scenario_row(s) for s in scenarios]
     results["figures"] = runs.figures

@@ -35,6 +35,7 @@ from bayes_fdi.benchmark.report_detection import (
     permanence_target,
 )
 from bayes_fdi.benchmark.report_summary import GLOSSARY, in_short_section
+from bayes_fdi.benchmark.report_wrong import published_wrong, wrong_by_scenario
 from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import format_number, markdown_table, to_jsonable
 from bayes_fdi.scoring.picalc import PICALC_KEYS
@@ -219,7 +220,7 @@ def target_rows(results: Mapping[str, Any]) -> list[list[str]]:
     add(
         "confident (p > 0.9) wrong group in <= 2 % of the faulty seconds",
         f"{100 * cw['share']:.2f} % ({cw['seconds']} of {cw['faulty_seconds']} s)"
-        + _published_wrong(cw),
+        + published_wrong(cw),
         cw["share"] <= 0.02,
     )
     timing = results["timing"]
@@ -424,7 +425,8 @@ def render_report(results: Mapping[str, Any]) -> str:
         f"{DETECTABLE_DEFLECTION:g}. The normal models' own median predictive std on the "
         f"fault-free parts is {_num(results['model_std']['X'], '.4f')} (X) and "
         f"{_num(results['model_std']['F'], '.4f')} (F): effects below that are hard to see "
-        "for a method that must predict X and F from CV, P1, P2, T1.",
+        "for a method that must predict X and F from CV, P1, P2, T1."
+        + _innovation_text(results.get("innovation_rms")),
         "",
         _effects_table(results, summary),
         *_undetectable_text(results),
@@ -471,16 +473,16 @@ def _with_fault_codes(lines: list[str]) -> list[str]:
     return [*lines[:at], "## Fault codes", "", *named, "", *lines[at:]]
 
 
-def _published_wrong(cw: Mapping[str, Any]) -> str:
-    """What the group probabilities alone say, where it differs from the answers' count: the
-    seconds answered "unknown" or "mismatch" whose most probable group is confident and wrong
-    (`bayes_fdi.benchmark.collection.confident_wrong`); results without that count say nothing."""
-    published = cw.get("probabilities_seconds")
-    if published is None or published == cw["seconds"]:
+def _innovation_text(rms: Mapping[str, Any] | None) -> str:
+    """How well the normal models fit the scenarios' inputs: the whitened innovations' RMS on
+    the fault-free parts (results without it say nothing)."""
+    if not rms or rms.get("X") is None or rms.get("F") is None:
         return ""
     return (
-        f"; counting the seconds answered unknown or mismatch by their most probable group, "
-        f"{100 * cw['probabilities_share']:.2f} %"
+        f" Their whitened innovations have an RMS of {_num(rms['X'], '.2f')} (X) and "
+        f"{_num(rms['F'], '.2f')} (F) there (median over the runs); the whitening was fitted "
+        "on out-of-fold residuals of the training data, so an RMS well above 1 says that the "
+        "normal models fit these inputs worse than their training data."
     )
 
 
@@ -499,7 +501,7 @@ def _calibration_lines(results: Mapping[str, Any]) -> list[str]:
         f"not independent); noise floor {_num(cal['noise_floor'])}, MCE {_num(cal['mce'])}; "
         f"accuracy {_num(cal['accuracy'])} at mean confidence {_num(cal['mean_confidence'])}. "
         f"Confident (p > 0.9) wrong group: {100 * cw['share']:.2f} % of all faulty seconds"
-        f"{_published_wrong(cw)}.",
+        f"{published_wrong(cw)}.{wrong_by_scenario(results['scenarios'])}",
         "",
         "![reliability diagram](reliability.png)",
         "",

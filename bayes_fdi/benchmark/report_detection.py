@@ -25,7 +25,8 @@ from bayes_fdi.reporting import markdown_table
 from bayes_fdi.scoring.picalc import UNDETERMINED
 
 __all__ = ["ONSET_RULE", "PERMANENT_SHARE", "alarm_at_onset", "first_detection_section",
-           "first_detection_summary", "judged_at_onset", "permanence_target"]  # fmt: skip
+           "first_detection_summary", "judged_at_onset", "permanence_target",
+           "scenario_name"]  # fmt: skip
 
 #: Share of the detected runs of the visible big abrupt faults whose DD must stay on after the
 #: first detection.
@@ -63,7 +64,8 @@ def judged_at_onset(results: Mapping[str, Any]) -> dict[str, Any]:
     return {**results, "scenarios": rows}
 
 
-def _scenario_name(row: Mapping[str, Any]) -> str:
+def scenario_name(row: Mapping[str, Any]) -> str:
+    """The scenario of a ``benchmark.json`` row, e.g. ``"f18 abrupt big"``, ``"f2 incipient"``."""
     return " ".join(p for p in (row["fault"], row["mode"], row.get("size")) if p)
 
 
@@ -75,7 +77,7 @@ def first_detection_summary(results: Mapping[str, Any]) -> dict[str, dict[str, A
     runs: dict[str, list[Mapping[str, float]]] = {}
     for row in results["scenarios"]:
         if "first_detection" in row:
-            runs.setdefault(_scenario_name(row), []).append(row["first_detection"])
+            runs.setdefault(scenario_name(row), []).append(row["first_detection"])
     out = {}
     for name, firsts in runs.items():
         t = np.array([f["t_dt_first"] for f in firsts], dtype=np.float64)
