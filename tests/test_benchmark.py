@@ -162,6 +162,11 @@ def test_rows_count_the_confident_wrong_seconds_of_the_diagnosers_own_stream(tin
         assert row["confident_wrong_seconds"] == named.size
         assert sum(row["confident_wrong_named"].values()) == named.size
         assert set(row["confident_wrong_named"]) == set(named.tolist())
+        dd = one.DD.values.astype(bool)
+        states, counts = np.unique(one.state.values.astype(str)[faulty & dd], return_counts=True)
+        want = dict(zip(states.tolist(), counts.tolist(), strict=True))
+        assert row["states"] == {**want, "not detected": int((faulty & ~dd).sum())}
+        assert sum(row["states"].values()) == row["faulty_seconds"]
         total += named.size
         fault_free = (t >= s.t_on) & (t < s.t_from)
         for c in ("X", "F"):

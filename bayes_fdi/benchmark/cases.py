@@ -18,13 +18,12 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.benchmark.collection import confident_wrong
+from bayes_fdi.benchmark.collection import confident_wrong, faulty_states
 from bayes_fdi.benchmark.report import DETECTABLE_DEFLECTION
 from bayes_fdi.scoring.decision_signals import decision_high, decision_signals, rising_edges
 from bayes_fdi.scoring.picalc import picalc
 
 __all__ = [
-    "NOT_DETECTED",
     "clean_summary",
     "groups_of",
     "innovation_effect",
@@ -33,8 +32,6 @@ __all__ = [
     "zeroed",
 ]
 
-#: The confusion's column of faulty seconds with no detection.
-NOT_DETECTED = "not detected"
 #: The whitened innovations of the normal models, one per measured output.
 INNOVATIONS = ("r_X", "r_F")
 
@@ -80,7 +77,7 @@ def score_case(
         `~bayes_fdi.benchmark.collection.confident_wrong`), ``true_group`` (its label,
         ``"DGN0"`` for an undetectable fault, None for a fault the diagnoser does not know)
         and ``states`` (faulty seconds per diagnosed state while DD is on, and
-        `NOT_DETECTED`).
+        `~bayes_fdi.benchmark.collection.NOT_DETECTED`).
     """
     t = np.asarray(one["time"].values, dtype=np.float64)
     sig = decision_signals(one, fault)
@@ -102,10 +99,7 @@ def score_case(
     true_label = (
         labels[sig.true_group] if sig.true_group is not None else "DGN0" if undetectable else None
     )
-    state = np.asarray(one["state"].values).astype(str)
-    named = state[faulty & sig.dd]
-    states = {str(s): int(n) for s, n in zip(*np.unique(named, return_counts=True), strict=True)}
-    states[NOT_DETECTED] = int((faulty & ~sig.dd).sum())
+    states = faulty_states(one["state"].values, sig.dd, faulty)
     answers, wrong = confident_wrong(one, sig.true_group)
     return {
         "indices": indices,

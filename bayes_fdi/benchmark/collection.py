@@ -24,8 +24,10 @@ from bayes_fdi.scoring.picalc import first_detection, picalc
 __all__ = [
     "CALIBRATION_SECONDS_PER_RUN",
     "CONFIDENT",
+    "NOT_DETECTED",
     "RunCollector",
     "confident_wrong",
+    "faulty_states",
     "group_calibration",
 ]
 
@@ -36,6 +38,19 @@ CALIBRATION_SECONDS_PER_RUN = 600
 #: A group probability above this is "confident" (the isolation target counts confident wrong
 #: groups).
 CONFIDENT = 0.9
+
+
+#: The column of faulty seconds with no detection, in a run's count of its diagnosed states.
+NOT_DETECTED = "not detected"
+
+
+def faulty_states(state: np.ndarray, detected: np.ndarray, faulty: np.ndarray) -> dict[str, int]:
+    """How a run's faulty seconds were answered: seconds per diagnosed state while DD was on,
+    and `NOT_DETECTED` (a row of the confusion matrix)."""
+    named = np.asarray(state).astype(str)[faulty & detected]
+    counts = {str(s): int(n) for s, n in zip(*np.unique(named, return_counts=True), strict=True)}
+    counts[NOT_DETECTED] = int((faulty & ~detected).sum())
+    return counts
 
 
 def confident_wrong(one: xr.Dataset, true_group: int | None) -> tuple[np.ndarray, np.ndarray]:
@@ -85,7 +100,7 @@ class RunCollector:
     `bayes_fdi.scoring.picalc.first_detection`'s ``t_dt_first`` and ``dd_permanent``;
     ``alarm_at_onset``: DD on at the last second before the fault; ``faulty_seconds``,
     ``confident_wrong_seconds`` and ``confident_wrong_named``, the wrong groups those seconds
-    named and how often),
+    named and how often; ``states``, `faulty_states`),
     ``faulty_seconds``,
     ``confident_wrong`` (faulty seconds answered with a wrong group above `CONFIDENT`) and
     ``confident_wrong_probabilities`` (faulty seconds whose most probable group is above it and
@@ -146,6 +161,7 @@ class RunCollector:
             "confident_wrong_named": {
                 str(g): int(n) for g, n in zip(*np.unique(named, return_counts=True), strict=True)
             },
+            "states": faulty_states(one["state"].values, sig.dd, faulty),
         }
         self.rows.append(row)
         labels = [str(g) for g in one["group"].values]

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from bayes_fdi.benchmark.cases import NOT_DETECTED
+from bayes_fdi.benchmark.collection import NOT_DETECTED
 from bayes_fdi.benchmark.commissioning_summary import (
     MODELS,
     big_abrupt_by_plant,
