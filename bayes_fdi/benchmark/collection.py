@@ -106,8 +106,9 @@ class RunCollector:
     ``confident_wrong_probabilities`` (faulty seconds whose most probable group is above it and
     wrong, the seconds answered "unknown" included; see `confident_wrong`),
     ``model_std`` (median predictive std of X and F before each fault), ``innovation_rms``
-    (per run, the RMS of the whitened innovations of X and F before the fault: near 1 where the
-    normal models fit as on their training data, larger where they do not) and the calibration
+    (per run, the RMS of the whitened innovations of X and F before the fault; the whitening
+    is fitted on out-of-fold training residuals, so it lies well above 1 where the normal models
+    do not fit the inputs) and the calibration
     sample (``proba``, ``true``, ``cluster``: at most `CALIBRATION_SECONDS_PER_RUN` detected
     faulty seconds per run) with the stream's group ``labels`` and ``attrs``.
     """
