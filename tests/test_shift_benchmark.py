@@ -121,6 +121,10 @@ def test_shift_run_writes_a_report_per_family_and_a_summary(double, tmp_path):
         if always > 0:
             assert f"{family.name} ({100 * always:.0f} %)" in summary
         assert entry["figures"] == pytest.approx(family_figures(one))
+        rms = one["innovation_rms"]
+        assert entry["figures"]["innovation_rms_X"] == rms["X"] > 0
+        row = next(line for line in summary.splitlines() if line.startswith(f"| [{family.name}]"))
+        assert f"| {rms['X']:.2f} / {rms['F']:.2f} |" in row
     # the indices are the double's on the family's runs, replayed independently
     inputs = ShiftInputs(families[0], [10_000], 1500)
     stream = double.run(inputs.simulate(BY_NAME["f1 abrupt big"], [10_000])[CHANNELS])

@@ -47,7 +47,10 @@ def family_figures(results: Mapping[str, Any]) -> dict[str, Any]:
     if its alarm was off at the fault's start, `judged_at_onset`); ``t_dt_median``,
     ``t_dt_worst``: median and largest of those scenarios' median t_dt (s); ``r_ti_median``,
     ``r_ti_ok``: their median r_ti and how many reach 0.9; ``ece`` (with ``ece_low``,
-    ``ece_high``), ``confident_wrong``: the calibration of the group probabilities.
+    ``ece_high``), ``confident_wrong``: the calibration of the group probabilities;
+    ``innovation_rms_X``, ``innovation_rms_F``: the whitened innovations' RMS on the scenarios'
+    fault-free parts, how well the normal models fit the family's inputs (None in results
+    without it).
     """
     summary = summarise(judged_at_onset(results))
     big = [n for n in summary if n.endswith("abrupt big")]
@@ -73,6 +76,7 @@ def family_figures(results: Mapping[str, Any]) -> dict[str, Any]:
         "ece_low": cal.get("ci_low"),
         "ece_high": cal.get("ci_high"),
         "confident_wrong": float(results["confident_wrong"]["share"]),
+        **{f"innovation_rms_{c}": (results.get("innovation_rms") or {}).get(c) for c in "XF"},
     }
 
 
@@ -80,7 +84,8 @@ def _overall_table(families: Sequence[Mapping[str, Any]]) -> str:
     header = ["family", "median r_fd (fault-free parts)", "runs alarmed before the fault",
               "alarms per 8 h; alarm on (fault-free hours)", "big abrupt detected",
               "t_dt median / worst (s)", "r_ti median (>= 0.9)",
-              "ECE [95 % interval]", "confident wrong", "targets met"]  # fmt: skip
+              "ECE [95 % interval]", "confident wrong", "innovations' RMS X / F",
+              "targets met"]  # fmt: skip
     rows = []
     for f in families:
         g = f["figures"]
@@ -97,6 +102,8 @@ def _overall_table(families: Sequence[Mapping[str, Any]]) -> str:
             f"{format_number(g['ece'], '.3f')} [{format_number(g['ece_low'], '.3f')}, "
             f"{format_number(g['ece_high'], '.3f')}]",
             f"{100 * g['confident_wrong']:.2f} %",
+            f"{format_number(g.get('innovation_rms_X'), '.2f')} / "
+            f"{format_number(g.get('innovation_rms_F'), '.2f')}",
             f"{sum(row[2] == 'yes' for row in met)} of {len(met)}",
         ])  # fmt: skip
     return markdown_table(header, rows)
