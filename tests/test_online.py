@@ -359,6 +359,10 @@ def test_settings_that_are_not_real_numbers_or_out_of_range_are_refused_by_name(
     from bayes_fdi.diagnosis.online.checks import NUMERIC_SETTINGS, check_settings
 
     params = OnlineDiagnoser().get_params()
+    assert set(NUMERIC_SETTINGS) == {
+        "false_alarm_hours", "cusum_k", "glr_window", "p_fault", "novelty_ratio", "coverage",
+        "detect_rate", "input_margin", "max_signatures_per_fault",
+    }  # fmt: skip
     check_settings(params)  # the defaults pass
     assert check_settings(dict(params, detect_rate=np.float64(0.25), glr_window=30)) is None
     for name in NUMERIC_SETTINGS:

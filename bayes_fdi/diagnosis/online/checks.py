@@ -10,41 +10,43 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
-__all__ = ["NUMERIC_SETTINGS", "check_fitted_values", "check_settings"]
+__all__ = ["NUMERIC_SETTINGS", "SETTING_RANGES", "check_fitted_values", "check_settings"]
 
 
+#: Each numeric setting of an `OnlineDiagnoser` and the range `check_settings` requires of it.
+SETTING_RANGES: Mapping[str, Callable[[Any], bool]] = MappingProxyType(
+    {
+        "false_alarm_hours": lambda v: v > 0,
+        "cusum_k": lambda v: v >= 0,
+        "glr_window": lambda v: isinstance(v, int) and v >= 1,
+        "p_fault": lambda v: 0 <= v <= 1,
+        "novelty_ratio": lambda v: v > 0,
+        "coverage": lambda v: 0 < v < 1,
+        "detect_rate": lambda v: 0 <= v <= 1,
+        "input_margin": lambda v: v >= 0,
+        "max_signatures_per_fault": lambda v: v >= 2,
+    }
+)
 #: The numeric settings `check_settings` checks, each of which must be a real number.
-NUMERIC_SETTINGS: tuple[str, ...] = (
-    "false_alarm_hours", "cusum_k", "glr_window", "p_fault", "novelty_ratio", "coverage",
-    "detect_rate", "input_margin", "max_signatures_per_fault",
-)  # fmt: skip
+NUMERIC_SETTINGS: tuple[str, ...] = tuple(SETTING_RANGES)
 
 
 def check_settings(params: Mapping[str, Any]) -> None:
     """Refuse settings that are not real numbers (a bool, a string) or out of range
-    (``get_params()`` of an `OnlineDiagnoser`); the error names the setting."""
+    (`SETTING_RANGES`; ``params``: ``get_params()`` of an `OnlineDiagnoser`); the error names
+    the setting."""
     for name in NUMERIC_SETTINGS:
         value = params[name]
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
             raise ValueError(f"{name} must be a real number, got {value!r}")
-    checks = {
-        "false_alarm_hours": params["false_alarm_hours"] > 0,
-        "cusum_k": params["cusum_k"] >= 0,
-        "glr_window": isinstance(params["glr_window"], int) and params["glr_window"] >= 1,
-        "p_fault": 0 <= params["p_fault"] <= 1,
-        "novelty_ratio": params["novelty_ratio"] > 0,
-        "coverage": 0 < params["coverage"] < 1,
-        "detect_rate": 0 <= params["detect_rate"] <= 1,
-        "input_margin": params["input_margin"] >= 0,
-        "max_signatures_per_fault": params["max_signatures_per_fault"] >= 2,
-    }
-    for name, ok in checks.items():
-        if not ok:
+    for name, in_range in SETTING_RANGES.items():
+        if not in_range(params[name]):
             raise ValueError(f"{name} is out of range: {params[name]!r}")
 
 
