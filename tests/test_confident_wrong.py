@@ -115,6 +115,13 @@ def test_the_reports_give_the_probabilities_count_only_where_it_differs():
         "probabilities_seconds": 3,
         "probabilities_share": 0.3,
     }
+    from bayes_fdi.benchmark.commissioning_summary import _wrong_text
+
+    assert _wrong_text(share) == (
+        "10.00%; counting the seconds answered unknown or mismatch by their most probable "
+        "group, 30.00 %"
+    )
+    assert _wrong_text({**share, "probabilities_seconds": 1}) == "10.00%"
     cal = {
         "n_seconds": 10,
         "n_runs": 2,

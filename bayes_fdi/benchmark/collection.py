@@ -44,11 +44,15 @@ CONFIDENT = 0.9
 NOT_DETECTED = "not detected"
 
 
+def _seconds_per_state(states: np.ndarray) -> dict[str, int]:
+    """How many seconds each state of ``states`` (strings) holds."""
+    return {str(s): int(n) for s, n in zip(*np.unique(states, return_counts=True), strict=True)}
+
+
 def faulty_states(state: np.ndarray, detected: np.ndarray, faulty: np.ndarray) -> dict[str, int]:
     """How a run's faulty seconds were answered: seconds per diagnosed state while DD was on,
     and `NOT_DETECTED` (a row of the confusion matrix)."""
-    named = np.asarray(state).astype(str)[faulty & detected]
-    counts = {str(s): int(n) for s, n in zip(*np.unique(named, return_counts=True), strict=True)}
+    counts = _seconds_per_state(np.asarray(state).astype(str)[faulty & detected])
     counts[NOT_DETECTED] = int((faulty & ~detected).sum())
     return counts
 
@@ -98,13 +102,13 @@ class RunCollector:
     `add` scores one run's decision stream; the attributes hold what the benchmark reports:
     ``rows`` (one per run: fault, mode, size, seed, PICalc indices, ``first_detection``:
     `bayes_fdi.scoring.picalc.first_detection`'s ``t_dt_first`` and ``dd_permanent``;
-    ``alarm_at_onset``: DD on at the last second before the fault; ``faulty_seconds``,
-    ``confident_wrong_seconds`` and ``confident_wrong_named``, the wrong groups those seconds
-    named and how often; ``states``, `faulty_states`),
-    ``faulty_seconds``,
-    ``confident_wrong`` (faulty seconds answered with a wrong group above `CONFIDENT`) and
-    ``confident_wrong_probabilities`` (faulty seconds whose most probable group is above it and
-    wrong, the seconds answered "unknown" included; see `confident_wrong`),
+    ``alarm_at_onset``: DD on at the last second before the fault; the run's
+    ``faulty_seconds``, ``confident_wrong_seconds`` and ``confident_wrong_named``, the wrong
+    groups those seconds named and how often; ``states``, `faulty_states`); over all runs,
+    ``faulty_seconds``, ``confident_wrong`` (faulty seconds answered with a wrong group above
+    `CONFIDENT`) and ``confident_wrong_probabilities`` (faulty seconds whose most probable
+    group is above it and wrong, the seconds answered "unknown" included; see
+    `confident_wrong`),
     ``model_std`` (median predictive std of X and F before each fault), ``innovation_rms``
     (per run, the RMS of the whitened innovations of X and F before the fault; the whitening
     is fitted on out-of-fold training residuals, so it lies well above 1 where the normal models
@@ -148,7 +152,7 @@ class RunCollector:
         )
         faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
         answers, wrong = confident_wrong(one, sig.true_group)
-        named = np.asarray(one["state"].values).astype(str)[answers & faulty]
+        state = np.asarray(one["state"].values).astype(str)
         row = {
             "fault": scenario.fault,
             "mode": scenario.mode,
@@ -158,11 +162,9 @@ class RunCollector:
             "first_detection": first,
             "alarm_at_onset": alarm_at_onset(t, sig.dd, t_from=scenario.t_from),
             "faulty_seconds": int(faulty.sum()),
-            "confident_wrong_seconds": int(named.size),
-            "confident_wrong_named": {
-                str(g): int(n) for g, n in zip(*np.unique(named, return_counts=True), strict=True)
-            },
-            "states": faulty_states(one["state"].values, sig.dd, faulty),
+            "confident_wrong_seconds": int((answers & faulty).sum()),
+            "confident_wrong_named": _seconds_per_state(state[answers & faulty]),
+            "states": faulty_states(state, sig.dd, faulty),
         }
         self.rows.append(row)
         labels = [str(g) for g in one["group"].values]
@@ -173,8 +175,8 @@ class RunCollector:
             raise ValueError("run_benchmark: the stream's groups changed between runs")
         proba = one["group_proba"].transpose("time", "group").values
         known = np.isfinite(proba).all(axis=1)
-        self.faulty_seconds += int(faulty.sum())
-        self.confident_wrong += int((answers & faulty).sum())
+        self.faulty_seconds += row["faulty_seconds"]
+        self.confident_wrong += row["confident_wrong_seconds"]
         self.confident_wrong_probabilities += int((wrong & faulty).sum())
         fault_free = (t >= scenario.t_on) & (t < scenario.t_from)
         for c in ("X", "F"):

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from bayes_fdi.benchmark.report import DETECTABLE_DEFLECTION
+from bayes_fdi.benchmark.report_wrong import published_wrong
 from bayes_fdi.scoring.picalc import PICALC_KEYS, UNDETERMINED
 
 __all__ = [
@@ -86,12 +87,9 @@ def confident_wrong_share(rows: Iterable[Mapping[str, Any]]) -> dict[str, float]
 
 
 def _wrong_text(wrong: Mapping[str, Any]) -> str:
-    """A `confident_wrong_share`, with the group probabilities' own count where it differs."""
-    text = f"{wrong['share']:.2%}"
-    if wrong["probabilities_seconds"] != wrong["seconds"]:
-        text += " (by the most probable group, unknown seconds included: "
-        text += f"{wrong['probabilities_share']:.2%})"
-    return text
+    """A `confident_wrong_share` as a percentage, with the group probabilities' own count
+    where it differs (`~bayes_fdi.benchmark.report_wrong.published_wrong`)."""
+    return f"{wrong['share']:.2%}{published_wrong(wrong)}"
 
 
 def group_confusion(rows: Iterable[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
