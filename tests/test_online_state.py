@@ -186,12 +186,12 @@ def test_the_0_1_0_whitener_and_normal_models_drop_their_caches(saved):
     new = ARWhitener.upgrade_model_file(whitener, 1)
     assert "_state" not in new and new["order_"] == whitener["order_"]
     unfitted = saved["normal_models"]["state"]
-    # the std factors of 0.1.0 were fitted by maximum likelihood (std_coverage=None), and its
-    # models took no physics inputs
+    # the std factors of 0.1.0 were fitted by maximum likelihood (std_coverage=None) per bin
+    # of the command speed, and its models took no physics inputs
     upgraded = DynamicNormalModels.upgrade_model_file(dict(unfitted), 1)
     assert upgraded == {
         **unfitted, "std_coverage": None, "physics_inputs": (), "lag_speed_limits": False,
-        "lag_as_mean": False,
+        "lag_as_mean": False, "law_as_mean": False, "std_bins": "speed",
     }  # fmt: skip
     # the fitted models' kernel parameters, rebuilt on loading, hold the values 0.1.0 passed
     # to its kernel (the scalars of its saved `_kernel_args`)

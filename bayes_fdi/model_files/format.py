@@ -109,6 +109,8 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
+#: 12: the dynamic normal models' flow model may learn F minus the valve law's flow
+#: (``law_as_mean``: one more field of their compiled predictor's parameters);
 #: 11: the dynamic normal models' command lag may limit the stem's speed and the position model
 #: may learn X minus the lagged command (``lag_speed_limits``, ``lag_as_mean``: two more fields
 #: of their compiled predictor's parameters);
@@ -125,7 +127,7 @@ FORMAT_NAME = "bayes_fdi.model"
 #: 4: the detection decision's hold (``hold``, the state's ``quiet`` count); 3: the online
 #: diagnoser's components own their states; 2: classes named by their stable registered names;
 #: 1 (bayes_fdi 0.1.0): classes named by ``module:QualName``.
-FORMAT_VERSION = 11
+FORMAT_VERSION = 12
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.

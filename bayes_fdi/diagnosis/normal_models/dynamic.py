@@ -24,8 +24,9 @@ error to about the achievable level (gradient boosting on the same inputs does n
 Both are RBF `~bayes_fdi.rvm.RVR` models whose widths maximise the evidence over a grid;
 the predictions are clipped to the sensors' range [0, 1]. The predictive standard deviations
 are calibrated by cross-fitting (fault-free runs split by run, or by time block when there are
-fewer runs than folds): one factor per bin of the command speed ``|CV(t) - CV(t-1)|`` (causal),
-by maximum likelihood or by coverage of the out-of-fold residuals (``std_coverage``).
+fewer runs than folds): one factor per bin of the command speed ``|CV(t) - CV(t-1)|`` (causal)
+or of the input novelty (``std_bins``: `~bayes_fdi.diagnosis.normal_models.input_novelty`), by
+maximum likelihood or by coverage of the out-of-fold residuals (``std_coverage``).
 
 **Rails.** A measurement at a sensor's rail whose prediction is at the same rail carries no
 information about a change, so its standardised residual is 0 (`standardised_residuals`). The
@@ -56,22 +57,27 @@ from bayes_fdi.diagnosis.component_state import (
     working_state,
     writable_copy,
 )
-from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     NormalModelsParams,
     NormalModelsState,
     dynamic_inputs,
+    kernel_params,
     predict_runs,
     predict_seconds,
 )
 from bayes_fdi.diagnosis.normal_models.evidence_widths import search_widths
+from bayes_fdi.diagnosis.normal_models.input_novelty import (
+    NOVELTY_LEVELS,
+    STD_BINS,
+    novelty_columns,
+    novelty_reference,
+)
 from bayes_fdi.diagnosis.normal_models.model_upgrades import upgrade_dynamic_models
 from bayes_fdi.diagnosis.normal_models.physics_inputs import (
     SPEED_GRID,
     check_physics_inputs,
     fit_command_lag,
     flow_model_inputs,
-    lag_rates,
     lagged_command,
     nominal_valve_law,
     stream_channels,
@@ -81,13 +87,11 @@ from bayes_fdi.diagnosis.normal_models.residuals import (
     SENSOR_RANGE,
     standardised_residuals,
 )
-from bayes_fdi.diagnosis.normal_models.speed_factors import cross_fit_folds, speed_bin_factors
-from bayes_fdi.diagnosis.normal_models.training_size import (
-    TrainingSize,
-    choose_training_size,
-    held_out_split,
-    log_predictive_density,
+from bayes_fdi.diagnosis.normal_models.speed_factors import (
+    out_of_fold_predictions,
+    speed_bin_factors,
 )
+from bayes_fdi.diagnosis.normal_models.training_size import TrainingSize, learning_curve_size
 
 __all__ = ["RAIL_TOL", "SENSOR_RANGE", "DynamicNormalModels", "standardised_residuals"]
 
@@ -115,6 +119,10 @@ class DynamicNormalModels(BaseEstimator):
         Folds of the cross-fit that calibrates the predictive standard deviations (>= 2).
     calibration_bins
         Bins of the command speed ``|CV(t) - CV(t-1)|`` with their own std factor.
+    std_bins
+        ``"speed"`` (default): the std factors follow the command speed; ``"novelty"`` or
+        ``"command-novelty"``: the distance of all the inputs, or of the command's, to the
+        training's (`~bayes_fdi.diagnosis.normal_models.input_novelty`; ``novelty_reference_``).
     std_coverage
         None (default): each bin's std factor by maximum likelihood, ``sqrt(mean(z^2))`` of the
         out-of-fold ``z``; a level ``q``: the central interval of level ``q`` covers a share ``q``
@@ -132,6 +140,10 @@ class DynamicNormalModels(BaseEstimator):
         With ``"command_lag"``: the position model learns ``X`` minus the lagged command, so
         where its inputs are far from the training data it falls back on the lag rather than
         on the data's mean (default False: it learns ``X``).
+    law_as_mean
+        With ``"valve_law"``: the flow model learns ``F`` minus the valve law's flow at ``X_hat``
+        (clipped to the sensors' range), falling back on the law far from the training data (a
+        shut valve, a flow over range; default False: it learns ``F``).
     random_state
         Seed of the subsets and folds.
 
@@ -145,11 +157,11 @@ class DynamicNormalModels(BaseEstimator):
         ``{"X": {width: log evidence}, "F": {...}}`` of the width search.
     input_mean_, input_scale_ : numpy.ndarray
         Standardisation of the position model's inputs.
-    std_scale_ : dict
-        ``{"X": (bins,), "F": (bins,)}`` std factors; ``std_scale_all_``
-        the factors fitted on every bin together (used where the speed is undefined).
-    std_scale_edges_ : numpy.ndarray
-        Inner edges of the speed bins.
+    std_scale_, std_scale_all_, std_scale_edges_ : dict, dict, numpy.ndarray
+        ``{"X": (bins,), "F": (bins,)}`` std factors, those fitted on every bin together (used
+        where the speed is undefined), and the bins' inner edges.
+    novelty_reference_ : numpy.ndarray
+        ``(m, d)`` training inputs of the input novelty (``std_bins="novelty"``; else ``(0, 0)``).
     oof_z_ : numpy.ndarray
         ``(n_runs, n_times, 2)`` out-of-fold standardised residuals of the training runs
         (NaN where not available), after calibration.
@@ -177,6 +189,8 @@ class DynamicNormalModels(BaseEstimator):
         physics_inputs: tuple[str, ...] = (),
         lag_speed_limits: bool = False,
         lag_as_mean: bool = False,
+        law_as_mean: bool = False,
+        std_bins: str = "speed",
         random_state: int | None = 0,
     ) -> None:
         self.n_differences = n_differences
@@ -190,6 +204,8 @@ class DynamicNormalModels(BaseEstimator):
         self.physics_inputs = physics_inputs
         self.lag_speed_limits = lag_speed_limits
         self.lag_as_mean = lag_as_mean
+        self.law_as_mean = law_as_mean
+        self.std_bins = std_bins
         self.random_state = random_state
 
     # ---------------------------------------------------------------- fitting
@@ -211,12 +227,16 @@ class DynamicNormalModels(BaseEstimator):
             grid = tuple(getattr(self, name))
             if not grid or not all(math.isfinite(float(w)) and float(w) > 0 for w in grid):
                 raise ValueError(f"{name} must be a non-empty grid of positive widths")
+        if self.std_bins not in STD_BINS:
+            raise ValueError(f"std_bins must be one of {STD_BINS}, got {self.std_bins!r}")
         if self.std_coverage is not None and not 0 < self.std_coverage < 1:
             raise ValueError(f"std_coverage must be None or in (0, 1), got {self.std_coverage!r}")
-        lagged = "command_lag" in check_physics_inputs(self.physics_inputs)
-        for name in ("lag_speed_limits", "lag_as_mean"):
-            if not isinstance(getattr(self, name), bool) or (getattr(self, name) and not lagged):
-                raise ValueError(f"{name} must be False, or True with the 'command_lag' input")
+        physics = check_physics_inputs(self.physics_inputs)
+        for name in ("lag_speed_limits", "lag_as_mean", "law_as_mean"):
+            needs = "valve_law" if name == "law_as_mean" else "command_lag"
+            value = getattr(self, name)
+            if not isinstance(value, bool) or (value and needs not in physics):
+                raise ValueError(f"{name} must be False, or True with the {needs!r} input")
 
     def fit(self, normal_runs: xr.Dataset) -> DynamicNormalModels:
         """Fit both models on fault-free runs and calibrate their predictive stds.
@@ -251,13 +271,15 @@ class DynamicNormalModels(BaseEstimator):
                 x_mean = lag.ravel()
         y["X - mean"] = y["X"] - x_mean
         U = U.reshape(n_runs * n_times, -1)
-        s = U[:, 1]
         law = nominal_valve_law() if "valve_law" in self.physics_inputs else np.empty(0)
         self.valve_law_ = law
         t1, p1 = grid["T1"].ravel(), grid["P1"].ravel()
 
         def flow_inputs(xh: np.ndarray, rows: np.ndarray) -> np.ndarray:
-            return flow_model_inputs(xh, s[rows], t1[rows], p1[rows], law)
+            return flow_model_inputs(xh, U[rows, 1], t1[rows], p1[rows], law)
+
+        def flow_mean(V: np.ndarray) -> np.ndarray:  # F's prior mean: 0, or the clipped law
+            return np.clip(V[:, 2], *SENSOR_RANGE) if self.law_as_mean else np.zeros(len(V))
 
         finite = np.isfinite(U).all(axis=1) & np.isfinite(y["X"]) & np.isfinite(y["F"])
         finite &= np.isfinite(t1) | (law.size == 0)  # the valve law reads T1
@@ -277,7 +299,7 @@ class DynamicNormalModels(BaseEstimator):
         rows = subset(idx, int(self.evidence_max_samples))
         self.log_evidence_ = search_widths(
             self.x_widths, self.f_widths, Z[rows], y["X - mean"][rows], y["F"][rows],
-            x_mean[rows], lambda xh: flow_inputs(xh, rows),
+            x_mean[rows], lambda xh: flow_inputs(xh, rows), flow_mean,
         )  # fmt: skip
         wx, wf = (max(self.log_evidence_[c], key=self.log_evidence_[c].get) for c in ("X", "F"))
         self.widths_ = {"X": float(wx), "F": float(wf)}
@@ -288,8 +310,8 @@ class DynamicNormalModels(BaseEstimator):
 
             mx = RVR(width=wx).fit(Z[rows], y["X - mean"][rows])
             xh = np.clip(mx.predict(Z[rows]) + x_mean[rows], *SENSOR_RANGE)
-            mf = RVR(width=wf).fit(flow_inputs(xh, rows), y["F"][rows])
-            return mx, mf
+            V = flow_inputs(xh, rows)
+            return mx, RVR(width=wf).fit(V, y["F"][rows] - flow_mean(V))
 
         t0 = time.perf_counter()
         size = self._training_size(normal_runs, y, finite, lambda r, n: fit_pair(subset(r, n)))
@@ -297,59 +319,49 @@ class DynamicNormalModels(BaseEstimator):
         mx, mf = fit_pair(subset(idx, size))
         self.regressors_ = {"X": mx, "F": mf}
         self.fit_seconds_["fit"] = time.perf_counter() - t0
-        self._set_identity_scales(D)
+        nb = int(self.calibration_bins)  # identity std factors until the cross-fit's
+        self.std_scale_ = {k: np.ones(nb) for k in ("X", "F")}
+        self.std_scale_all_ = {"X": 1.0, "F": 1.0}
+        self.std_scale_edges_ = np.empty(0)
         t0 = time.perf_counter()
         speed = np.abs(U[:, 2]) if D > 0 else np.full(U.shape[0], np.nan)
+        self.novelty_reference_ = np.empty((0, 0))
         self._cross_fit(normal_runs, Z, y, finite, speed, fit_pair, rng)
+        if self.std_bins != "speed":
+            self.novelty_reference_ = novelty_reference(Z, idx, rng, self._novelty_columns())
         self.params_ = self._kernel_params(self.regressors_["X"], self.regressors_["F"])
         self.fit_seconds_["calibration"] = time.perf_counter() - t0
         self.fit_seconds_["total"] = time.perf_counter() - t_start
         return self
 
     def _training_size(self, runs: xr.Dataset, y: dict, finite: np.ndarray, fit_rows) -> int:
-        """Rows of the fits: ``max_train_samples``, or (``"auto"``) `choose_training_size`'s."""
+        """Rows of the fits: ``max_train_samples``, or (``"auto"``) `learning_curve_size`'s."""
         n_all = int(finite.sum())
         if self.max_train_samples != "auto":
             self.training_size_ = TrainingSize(min(n_all, int(self.max_train_samples)), n_all)
             return int(self.max_train_samples)
-        fit, held = held_out_split(finite, runs.sizes["run"], runs.sizes["time"])
 
-        def score(n: int) -> tuple[float, float]:
-            mx, mf = fit_rows(fit, n)
-            out = self._stream_runs(runs, self._kernel_params(mx, mf, calibrated=False))
-            out = out.reshape(-1, out.shape[-1])[held]
-            lpd = log_predictive_density
-            return lpd(y["X"][held], out[:, 0], out[:, 1]), lpd(y["F"][held], out[:, 2], out[:, 3])
+        def predict(mx: Any, mf: Any) -> np.ndarray:
+            return self._stream_runs(runs, self._kernel_params(mx, mf, calibrated=False))
 
-        self.training_size_ = choose_training_size(score, fit.size, n_all)
+        self.training_size_ = learning_curve_size(runs, y, finite, fit_rows, predict)
         return self.training_size_.rows
-
-    def _set_identity_scales(self, D: int) -> None:
-        nb = int(self.calibration_bins)
-        self.std_scale_ = {k: np.ones(nb) for k in ("X", "F")}
-        self.std_scale_all_ = {"X": 1.0, "F": 1.0}
-        self.std_scale_edges_ = np.empty(0)
 
     def _cross_fit(self, runs, Z, y, finite, speed, fit_pair, rng) -> None:
         """Out-of-fold predictions of every training sample -> std factors and ``oof_z_``."""
-        n_runs, n_times = runs.sizes["run"], runs.sizes["time"]
-        fold = cross_fit_folds(n_runs, n_times, int(self.calibration_folds), rng).ravel()
-        pred = np.full((Z.shape[0], 4), np.nan)
-        for f in range(int(self.calibration_folds)):
-            held = fold == f
-            train = np.flatnonzero(finite & ~held)
-            if train.size < 10 or not held.any():
-                continue
+        novelty, columns = self.std_bins != "speed", self._novelty_columns()
+
+        def predict_fold(train: np.ndarray, held_runs: np.ndarray) -> np.ndarray:
             size = min(train.size, self.n_train_samples_)
             rows = np.sort(rng.choice(train, size=size, replace=False))
-            mx, mf = fit_pair(rows)
-            held_runs = np.unique(np.flatnonzero(held) // n_times)
-            identity = self._kernel_params(mx, mf, calibrated=False)
-            part = self._stream_runs(runs.isel(run=held_runs), identity)
-            part = part.reshape(-1, part.shape[-1])
-            rows_of = (held_runs[:, None] * n_times + np.arange(n_times)[None, :]).ravel()
-            keep = held[rows_of]
-            pred[rows_of[keep]] = part[keep, :4]
+            params = self._kernel_params(*fit_pair(rows), calibrated=False)
+            if novelty:  # the held-out runs' distances to this fold's training rows
+                ref = novelty_reference(Z, train, rng, columns)
+                params = params._replace(novelty_reference=ref, novelty_columns=columns)
+            return self._stream_runs(runs.isel(run=held_runs), params)
+
+        n_runs, n_times, k = runs.sizes["run"], runs.sizes["time"], int(self.calibration_folds)
+        pred = out_of_fold_predictions(finite, n_runs, n_times, k, rng, 5, predict_fold)
         z, censored = {}, {}
         for j, c in ((0, "X"), (2, "F")):
             _, z[c] = standardised_residuals(y[c], pred[:, j], pred[:, j + 1])
@@ -364,8 +376,9 @@ class DynamicNormalModels(BaseEstimator):
             self.oof_z_ = np.full((n_runs, n_times, 2), np.nan)
             return
         fitted = speed_bin_factors(
-            z, censored, used, speed, int(self.calibration_bins), self.std_coverage
-        )
+            z, censored, used, pred[:, 4] if novelty else speed, int(self.calibration_bins),
+            self.std_coverage, NOVELTY_LEVELS if novelty else None,
+        )  # fmt: skip
         self.std_scale_edges_, self.std_scale_, self.std_scale_all_, factor = fitted
         oof = np.stack([z["X"] / factor["X"], z["F"] / factor["F"]], axis=-1)
         oof[~used] = np.nan
@@ -373,31 +386,11 @@ class DynamicNormalModels(BaseEstimator):
 
     # ------------------------------------------------------------- prediction
     def _kernel_params(self, mx: Any, mf: Any, *, calibrated: bool = True) -> NormalModelsParams:
-        """The compiled predictor's parameters for the regressions ``mx``, ``mf``: with the
-        fitted std factors, or (``calibrated=False``) with factors 1 (the cross-fit's)."""
-        if calibrated:
-            edges = self.std_scale_edges_
-            scale = (self.std_scale_["X"], self.std_scale_["F"])
-            scale_all = (self.std_scale_all_["X"], self.std_scale_all_["F"])
-        else:
-            nb = int(self.calibration_bins)
-            edges, scale, scale_all = np.empty(0), (np.ones(nb), np.ones(nb)), (1.0, 1.0)
-        return NormalModelsParams(
-            input_mean=np.ascontiguousarray(self.input_mean_),
-            input_scale=np.ascontiguousarray(self.input_scale_),
-            x_model=LeanRVR.from_estimator(mx),
-            f_model=LeanRVR.from_estimator(mf),
-            speed_edges=np.ascontiguousarray(edges),
-            x_std_scale=np.ascontiguousarray(scale[0]),
-            f_std_scale=np.ascontiguousarray(scale[1]),
-            x_std_scale_all=float(scale_all[0]),
-            f_std_scale_all=float(scale_all[1]),
-            low=SENSOR_RANGE[0],
-            high=SENSOR_RANGE[1],
-            command_lag=lag_rates(*self.command_lag_) if self.command_lag_ else np.empty(0),
-            valve_law=np.ascontiguousarray(self.valve_law_),
-            lag_as_mean=bool(self.lag_as_mean),
-        )
+        """`kernel_params` of these models for the regressions ``mx``, ``mf``."""
+        return kernel_params(self, mx, mf, calibrated=calibrated)
+
+    def _novelty_columns(self) -> np.ndarray:  # the inputs the novelty measures
+        return novelty_columns(self.std_bins, int(self.n_differences), bool(self.command_lag_))
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "regressors_"):

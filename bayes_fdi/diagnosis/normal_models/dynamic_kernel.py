@@ -6,9 +6,9 @@ second through `predict_seconds`, a compiled loop over the samples of one run th
 last ``D`` values of CV and of the signed root ``s`` of the pressure drop
 (`NormalModelsState`) and takes the fitted values as one named tuple (`NormalModelsParams`:
 the input standardisation, the two `~bayes_fdi.diagnosis.normal_models.compiled.LeanRVR`
-regressions and the std factors per command-speed bin). Whole recordings and single seconds go
-through the same loop (`predict_runs` runs it over many runs at once), so they give the same
-numbers. `dynamic_inputs` is a vectorised reference
+regressions and the std factors per bin of the command speed or of the input novelty). Whole
+recordings and single seconds go through the same loop (`predict_runs` runs it over many runs
+at once), so they give the same numbers. `dynamic_inputs` is a vectorised reference
 of the inputs the loop builds, and the fit's. With physics inputs
 (`bayes_fdi.diagnosis.normal_models.physics_inputs`) the loop also carries the command's lag
 (one more input of the position model) and evaluates the valve law at the predicted position (one
@@ -27,19 +27,23 @@ import xarray as xr
 from numba import njit
 
 from bayes_fdi.diagnosis.normal_models.compiled import LeanRVR, rvr_predict
-from bayes_fdi.diagnosis.normal_models.physics_inputs import lag_step, valve_law_at
+from bayes_fdi.diagnosis.normal_models.input_novelty import nearest_distance, novelty_columns
+from bayes_fdi.diagnosis.normal_models.physics_inputs import lag_rates, lag_step, valve_law_at
+from bayes_fdi.diagnosis.normal_models.residuals import SENSOR_RANGE
 
 __all__ = [
     "PREDICTION_COLUMNS",
     "NormalModelsParams",
     "NormalModelsState",
     "dynamic_inputs",
+    "kernel_params",
     "predict_runs",
     "predict_seconds",
     "signed_root",
 ]
 
-#: Columns of `predict_seconds`' output.
+#: Columns of `predict_seconds`' output; the last is what bins the std factors: the command
+#: speed, or the input novelty (`~.input_novelty`) where ``novelty_reference`` is given.
 PREDICTION_COLUMNS = ("X_hat", "X_hat_std", "F_hat", "F_hat_std", "command_speed")
 
 
@@ -107,18 +111,62 @@ class NormalModelsParams(NamedTuple):
     valve_law: np.ndarray = np.empty(0)
     #: True: the position model learnt X minus the lagged command, which is added back
     lag_as_mean: bool = False
+    #: True: the flow model learnt F minus the valve law's clipped flow, which is added back
+    law_as_mean: bool = False
+    #: ``(m, n_u)`` standardised training inputs whose nearest distance bins the std factors
+    #: (`~.input_novelty`), or ``(0, 0)``: the command speed bins them
+    novelty_reference: np.ndarray = np.empty((0, 0))
+    #: the columns of the standardised inputs that the novelty measures
+    novelty_columns: np.ndarray = np.empty(0, dtype=np.int64)
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
         """Files of format <= 8 have no physics inputs; of format <= 10, a command lag without
-        speed limits and a position model that learnt X itself."""
+        speed limits and a position model that learnt X itself; of format <= 11, a flow model
+        that learnt F itself and std factors binned by the command speed."""
         data.setdefault("command_lag", np.empty(0))
         data.setdefault("valve_law", np.empty(0))
         data.setdefault("lag_as_mean", False)
+        data.setdefault("law_as_mean", False)
+        data.setdefault("novelty_reference", np.empty((0, 0)))
+        data.setdefault("novelty_columns", np.empty(0, dtype=np.int64))
         lag = np.asarray(data["command_lag"], dtype=np.float64)
         if lag.size == 2:  # format <= 10: a lag without speed limits
             data["command_lag"] = np.concatenate([lag, [np.inf, np.inf]])
         return data
+
+
+def kernel_params(models: Any, mx: Any, mf: Any, *, calibrated: bool = True) -> NormalModelsParams:
+    """The compiled predictor's parameters of fitted
+    `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``models`` for the
+    regressions ``mx``, ``mf``: with the fitted std factors, or (``calibrated=False``) with
+    factors 1 and no novelty reference (the cross-fit's)."""
+    if calibrated:
+        edges, scale, scale_all = models.std_scale_edges_, models.std_scale_, models.std_scale_all_
+    else:
+        nb = int(models.calibration_bins)
+        edges, scale = np.empty(0), {"X": np.ones(nb), "F": np.ones(nb)}
+        scale_all = {"X": 1.0, "F": 1.0}
+    lag = models.command_lag_
+    return NormalModelsParams(
+        input_mean=np.ascontiguousarray(models.input_mean_),
+        input_scale=np.ascontiguousarray(models.input_scale_),
+        x_model=LeanRVR.from_estimator(mx),
+        f_model=LeanRVR.from_estimator(mf),
+        speed_edges=np.ascontiguousarray(edges),
+        x_std_scale=np.ascontiguousarray(scale["X"]),
+        f_std_scale=np.ascontiguousarray(scale["F"]),
+        x_std_scale_all=float(scale_all["X"]),
+        f_std_scale_all=float(scale_all["F"]),
+        low=SENSOR_RANGE[0],
+        high=SENSOR_RANGE[1],
+        command_lag=lag_rates(*lag) if lag else np.empty(0),
+        valve_law=np.ascontiguousarray(models.valve_law_),
+        lag_as_mean=bool(models.lag_as_mean),
+        law_as_mean=bool(models.law_as_mean),
+        novelty_reference=models.novelty_reference_ if calibrated else np.empty((0, 0)),
+        novelty_columns=novelty_columns(models.std_bins, int(models.n_differences), bool(lag)),
+    )
 
 
 # one compiled loop over the seconds, clearer whole than cut into pieces
@@ -182,6 +230,8 @@ def predict_seconds(cv, p1, p2, t1, params, state, out):  # pragma: no cover - c
             continue
         for j in range(u.size):
             u[j] = (u[j] - params.input_mean[j]) / params.input_scale[j]
+        if params.novelty_reference.shape[0] > 0:  # the std bins follow the input novelty
+            speed = nearest_distance(u, params.novelty_reference, params.novelty_columns)
         xm, xv = rvr_predict(u, params.x_model, phi_x)
         if lagged and params.lag_as_mean:  # the model learnt X minus the lagged command
             xm = xm + hist[0, n_d]
@@ -191,6 +241,8 @@ def predict_seconds(cv, p1, p2, t1, params, state, out):  # pragma: no cover - c
         if law:
             v[2] = valve_law_at(xm, s, t1[t], p1[t], params.valve_law)
         fm, fv = rvr_predict(v, params.f_model, phi_f)
+        if law and params.law_as_mean:  # the model learnt F minus the clipped valve law
+            fm = fm + min(max(v[2], params.low), params.high)
         fm = min(max(fm, params.low), params.high)
         if np.isfinite(speed):
             b = 0

@@ -29,6 +29,7 @@ def search_widths(
     f_target: np.ndarray,
     x_mean: np.ndarray,
     flow_inputs: Callable[[np.ndarray], np.ndarray],
+    flow_mean: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> dict[str, dict[float, float]]:
     """``{"X": {width: log evidence}, "F": {width: log evidence}}`` on one subsample.
 
@@ -45,6 +46,9 @@ def search_widths(
         position model's output to give ``X_hat`` (clipped to the sensors' range).
     flow_inputs
         The flow model's input rows from ``X_hat``.
+    flow_mean
+        F's prior mean from those input rows (None: 0), subtracted from ``f_target`` as the
+        position's is from X.
     """
     from bayes_fdi.rvm import RVR
 
@@ -54,6 +58,8 @@ def search_widths(
     wx = max(evidence["X"], key=evidence["X"].get)
     x_hat = np.clip(RVR(width=wx).fit(Z, x_target).predict(Z) + x_mean, *SENSOR_RANGE)
     V = flow_inputs(x_hat)
+    if flow_mean is not None:
+        f_target = f_target - flow_mean(V)
     for w in f_widths:
         evidence["F"][float(w)] = RVR(width=float(w)).fit(V, f_target).log_evidence_
     return evidence

@@ -11,13 +11,20 @@ robust to a heavy tail). Censored samples (a measurement and its prediction at t
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from bayes_fdi.diagnosis.normal_models.std_scaler import StdScaler
 
-__all__ = ["SpeedBinFactors", "cross_fit_folds", "speed_bin_factors", "speed_bins"]
+__all__ = [
+    "SpeedBinFactors",
+    "cross_fit_folds",
+    "out_of_fold_predictions",
+    "speed_bin_factors",
+    "speed_bins",
+]
 
 
 class SpeedBinFactors(NamedTuple):
@@ -39,6 +46,37 @@ def cross_fit_folds(n_runs: int, n_times: int, k: int, rng: np.random.Generator)
     fold_of_segment = np.empty(n_seg, dtype=np.int64)
     fold_of_segment[rng.permutation(n_seg)] = np.arange(n_seg) % k
     return fold_of_segment[segment]
+
+
+def out_of_fold_predictions(
+    finite: np.ndarray,
+    n_runs: int,
+    n_times: int,
+    k: int,
+    rng: np.random.Generator,
+    columns: int,
+    predict_fold: Callable[[np.ndarray, np.ndarray], np.ndarray],
+) -> np.ndarray:
+    """``(n_runs * n_times, columns)`` predictions of each sample by models fitted without it.
+
+    The folds are `cross_fit_folds`'; ``predict_fold(train, held_runs)`` fits on the rows
+    ``train`` (the fold's complement where ``finite``) and returns the predictions of the runs
+    ``held_runs``, ``(len(held_runs), n_times, columns)``, of which the fold's samples are kept. NaN
+    where a fold has under 10 rows to fit on.
+    """
+    fold = cross_fit_folds(n_runs, n_times, k, rng).ravel()
+    pred = np.full((n_runs * n_times, columns), np.nan)
+    for f in range(k):
+        held = fold == f
+        train = np.flatnonzero(finite & ~held)
+        if train.size < 10 or not held.any():
+            continue
+        held_runs = np.unique(np.flatnonzero(held) // n_times)
+        part = predict_fold(train, held_runs).reshape(-1, columns)
+        rows_of = (held_runs[:, None] * n_times + np.arange(n_times)[None, :]).ravel()
+        keep = held[rows_of]
+        pred[rows_of[keep]] = part[keep]
+    return pred
 
 
 def speed_bins(edges: np.ndarray, speed: np.ndarray) -> np.ndarray:
@@ -65,8 +103,11 @@ def speed_bin_factors(
     speed: np.ndarray,
     n_bins: int,
     coverage: float | None,
+    levels: Sequence[float] | None = None,
 ) -> SpeedBinFactors:
     """Std factors of X and F per command-speed bin (quantile bins of the used samples' speed).
+
+    The same for any other binning variable in place of the speed (the input novelty).
 
     Parameters
     ----------
@@ -80,9 +121,12 @@ def speed_bin_factors(
         Bins of the speed (fewer when quantiles coincide).
     coverage
         None: maximum likelihood; a level ``q``: calibrated by coverage.
+    levels
+        The quantiles of the speed that cut the bins (default: ``n_bins`` bins of equal mass).
     """
     fast = speed[used & np.isfinite(speed)]
-    edges = np.quantile(fast, np.arange(1, n_bins) / n_bins) if (n_bins > 1 and fast.size) else []
+    levels = np.arange(1, n_bins) / n_bins if levels is None else np.asarray(levels, float)
+    edges = np.quantile(fast, levels) if (levels.size and fast.size) else []
     edges = np.unique(np.asarray(edges, dtype=np.float64))
     nb = edges.size + 1
     bins = speed_bins(edges, speed)

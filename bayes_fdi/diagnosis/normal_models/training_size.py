@@ -20,7 +20,7 @@ scikit-learn's ``learning_curve`` (cross-validated scores of whole estimators) d
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -33,6 +33,7 @@ __all__ = [
     "TrainingSize",
     "choose_training_size",
     "held_out_split",
+    "learning_curve_size",
     "log_predictive_density",
 ]
 
@@ -152,3 +153,37 @@ def choose_training_size(
     if chosen == n_fit:  # every row of the fitting part still helped: take all the data
         chosen = min(n_all, max_rows)
     return TrainingSize(int(chosen), int(n_all), tuple(curve))
+
+
+def learning_curve_size(
+    runs: Any,
+    y: dict[str, np.ndarray],
+    finite: np.ndarray,
+    fit_rows: Callable[[np.ndarray, int], tuple[Any, Any]],
+    predict: Callable[[Any, Any], np.ndarray],
+) -> TrainingSize:
+    """`choose_training_size` scored on the held-out part of fault-free runs (`held_out_split`).
+
+    Parameters
+    ----------
+    runs
+        The runs (sizes ``run`` and ``time``).
+    y
+        ``{"X": (n,), "F": (n,)}`` the measured outputs, flattened ``run x time``.
+    finite
+        ``(n,)`` the complete samples.
+    fit_rows
+        ``fit_rows(rows, size)`` fits the position and flow models on ``size`` of ``rows``.
+    predict
+        ``predict(mx, mf)``: their ``(n_runs, n_times, >= 4)`` predictions of ``runs``
+        (X_hat, its std, F_hat, its std first).
+    """
+    fit, held = held_out_split(finite, runs.sizes["run"], runs.sizes["time"])
+
+    def score(n: int) -> tuple[float, float]:
+        out = predict(*fit_rows(fit, n))
+        out = out.reshape(-1, out.shape[-1])[held]
+        lpd = log_predictive_density
+        return lpd(y["X"][held], out[:, 0], out[:, 1]), lpd(y["F"][held], out[:, 2], out[:, 3])
+
+    return choose_training_size(score, fit.size, int(finite.sum()))
