@@ -11,8 +11,11 @@ declared in ``sim/``, in one of two trainings (`TRAININGS`):
   families of `bayes_fdi.actuator.excitation` (sums of sines, steps and ramps, a PI level loop)
   over the DABLib operating ranges of P1, P2, T1; normal models whose std factors are fitted by
   coverage (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels`
-  ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all, and
-  that take the command through the actuator's lag as an input (``physics_inputs``);
+  ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all, one
+  factor per bin of the command's novelty (``std_bins="command-novelty"``: how far the command's
+  level, increments and lag lie from the training runs', so that a command unlike any training
+  run widens the intervals), and that take the command through the actuator's lag as an input
+  (``physics_inputs``);
 - ``"dgen"``: the three DGen files alone, with all their runs: a diagnoser for the DAMADICS
   benchmark's own excitation, which alarms as soon as the valve is moved otherwise.
 
@@ -54,6 +57,7 @@ __all__ = [
     "CALIBRATION_AFTER_ONSET",
     "CAMPAIGNS",
     "DEFAULT_PHYSICS_INPUTS",
+    "DEFAULT_STD_BINS",
     "DEFAULT_TRAINING",
     "LONG_CALIBRATION_FILES",
     "SET_SEED_OFFSETS",
@@ -92,6 +96,10 @@ DEFAULT_TRAINING = "excitation-mix"
 DEFAULT_PHYSICS_INPUTS: dict[str, tuple[str, ...]] = {
     "dgen": (), "excitation-mix": ("command_lag",),
 }  # fmt: skip
+#: What bins the normal models' std factors in each training: with the mix, the command's
+#: novelty measured better under the shift families than the command speed (fewer confident
+#: wrong groups, probabilities closer to calibration).
+DEFAULT_STD_BINS: dict[str, str] = {"dgen": "speed", "excitation-mix": "command-novelty"}
 #: The campaign files of each set of the DGen-only training (``"dgen"``).
 CAMPAIGNS: dict[str, tuple[str, ...]] = {
     key: tuple(name for name, _ in files) for key, files in TRAININGS["dgen"].items()
@@ -281,18 +289,23 @@ def fit_online_diagnoser(
     params.setdefault("calibrator", TopLabelScaler() if top_label else TemperatureScaler())
     params.setdefault("random_state", seed)
     coverage = 0.9 if mix else None
+    std_bins = DEFAULT_STD_BINS[training]
     if small:
         params.setdefault("max_signatures_per_fault", 25)
         params.setdefault(
             "normal_models",
             DynamicNormalModels(max_train_samples=800, calibration_folds=3, std_coverage=coverage,
-                                physics_inputs=physics_inputs, random_state=seed),
+                                physics_inputs=physics_inputs, std_bins=std_bins,
+                                random_state=seed),
         )  # fmt: skip
     elif mix or physics_inputs:
         params.setdefault(
             "normal_models",
             DynamicNormalModels(
-                std_coverage=coverage, physics_inputs=physics_inputs, random_state=seed
+                std_coverage=coverage,
+                physics_inputs=physics_inputs,
+                std_bins=std_bins,
+                random_state=seed,
             ),
         )
     diag = OnlineDiagnoser(**params).fit(

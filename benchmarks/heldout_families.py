@@ -3,7 +3,8 @@
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/heldout_families.py \
         [--model FILE | --small] [--training excitation-mix|dgen] \
         [--physics-inputs command_lag,valve_law] [--f-widths 0.05,0.1,0.2] \
-        [--std-coverage 0.95] [--lag-speed-limits] [--lag-as-mean] \
+        [--std-coverage 0.95] [--lag-speed-limits] [--lag-as-mean] [--law-as-mean] \
+        [--std-bins speed|novelty] \
         [--leave-out sine-sum|step-ramp|level-loop] \
         [--save FILE] [--runs 8] [--duration 900] [--fault-runs 1] [--fault-duration 600] \
         [--seed 900]
@@ -25,7 +26,8 @@ the true fault (a group-level r_ti over the runs).
 
 Without ``--model`` the script fits the diagnoser (`fit_online_diagnoser` with ``--training``
 and ``--physics-inputs``, by default the training's own, ``""`` for none; the normal models'
-``--std-coverage``, ``--lag-speed-limits`` and ``--lag-as-mean``, see `DynamicNormalModels`;
+``--std-coverage``, ``--lag-speed-limits``, ``--lag-as-mean``, ``--law-as-mean`` and
+``--std-bins``, see `DynamicNormalModels`;
 ``--leave-out FAMILY``: without that family's campaign files, which then plays an excitation the
 normal models never saw; ``--save``: write it to a model file, e.g. for the benchmark). Results
 go to stdout and ``benchmarks/out/heldout_families.json``.
@@ -125,11 +127,13 @@ def _physics(args: argparse.Namespace) -> tuple[str, ...] | None:
 
 def _normal_models(args: argparse.Namespace) -> dict:
     """``normal_models=`` of the fit when ``--f-widths``, ``--std-coverage``,
-    ``--lag-speed-limits`` or ``--lag-as-mean`` is given (the training's other settings)."""
-    options = (args.f_widths, args.std_coverage, args.lag_speed_limits, args.lag_as_mean)
+    ``--lag-speed-limits``, ``--lag-as-mean``, ``--law-as-mean`` or ``--std-bins`` is given
+    (the training's other settings)."""
+    options = (args.f_widths, args.std_coverage, args.lag_speed_limits, args.lag_as_mean,
+               args.law_as_mean, args.std_bins)  # fmt: skip
     if not any(o not in ("", None, False) for o in options):
         return {}
-    from bayes_fdi.default_diagnoser import DEFAULT_PHYSICS_INPUTS
+    from bayes_fdi.default_diagnoser import DEFAULT_PHYSICS_INPUTS, DEFAULT_STD_BINS
     from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
 
     physics = _physics(args)
@@ -140,14 +144,15 @@ def _normal_models(args: argparse.Namespace) -> dict:
     widths = {"f_widths": grid} if grid else {}
     return {"normal_models": DynamicNormalModels(
         physics_inputs=physics, std_coverage=coverage, lag_speed_limits=args.lag_speed_limits,
-        lag_as_mean=args.lag_as_mean, random_state=0, **widths,
+        lag_as_mean=args.lag_as_mean, law_as_mean=args.law_as_mean,
+        std_bins=args.std_bins or DEFAULT_STD_BINS[args.training], random_state=0, **widths,
     )}  # fmt: skip
 
 
 def _leave_out(training: str, family: str) -> str:
     """The name of ``training`` without the campaign files of ``family`` (registered in
     `TRAININGS` and `DEFAULT_PHYSICS_INPUTS` under that name for this process)."""
-    from bayes_fdi.default_diagnoser import DEFAULT_PHYSICS_INPUTS, TRAININGS
+    from bayes_fdi.default_diagnoser import DEFAULT_PHYSICS_INPUTS, DEFAULT_STD_BINS, TRAININGS
 
     if family not in FAMILIES[1:]:
         raise SystemExit(f"--leave-out must be one of {', '.join(FAMILIES[1:])}")
@@ -158,6 +163,7 @@ def _leave_out(training: str, family: str) -> str:
     name = f"{training}-without-{family}"
     TRAININGS[name] = kept
     DEFAULT_PHYSICS_INPUTS[name] = DEFAULT_PHYSICS_INPUTS[training]
+    DEFAULT_STD_BINS[name] = DEFAULT_STD_BINS[training]
     return name
 
 
@@ -183,6 +189,17 @@ def main() -> None:
         "--lag-as-mean",
         action="store_true",
         help="the position model learns X minus the lagged command",
+    )
+    parser.add_argument(
+        "--law-as-mean",
+        action="store_true",
+        help="the flow model learns F minus the valve law's flow (needs the valve_law input)",
+    )
+    parser.add_argument(
+        "--std-bins",
+        default=None,
+        help="what bins the normal models' std factors: speed, novelty or command-novelty "
+        "(default: the training's)",
     )
     parser.add_argument(
         "--leave-out",
