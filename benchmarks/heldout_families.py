@@ -4,7 +4,7 @@
         [--model FILE | --small] [--training excitation-mix|dgen] \
         [--physics-inputs command_lag,valve_law] [--f-widths 0.05,0.1,0.2] \
         [--std-coverage 0.95] [--lag-speed-limits] [--lag-as-mean] [--law-as-mean] \
-        [--std-bins speed|novelty] \
+        [--std-bins speed|novelty|command-novelty] \
         [--leave-out sine-sum|step-ramp|level-loop] \
         [--save FILE] [--runs 8] [--duration 900] [--fault-runs 1] [--fault-duration 600] \
         [--seed 900]
@@ -151,7 +151,8 @@ def _normal_models(args: argparse.Namespace) -> dict:
 
 def _leave_out(training: str, family: str) -> str:
     """The name of ``training`` without the campaign files of ``family`` (registered in
-    `TRAININGS` and `DEFAULT_PHYSICS_INPUTS` under that name for this process)."""
+    `TRAININGS`, `DEFAULT_PHYSICS_INPUTS` and `DEFAULT_STD_BINS` under that name for this
+    process)."""
     from bayes_fdi.default_diagnoser import DEFAULT_PHYSICS_INPUTS, DEFAULT_STD_BINS, TRAININGS
 
     if family not in FAMILIES[1:]:
@@ -198,6 +199,7 @@ def main() -> None:
     parser.add_argument(
         "--std-bins",
         default=None,
+        choices=("speed", "novelty", "command-novelty"),
         help="what bins the normal models' std factors: speed, novelty or command-novelty "
         "(default: the training's)",
     )

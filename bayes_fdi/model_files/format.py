@@ -109,8 +109,9 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
-#: 12: the dynamic normal models' flow model may learn F minus the valve law's flow
-#: (``law_as_mean``: one more field of their compiled predictor's parameters);
+#: 12: the dynamic normal models' flow model may learn F minus the valve law's flow and their
+#: std factors may follow the input novelty (``law_as_mean``, ``std_bins``: three more fields of
+#: their compiled predictor's parameters, the novelty's reference rows and columns);
 #: 11: the dynamic normal models' command lag may limit the stem's speed and the position model
 #: may learn X minus the lagged command (``lag_speed_limits``, ``lag_as_mean``: two more fields
 #: of their compiled predictor's parameters);

@@ -161,7 +161,8 @@ class DynamicNormalModels(BaseEstimator):
         ``{"X": (bins,), "F": (bins,)}`` std factors, those fitted on every bin together (used
         where the speed is undefined), and the bins' inner edges.
     novelty_reference_ : numpy.ndarray
-        ``(m, d)`` training inputs of the input novelty (``std_bins="novelty"``; else ``(0, 0)``).
+        ``(m, d)`` training inputs of the input novelty (``std_bins`` other than ``"speed"``;
+        else ``(0, 0)``).
     oof_z_ : numpy.ndarray
         ``(n_runs, n_times, 2)`` out-of-fold standardised residuals of the training runs
         (NaN where not available), after calibration.
@@ -328,7 +329,8 @@ class DynamicNormalModels(BaseEstimator):
         self.novelty_reference_ = np.empty((0, 0))
         self._cross_fit(normal_runs, Z, y, finite, speed, fit_pair, rng)
         if self.std_bins != "speed":
-            self.novelty_reference_ = novelty_reference(Z, idx, rng, self._novelty_columns())
+            columns = novelty_columns(self.std_bins, D, bool(self.command_lag_))
+            self.novelty_reference_ = novelty_reference(Z, idx, rng, columns)
         self.params_ = self._kernel_params(self.regressors_["X"], self.regressors_["F"])
         self.fit_seconds_["calibration"] = time.perf_counter() - t0
         self.fit_seconds_["total"] = time.perf_counter() - t_start
@@ -349,15 +351,15 @@ class DynamicNormalModels(BaseEstimator):
 
     def _cross_fit(self, runs, Z, y, finite, speed, fit_pair, rng) -> None:
         """Out-of-fold predictions of every training sample -> std factors and ``oof_z_``."""
-        novelty, columns = self.std_bins != "speed", self._novelty_columns()
+        novelty = self.std_bins != "speed"
 
         def predict_fold(train: np.ndarray, held_runs: np.ndarray) -> np.ndarray:
             size = min(train.size, self.n_train_samples_)
             rows = np.sort(rng.choice(train, size=size, replace=False))
             params = self._kernel_params(*fit_pair(rows), calibrated=False)
             if novelty:  # the held-out runs' distances to this fold's training rows
-                ref = novelty_reference(Z, train, rng, columns)
-                params = params._replace(novelty_reference=ref, novelty_columns=columns)
+                ref = novelty_reference(Z, train, rng, params.novelty_columns)
+                params = params._replace(novelty_reference=ref)
             return self._stream_runs(runs.isel(run=held_runs), params)
 
         n_runs, n_times, k = runs.sizes["run"], runs.sizes["time"], int(self.calibration_folds)
@@ -388,9 +390,6 @@ class DynamicNormalModels(BaseEstimator):
     def _kernel_params(self, mx: Any, mf: Any, *, calibrated: bool = True) -> NormalModelsParams:
         """`kernel_params` of these models for the regressions ``mx``, ``mf``."""
         return kernel_params(self, mx, mf, calibrated=calibrated)
-
-    def _novelty_columns(self) -> np.ndarray:  # the inputs the novelty measures
-        return novelty_columns(self.std_bins, int(self.n_differences), bool(self.command_lag_))
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "regressors_"):

@@ -113,8 +113,8 @@ class NormalModelsParams(NamedTuple):
     lag_as_mean: bool = False
     #: True: the flow model learnt F minus the valve law's clipped flow, which is added back
     law_as_mean: bool = False
-    #: ``(m, n_u)`` standardised training inputs whose nearest distance bins the std factors
-    #: (`~.input_novelty`), or ``(0, 0)``: the command speed bins them
+    #: ``(m, len(novelty_columns))`` standardised training inputs whose nearest distance bins
+    #: the std factors (`~.input_novelty`), or ``(0, 0)``: the command speed bins them
     novelty_reference: np.ndarray = np.empty((0, 0))
     #: the columns of the standardised inputs that the novelty measures
     novelty_columns: np.ndarray = np.empty(0, dtype=np.int64)

@@ -18,8 +18,9 @@ bins at the quantiles `NOVELTY_LEVELS` of the out-of-fold distances, so that the
 farthest from the training runs, where the out-of-fold residuals are largest, get their own
 factor.
 
-Written by hand: the distance is computed in the normal models' compiled per-second kernel,
-which no nearest-neighbour library reaches; `input_novelty` is its vectorised reference.
+Written by hand: the distance is computed in the normal models' compiled per-second kernel
+(`nearest_distance`), which no nearest-neighbour library reaches; `input_novelty` computes the
+same distances for many rows with scikit-learn's k-d tree.
 """
 
 from __future__ import annotations
@@ -86,13 +87,16 @@ def nearest_distance(u, reference, columns):  # pragma: no cover - compiled
 
 
 def input_novelty(Z: Any, reference: Any, columns: Any = None) -> np.ndarray:
-    """`nearest_distance` of each row of ``Z`` ``(n, d)`` (NaN where a row is not finite) over
-    ``columns`` (default: all)."""
+    """`nearest_distance` of each row of ``Z`` ``(n, d)`` over ``columns`` (default: all) to
+    ``reference`` ``(m, len(columns))``, by scikit-learn's k-d tree (exact distances); NaN
+    where a row is not finite."""
+    from sklearn.neighbors import NearestNeighbors
+
     Z = np.asarray(Z, dtype=np.float64)
     Z = Z if columns is None else Z[:, np.asarray(columns)]
-    reference = np.asarray(reference, dtype=np.float64)
     out = np.full(Z.shape[0], np.nan)
     ok = np.isfinite(Z).all(axis=1)
-    d2 = ((Z[ok, None, :] - reference[None, :, :]) ** 2).sum(axis=-1)
-    out[ok] = np.sqrt(d2.min(axis=1))
+    if ok.any():
+        tree = NearestNeighbors(n_neighbors=1, algorithm="kd_tree").fit(reference)
+        out[ok] = tree.kneighbors(Z[ok])[0][:, 0]
     return out
