@@ -151,9 +151,14 @@ def _normal_models(args: argparse.Namespace) -> dict:
 
 def _leave_out(training: str, family: str) -> str:
     """The name of ``training`` without the campaign files of ``family`` (registered in
-    `TRAININGS`, `DEFAULT_PHYSICS_INPUTS` and `DEFAULT_STD_BINS` under that name for this
-    process)."""
-    from bayes_fdi.default_diagnoser import DEFAULT_PHYSICS_INPUTS, DEFAULT_STD_BINS, TRAININGS
+    `TRAININGS`, `DEFAULT_PHYSICS_INPUTS`, `DEFAULT_STD_BINS` and `DEFAULT_DETECTORS` under
+    that name for this process)."""
+    from bayes_fdi.default_diagnoser import (
+        DEFAULT_DETECTORS,
+        DEFAULT_PHYSICS_INPUTS,
+        DEFAULT_STD_BINS,
+        TRAININGS,
+    )
 
     if family not in FAMILIES[1:]:
         raise SystemExit(f"--leave-out must be one of {', '.join(FAMILIES[1:])}")
@@ -165,6 +170,7 @@ def _leave_out(training: str, family: str) -> str:
     TRAININGS[name] = kept
     DEFAULT_PHYSICS_INPUTS[name] = DEFAULT_PHYSICS_INPUTS[training]
     DEFAULT_STD_BINS[name] = DEFAULT_STD_BINS[training]
+    DEFAULT_DETECTORS[name] = DEFAULT_DETECTORS[training]
     return name
 
 

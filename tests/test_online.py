@@ -164,8 +164,24 @@ def test_a_detector_object_gives_the_stream_of_its_name(recording):
     a, b = by_name.run(recording), by_object.run(recording)
     for name in ("DD", "stat_X", "stat_F", "status"):
         np.testing.assert_array_equal(a[name].values, b[name].values)
-    with pytest.raises(ValueError, match="detector must be 'cusum', 'glr' or a sequential test"):
+    with pytest.raises(ValueError, match="'cusum', 'variance-hold', 'glr' or a sequential test"):
         OnlineDiagnoser(_tiny_models(), detector=object()).fit(normal)
+
+
+def test_the_variance_hold_by_name_is_calibrated_saved_and_loaded(recording, tmp_path):
+    """``detector="variance-hold"`` fits the CUSUM with its variance sum; its threshold is the
+    mean sums' (the variance sum never exceeds half of it), and a model file gives the stream."""
+    from bayes_fdi.diagnosis.detection import VarianceHoldCUSUM
+
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    diag = OnlineDiagnoser(_tiny_models(), detector="variance-hold").fit(normal)
+    assert isinstance(diag.detector_, VarianceHoldCUSUM)
+    assert diag.detector_.threshold == diag.threshold_
+    stream = diag.run(recording)
+    back = OnlineDiagnoser.load(diag.save(tmp_path / "hold.npz"))
+    again = back.run(recording)
+    for name in ("DD", "stat_X", "stat_F", "status", "group_proba"):
+        np.testing.assert_array_equal(stream[name].values, again[name].values)
 
 
 def test_clone_refits_and_bad_input_is_named(fitted, recording):

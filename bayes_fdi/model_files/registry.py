@@ -56,6 +56,8 @@ PERSISTED: dict[str, str] = {
     "GLRState": "bayes_fdi.diagnosis.detection:GLRState",
     "TwoSpeedCUSUM": "bayes_fdi.diagnosis.detection:TwoSpeedCUSUM",
     "TwoSpeedCUSUMState": "bayes_fdi.diagnosis.detection:TwoSpeedCUSUMState",
+    "VarianceHoldCUSUM": "bayes_fdi.diagnosis.detection:VarianceHoldCUSUM",
+    "VarianceHoldCUSUMState": "bayes_fdi.diagnosis.detection:VarianceHoldCUSUMState",
     "DetectionDecision": "bayes_fdi.diagnosis.detection:DetectionDecision",
     "DecisionState": "bayes_fdi.diagnosis.detection:DecisionState",
     "HierarchicalClassifier": "bayes_fdi.diagnosis.isolation:HierarchicalClassifier",

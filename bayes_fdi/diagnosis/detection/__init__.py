@@ -5,12 +5,16 @@
 - `bayes_fdi.diagnosis.detection.detectors`: the sequential tests `CUSUM` and `GLR`.
 - `bayes_fdi.diagnosis.detection.two_speed`: `TwoSpeedCUSUM`, the CUSUM with a slow branch
   for lasting small shifts of the innovations (commissioned diagnosers use it).
+- `bayes_fdi.diagnosis.detection.variance_hold`: `VarianceHoldCUSUM`, the CUSUM whose alarm
+  holds while the innovations' variance stays above its in-control level (the default online
+  diagnoser uses it).
 - `bayes_fdi.diagnosis.detection.decision`: `DetectionDecision`, the detection decision DD
   with hysteresis and a hold (`CLEAR_HOLD`: the online diagnoser's).
 - `bayes_fdi.diagnosis.detection.thresholds`: thresholds for a false-alarm budget.
 
 Each online component here owns its state, a named tuple of arrays (`WhitenState`,
-`CUSUMState`, `GLRState`, `TwoSpeedCUSUMState`, `DecisionState`), with ``update`` for one
+`CUSUMState`, `GLRState`, `TwoSpeedCUSUMState`, `VarianceHoldCUSUMState`,
+`DecisionState`), with ``update`` for one
 sample and ``run`` over a chunk through the same compiled kernel.
 
 May import `bayes_fdi.diagnosis.component_state`, `bayes_fdi.datasets` and the foundation.
@@ -35,6 +39,11 @@ from bayes_fdi.diagnosis.detection.thresholds import (
     fit_threshold,
 )
 from bayes_fdi.diagnosis.detection.two_speed import TwoSpeedCUSUM, TwoSpeedCUSUMState
+from bayes_fdi.diagnosis.detection.variance_hold import (
+    VarianceHoldCUSUM,
+    VarianceHoldCUSUMState,
+    variance_reference,
+)
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener, WhitenState
 
 __all__ = [
@@ -49,9 +58,12 @@ __all__ = [
     "GLRState",
     "TwoSpeedCUSUM",
     "TwoSpeedCUSUMState",
+    "VarianceHoldCUSUM",
+    "VarianceHoldCUSUMState",
     "WhitenState",
     "calibrate_threshold",
     "cusum_threshold",
     "detection_decision",
     "fit_threshold",
+    "variance_reference",
 ]

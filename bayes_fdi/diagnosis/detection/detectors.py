@@ -389,16 +389,23 @@ SEQUENTIAL_TEST_METHODS = (
 
 def sequential_test(detector: Any, *, cusum_k: float, glr_window: int) -> Any:
     """The unfitted test (threshold 1) that ``detector`` names: ``"cusum"`` (`CUSUM` with
-    reference ``cusum_k``), ``"glr"`` (`GLR` over ``glr_window`` s), or an object with the
-    methods of :data:`SEQUENTIAL_TEST_METHODS` (e.g. a new detector class)."""
+    reference ``cusum_k``), ``"variance-hold"``
+    (`~bayes_fdi.diagnosis.detection.variance_hold.VarianceHoldCUSUM` with reference
+    ``cusum_k``: the CUSUM whose alarm holds while the innovations' variance stays high),
+    ``"glr"`` (`GLR` over ``glr_window`` s), or an object with the methods of
+    :data:`SEQUENTIAL_TEST_METHODS` (e.g. a new detector class)."""
     if isinstance(detector, str):
         if detector == "cusum":
             return CUSUM(k=float(cusum_k), threshold=1.0)
+        if detector == "variance-hold":  # the module extends CUSUM: imported here, not above
+            from bayes_fdi.diagnosis.detection.variance_hold import VarianceHoldCUSUM
+
+            return VarianceHoldCUSUM(k=float(cusum_k), threshold=1.0)
         if detector == "glr":
             return GLR(window=int(glr_window), threshold=1.0)
     elif all(hasattr(detector, m) for m in SEQUENTIAL_TEST_METHODS):
         return detector.with_threshold(1.0)
     raise ValueError(
-        f"detector must be 'cusum', 'glr' or a sequential test with the methods "
+        f"detector must be 'cusum', 'variance-hold', 'glr' or a sequential test with the methods "
         f"{', '.join(SEQUENTIAL_TEST_METHODS)}; got {detector!r}"
     )

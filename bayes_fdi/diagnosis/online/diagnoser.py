@@ -72,7 +72,9 @@ class OnlineDiagnoser(BaseEstimator):
         ``oof_z_``, and as an online component ``init_state``, ``check_state``, ``run``;
         cloned); None: ``DynamicNormalModels(random_state=random_state)``.
     detector
-        ``"cusum"`` (default), ``"glr"``, or an unfitted sequential test with the interface of
+        ``"cusum"`` (default), ``"variance-hold"`` (the CUSUM whose alarm holds while the
+        innovations' variance stays high, `bayes_fdi.diagnosis.detection.VarianceHoldCUSUM`;
+        the default model's), ``"glr"``, or an unfitted sequential test with the interface of
         `bayes_fdi.diagnosis.detection.CUSUM` (``init_state``, ``check_state``, ``update``,
         ``run``, ``with_threshold``, ``gaussian_threshold``): its threshold is calibrated here.
     cusum_k
