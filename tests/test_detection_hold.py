@@ -226,3 +226,38 @@ def test_training_signatures_are_those_of_plain_hysteresis():
     assert longer > 0
     np.testing.assert_array_equal(held.rows, plain.rows)
     np.testing.assert_array_equal(held.ages, plain.ages)
+
+
+def test_training_signatures_do_not_depend_on_the_variance_hold():
+    """With `VarianceHoldCUSUM` the training stream takes its ages from the mean test alone:
+    the signatures and the detected runs equal those of the plain CUSUM at the same threshold,
+    while the per-second rows (the recalibration's, the seconds the diagnoser reports) come
+    from the stream with the variance hold."""
+    from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+    from bayes_fdi.diagnosis.detection import CUSUM, VarianceHoldCUSUM
+    from bayes_fdi.diagnosis.online.step import Components
+    from bayes_fdi.diagnosis.online.training import training_signatures
+
+    models = DynamicNormalModels(
+        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
+        calibration_folds=2, random_state=0,
+    )  # fmt: skip
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    diag = OnlineDiagnoser(models, detector="variance-hold").fit(normal)
+    assert isinstance(diag.detector_, VarianceHoldCUSUM)
+    specs = [Fault(f, s, 100.0) for f in ("f11", "f18") for s in (0.5, 1.0)]
+    faults = simulate(benchmark_inputs(len(specs), 400, seed=2, vary=True), specs, seed=2)
+    parts = (diag.normal_models_, PerOutput(diag.whiteners_["X"], diag.whiteners_["F"]))
+    rest = (diag.decision_, diag.signature_, diag.envelope_, None)
+    held = Components(*parts, diag.detector_, *rest)
+    plain = Components(*parts, CUSUM(k=0.5, threshold=diag.threshold_), *rest)
+    a, b = training_signatures(held, faults), training_signatures(plain, faults)
+    assert a.detected == b.detected and a.rows.shape[0] > 0
+    np.testing.assert_array_equal(a.rows, b.rows)
+    np.testing.assert_array_equal(a.ages, b.ages)
+    per_second = training_signatures(held, faults, per_second=True)
+    assert (
+        per_second.rows.shape[0]
+        >= training_signatures(plain, faults, per_second=True).rows.shape[0]
+    )

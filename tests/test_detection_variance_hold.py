@@ -131,6 +131,8 @@ def test_parameters_threshold_and_the_named_detector():
     other = VarianceHoldCUSUM(k=0.3, hold_sigma=2.0, clip=5.0).with_threshold(7.0)
     assert (other.k, other.hold_sigma, other.clip, other.threshold) == (0.3, 2.0, 5.0, 7.0)
     assert other.hold_level_ == 3.5 and "hold_sigma=2.0" in repr(other)
+    mean = other.mean_test()
+    assert type(mean) is CUSUM and (mean.k, mean.threshold, mean.cap) == (0.3, 7.0, None)
     # the Gaussian threshold is the mean CUSUM's: the variance sum raises no alarm
     assert other.gaussian_threshold(28800.0) == CUSUM(k=0.3).gaussian_threshold(28800.0)
     for bad in ({"hold_sigma": 1.0}, {"clip": 0.5}, {"hold_sigma": "2"}, {"clip": True}):

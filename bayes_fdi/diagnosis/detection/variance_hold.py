@@ -191,6 +191,12 @@ class VarianceHoldCUSUM(CUSUM):
     ) -> None:
         _hold_runs(e, *self._arguments(), state, stat, since)
 
+    def mean_test(self) -> CUSUM:
+        """The same test without the variance sum: `CUSUM` with the same reference, threshold
+        and cap (the online diagnoser's fit takes its training signatures with it, as it does
+        without the decision's hold)."""
+        return CUSUM(k=self.k, threshold=self.threshold, cap=self.cap)
+
     def with_threshold(self, threshold: float) -> VarianceHoldCUSUM:
         """The same test with another threshold (the default cap and the hold level follow)."""
         return VarianceHoldCUSUM(

@@ -283,8 +283,11 @@ def training_signatures(
     that follows the fault's onset are kept (`detection_signatures`), or with ``per_second``
     those of its detected seconds after the onset (`detected_seconds`: the seconds the
     diagnoser reports, under its decision with the hold). For the ages the decision is plain
-    hysteresis (without its hold): with the hold, an alarm raised before the onset could last
-    into the fault and swallow its own detection, and the run would count as undetected.
+    hysteresis (without its hold) on the detector's mean test (a detector with a ``mean_test``,
+    `~bayes_fdi.diagnosis.detection.VarianceHoldCUSUM`, without its variance hold): with a hold,
+    an alarm raised before the onset could last into the fault and swallow its own detection,
+    and the run would count as undetected; so the signatures, the isolability groups and the
+    faults listed as undetectable do not depend on how long alarms are held.
 
     Parameters
     ----------
@@ -298,10 +301,12 @@ def training_signatures(
     pick = detected_seconds if per_second else detection_signatures
     rows, labels, ages = [], [], []
     detected: dict[str, list[bool]] = {}
-    decision = components.decision
-    if not per_second:  # signatures at ages after each detection: plain hysteresis
+    decision, detector = components.decision, components.detector
+    if not per_second:  # signatures at ages after each detection: plain hysteresis, mean test
         decision = DetectionDecision(decision.threshold, decision.clear, decision.n_channels)
-    components = components._replace(isolator=None, decision=decision)
+        if hasattr(detector, "mean_test"):
+            detector = detector.mean_test()
+    components = components._replace(isolator=None, decision=decision, detector=detector)
     for part in runs_as_list(runs):
         validate_dataset(part, require=CHANNELS, allow_nan=True)
         if "state" not in part.coords:
