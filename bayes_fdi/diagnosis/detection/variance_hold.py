@@ -90,19 +90,13 @@ def _hold_kernel(e, k, k_var, clip2, cap, hold, state, stat, since):  # pragma: 
                 s = 0.0
                 lengths[j] = 0.0
             sums[j] = min(s, cap)
-        best = 0.0
-        best_len = 0.0
-        for j in range(3):
-            value = sums[j] if j < 2 else min(sums[j], hold)
-            if value > best:
-                best = value
-                best_len = lengths[j]
-        if missing:
-            stat[t] = np.nan
-            since[t] = -1
-        else:
-            stat[t] = best
-            since[t] = best_len
+        side = 0 if sums[0] >= sums[1] else 1  # the larger mean sum (a tie: S+)
+        best, best_len = sums[side], lengths[side]
+        held = min(sums[2], hold)  # the variance sum counts up to the hold level
+        if held > best:
+            best, best_len = held, lengths[2]
+        stat[t] = np.nan if missing else best
+        since[t] = -1.0 if missing else best_len
 
 
 @njit(cache=True, error_model="numpy")
