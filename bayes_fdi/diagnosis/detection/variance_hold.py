@@ -23,7 +23,7 @@ detection on while the innovations stay wider than in control. That is the *sust
 evidence* the decision waits for: the mean sums at 0 and the variance back to its in-control
 level. Its cost: after a false alarm the innovations must also calm down, so false alarms last
 longer (never more of them: the hold lengthens and merges alarms, it adds none), and once the
-variance is back ``V`` clears within about ``cap / (k_var - 1)`` samples (94 s at the default
+variance is back ``V`` clears within about ``cap / (k_var - 1)`` samples (90 s at the default
 model's threshold, about the decision's own hold). The cap is what carries a detection over the
 calm stretches of a fault whose residuals widen at some phases of the excitation only: with ``V``
 capped at half the threshold instead, f11 and f12 runs of the held-out families cleared

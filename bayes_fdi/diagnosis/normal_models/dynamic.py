@@ -61,6 +61,7 @@ from bayes_fdi.diagnosis.normal_models.dynamic_kernel import (
     NormalModelsParams,
     NormalModelsState,
     dynamic_inputs,
+    identity_std_factors,
     kernel_params,
     predict_runs,
     predict_seconds,
@@ -320,10 +321,8 @@ class DynamicNormalModels(BaseEstimator):
         mx, mf = fit_pair(subset(idx, size))
         self.regressors_ = {"X": mx, "F": mf}
         self.fit_seconds_["fit"] = time.perf_counter() - t0
-        nb = int(self.calibration_bins)  # identity std factors until the cross-fit's
-        self.std_scale_ = {k: np.ones(nb) for k in ("X", "F")}
-        self.std_scale_all_ = {"X": 1.0, "F": 1.0}
-        self.std_scale_edges_ = np.empty(0)
+        identity = identity_std_factors(int(self.calibration_bins))  # until the cross-fit's
+        self.std_scale_edges_, self.std_scale_, self.std_scale_all_ = identity
         t0 = time.perf_counter()
         speed = np.abs(U[:, 2]) if D > 0 else np.full(U.shape[0], np.nan)
         self.novelty_reference_ = np.empty((0, 0))

@@ -36,6 +36,7 @@ __all__ = [
     "NormalModelsParams",
     "NormalModelsState",
     "dynamic_inputs",
+    "identity_std_factors",
     "kernel_params",
     "predict_runs",
     "predict_seconds",
@@ -136,6 +137,12 @@ class NormalModelsParams(NamedTuple):
         return data
 
 
+def identity_std_factors(n_bins: int) -> tuple[np.ndarray, dict, dict]:
+    """Std factors 1 (no bin edges, ``{"X": ones, "F": ones}`` per bin, 1 over every bin): the
+    cross-fit's, and the fitted models' until the cross-fit gives theirs."""
+    return np.empty(0), {c: np.ones(n_bins) for c in ("X", "F")}, {"X": 1.0, "F": 1.0}
+
+
 def kernel_params(models: Any, mx: Any, mf: Any, *, calibrated: bool = True) -> NormalModelsParams:
     """The compiled predictor's parameters of fitted
     `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``models`` for the
@@ -144,9 +151,7 @@ def kernel_params(models: Any, mx: Any, mf: Any, *, calibrated: bool = True) -> 
     if calibrated:
         edges, scale, scale_all = models.std_scale_edges_, models.std_scale_, models.std_scale_all_
     else:
-        nb = int(models.calibration_bins)
-        edges, scale = np.empty(0), {"X": np.ones(nb), "F": np.ones(nb)}
-        scale_all = {"X": 1.0, "F": 1.0}
+        edges, scale, scale_all = identity_std_factors(int(models.calibration_bins))
     lag = models.command_lag_
     return NormalModelsParams(
         input_mean=np.ascontiguousarray(models.input_mean_),
