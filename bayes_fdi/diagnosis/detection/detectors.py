@@ -35,6 +35,7 @@ Written by hand: scipy and scikit-learn have no sequential change detectors, and
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -287,17 +288,36 @@ class CUSUM(_SequentialTest):
         """A fresh state: both sums 0."""
         return CUSUMState(np.zeros(2), np.zeros(2))
 
+    #: The compiled kernels over one run and over stacked runs, called with `_arguments`; a
+    #: variant of the CUSUM (`~bayes_fdi.diagnosis.detection.two_speed.TwoSpeedCUSUM`,
+    #: `~bayes_fdi.diagnosis.detection.variance_hold.VarianceHoldCUSUM`) sets its own.
+    _run_kernel = staticmethod(_cusum_kernel)
+    _runs_kernel = staticmethod(_cusum_runs)
+
+    def _arguments(self) -> tuple[Any, ...]:
+        return float(self.k), self.cap_
+
     def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
-        _cusum_kernel(e, float(self.k), self.cap_, state, stat, since)
+        self._run_kernel(e, *self._arguments(), state, stat, since)
 
     def _kernel_stacked(
         self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray
     ) -> None:
-        _cusum_runs(e, float(self.k), self.cap_, state, stat, since)
+        self._runs_kernel(e, *self._arguments(), state, stat, since)
+
+    def _params(self) -> dict[str, Any]:
+        """The constructor's parameters (of this class) and their values."""
+        names = inspect.signature(type(self).__init__).parameters
+        return {name: getattr(self, name) for name in names if name != "self"}
+
+    def __repr__(self) -> str:
+        shown = {n: v for n, v in self._params().items() if not (n == "cap" and v is None)}
+        return f"{type(self).__name__}({', '.join(f'{n}={v!r}' for n, v in shown.items())})"
 
     def with_threshold(self, threshold: float) -> CUSUM:
-        """The same CUSUM with another threshold (and the default cap follows it)."""
-        return CUSUM(k=self.k, threshold=float(threshold), cap=self.cap)
+        """The same test (of this class, with these parameters) with another threshold; a
+        default cap follows it."""
+        return type(self)(**(self._params() | {"threshold": float(threshold)}))
 
     def gaussian_threshold(
         self,

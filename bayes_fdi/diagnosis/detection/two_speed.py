@@ -27,7 +27,7 @@ vectorised path equal to ``update`` and NaN gaps).
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -132,13 +132,6 @@ class TwoSpeedCUSUM(CUSUM):
         if not (isinstance(self.k_slow, int | float) and 0 < self.k_slow < self.k):
             raise ValueError(f"k_slow must be a number in (0, k = {self.k}), got {self.k_slow!r}")
 
-    def __repr__(self) -> str:
-        cap = "" if self.cap is None else f", cap={self.cap!r}"
-        return (
-            f"TwoSpeedCUSUM(k={self.k!r}, k_slow={self.k_slow!r}, "
-            f"threshold={self.threshold!r}{cap})"
-        )
-
     @property
     def slow_band_(self) -> float:
         """The band the slow sums must leave before they count: ``1 / k_slow``."""
@@ -158,22 +151,13 @@ class TwoSpeedCUSUM(CUSUM):
         """A fresh state: every sum 0."""
         return TwoSpeedCUSUMState(np.zeros(4), np.zeros(4))
 
+    _run_kernel = staticmethod(_two_speed_kernel)
+    _runs_kernel = staticmethod(_two_speed_runs)
+
     def _arguments(self) -> tuple[np.ndarray, np.ndarray, float, float]:
         scale, band = self.slow_scale_, self.slow_band_
         ks = np.array([float(self.k), float(self.k_slow)])
         return ks, np.array([self.cap_, self.cap_ / scale + band]), scale, band
-
-    def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
-        _two_speed_kernel(e, *self._arguments(), state, stat, since)
-
-    def _kernel_stacked(
-        self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray
-    ) -> None:
-        _two_speed_runs(e, *self._arguments(), state, stat, since)
-
-    def with_threshold(self, threshold: float) -> TwoSpeedCUSUM:
-        """The same test with another threshold (and the default cap follows it)."""
-        return TwoSpeedCUSUM(k=self.k, k_slow=self.k_slow, threshold=float(threshold), cap=self.cap)
 
     def gaussian_threshold(
         self,

@@ -40,7 +40,7 @@ vectorised path equal to ``update`` and NaN gaps).
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -151,13 +151,6 @@ class VarianceHoldCUSUM(CUSUM):
             if isinstance(value, bool) or not isinstance(value, int | float) or not value > 1:
                 raise ValueError(f"{name} must be a number above 1, got {value!r}")
 
-    def __repr__(self) -> str:
-        cap = "" if self.cap is None else f", cap={self.cap!r}"
-        return (
-            f"VarianceHoldCUSUM(k={self.k!r}, hold_sigma={self.hold_sigma!r}, "
-            f"clip={self.clip!r}, threshold={self.threshold!r}{cap})"
-        )
-
     @property
     def k_var_(self) -> float:
         """The variance sum's reference value (`variance_reference` of ``hold_sigma``)."""
@@ -173,30 +166,15 @@ class VarianceHoldCUSUM(CUSUM):
         """A fresh state: every sum 0."""
         return VarianceHoldCUSUMState(np.zeros(3), np.zeros(3))
 
+    _run_kernel = staticmethod(_hold_kernel)
+    _runs_kernel = staticmethod(_hold_runs)
+
     def _arguments(self) -> tuple[float, float, float, float, float]:
         clip = float(self.clip)
         return float(self.k), self.k_var_, clip * clip, self.cap_, self.hold_level_
-
-    def _kernel(self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray) -> None:
-        _hold_kernel(e, *self._arguments(), state, stat, since)
-
-    def _kernel_stacked(
-        self, e: np.ndarray, state: Any, stat: np.ndarray, since: np.ndarray
-    ) -> None:
-        _hold_runs(e, *self._arguments(), state, stat, since)
 
     def mean_test(self) -> CUSUM:
         """The same test without the variance sum: `CUSUM` with the same reference, threshold
         and cap (the online diagnoser's fit takes its training signatures with it, as it does
         without the decision's hold)."""
         return CUSUM(k=self.k, threshold=self.threshold, cap=self.cap)
-
-    def with_threshold(self, threshold: float) -> VarianceHoldCUSUM:
-        """The same test with another threshold (the default cap and the hold level follow)."""
-        return VarianceHoldCUSUM(
-            k=self.k,
-            hold_sigma=self.hold_sigma,
-            clip=self.clip,
-            threshold=float(threshold),
-            cap=self.cap,
-        )
