@@ -4,7 +4,7 @@
         [--model FILE | --small] [--training excitation-mix|dgen] \
         [--physics-inputs command_lag,valve_law] [--f-widths 0.05,0.1,0.2] \
         [--std-coverage 0.95] [--lag-speed-limits] [--lag-as-mean] [--law-as-mean] \
-        [--std-bins speed|novelty|command-novelty] \
+        [--std-bins speed|novelty|command-novelty] [--detector cusum|variance-hold] \
         [--leave-out sine-sum|step-ramp|level-loop] \
         [--save FILE] [--runs 8] [--duration 900] [--fault-runs 1] [--fault-duration 600] \
         [--seed 900]
@@ -27,7 +27,8 @@ the true fault (a group-level r_ti over the runs).
 Without ``--model`` the script fits the diagnoser (`fit_online_diagnoser` with ``--training``
 and ``--physics-inputs``, by default the training's own, ``""`` for none; the normal models'
 ``--std-coverage``, ``--lag-speed-limits``, ``--lag-as-mean``, ``--law-as-mean`` and
-``--std-bins``, see `DynamicNormalModels`;
+``--std-bins``, see `DynamicNormalModels`; ``--detector``: the online diagnoser's, by default
+the training's, `DEFAULT_DETECTORS`;
 ``--leave-out FAMILY``: without that family's campaign files, which then plays an excitation the
 normal models never saw; ``--save``: write it to a model file, e.g. for the benchmark). Results
 go to stdout and ``benchmarks/out/heldout_families.json``.
@@ -214,6 +215,12 @@ def main() -> None:
         default=None,
         help="fit without this training family's campaign files: sine-sum, step-ramp or level-loop",
     )
+    parser.add_argument(
+        "--detector",
+        default=None,
+        choices=("cusum", "variance-hold"),
+        help="the diagnoser's detector (default: the training's)",
+    )
     parser.add_argument("--save", help="write the fitted diagnoser to this model file")
     parser.add_argument("--runs", type=int, default=8)
     parser.add_argument("--duration", type=int, default=900)
@@ -236,11 +243,12 @@ def main() -> None:
 
         t_fit = time.process_time()
         normal_models = _normal_models(args)  # the named training's settings
+        detector = {"detector": args.detector} if args.detector else {}
         if args.leave_out:
             args.training = _leave_out(args.training, args.leave_out)
         diagnoser = fit_online_diagnoser(
             small=args.small, progress=False, training=args.training,
-            physics_inputs=_physics(args), **normal_models,
+            physics_inputs=_physics(args), **normal_models, **detector,
         )  # fmt: skip
         print(f"fitted in {time.process_time() - t_fit:.0f} CPU s; threshold "
               f"{diagnoser.threshold_:.2f}, DGN0 {', '.join(diagnoser.undetectable_) or 'none'}; "
