@@ -9,8 +9,9 @@ SEVA statuses), then over its second half with each of the DAMADICS faults below
 into it (`bayes_fdi.twin.transplant` with the actuator's nominal parameters, not a twin of this
 valve; strength ``--strength`` with the benchmark's direction, from ``--onset`` s into the
 half). Per fault: the share of the seconds before the onset with DD on, the share after it, the
-seconds to the first detection, whether DD stayed on from then to the end, and the two states
-named most often over the detected seconds. The faults are those of the benchmark's big abrupt
+seconds to the first detection, whether DD stayed on from then to the end, the two states
+named most often over the detected seconds, and the seconds after the onset that named another
+known group at a probability above 0.9 (confident wrong). The faults are those of the benchmark's big abrupt
 scenarios (`bayes_fdi.benchmark.scenarios.SCENARIOS`).
 """
 
@@ -46,6 +47,7 @@ def main() -> None:
     second = hour.isel(time=slice(1800, None))
     onset = int(args.onset)
     faults = [s.fault for s in SCENARIOS if s.mode == "abrupt" and s.size == "big"]
+    groups = ["|".join(g) for g in diagnoser.groups_]
     for name in faults:
         fault = Fault(name, args.strength * FAULT_DIRECTION[name], onset=args.onset)
         stream = diagnoser.run(transplant(second, [fault], NOMINAL))
@@ -53,11 +55,16 @@ def main() -> None:
         after = dd[onset:]
         first = int(np.argmax(after)) if after.any() else None
         kept = bool(after[first:].all()) if first is not None else False
-        named = collections.Counter(str(s) for s in stream["state"].values[0][onset:][after])
+        state = np.asarray(stream["state"].values[0][onset:]).astype(str)
+        named = collections.Counter(str(s) for s in state[after])
+        # a known group other than the fault's own, at p > 0.9 (unknown, mismatch: not named)
+        truth = next((g for g in groups if name in g.split("|")), None)
+        wrong = np.isin(state, list(groups)) & (state != truth)
+        confident = int(np.sum(wrong & (stream["probability"].values[0][onset:] > 0.9)))
         print(
             f"{name}: DD before {dd[:onset].mean():.1%}, after {after.mean():.1%}; first "
             f"detection {'none' if first is None else f'{first} s'}, kept on {kept}; named "
-            f"{named.most_common(2)}"
+            f"{named.most_common(2)}; confident (p > 0.9) wrong {confident} s"
         )
 
 

@@ -18,6 +18,7 @@ from bayes_fdi.default_diagnoser import (
     DEFAULT_TRAINING,
     SET_SEED_OFFSETS,
     TRAININGS,
+    fit_online_diagnoser,
     online_campaigns,
     simulate_online_campaigns,
     simulation_plan,
@@ -104,6 +105,9 @@ def test_a_seed_beyond_the_last_allowed_or_an_unknown_training_is_refused_by_nam
         simulate_online_campaigns(seed=549, small=True, progress=False, training="dgen")
     with pytest.raises(ValueError, match="training must be one of dgen, excitation-mix"):
         online_campaigns(training="chirp")
+    # checked before anything is simulated
+    with pytest.raises(ValueError, match="isolation must be one of tree, forest, got 'svm'"):
+        fit_online_diagnoser(isolation="svm", small=True, progress=False)
 
 
 def test_the_long_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones():

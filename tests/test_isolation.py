@@ -186,28 +186,39 @@ def test_one_group_has_probability_one_and_no_calibrator(rng):
     np.testing.assert_allclose(out.fault_proba, iso.fault_proba(rows), rtol=1e-10)
 
 
-def test_isolator_run_equals_the_temperature_scaled_group_sums(rng):
+@pytest.mark.parametrize("classifier", ["tree", "forest"])
+def test_isolator_run_equals_the_temperature_scaled_group_sums(rng, classifier):
     from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.diagnosis.isolation import ForestClassifier
 
     centres = [(0, 0), (0, 0), (5, 5)]
     X, y = _blobs(rng, centres, 40)
-    iso = FaultIsolator(calibrator=TemperatureScaler()).fit(
+    clf = ForestClassifier(n_estimators=25, random_state=0) if classifier == "forest" else None
+    iso = FaultIsolator(clf, calibrator=TemperatureScaler()).fit(
         X, y, validation=_blobs(rng, centres, 40), calibration=_blobs(rng, centres, 40)
     )
+    assert iso.rows_independent  # both run the compiled pass
     rows = _blobs(rng, centres, 10)[0]
     rows[3] = np.nan  # no signature this second
     out = iso.run(rows)
     assert np.isnan(out.fault_proba[3]).all() and np.isnan(out.novelty[3])
     ok = np.arange(rows.shape[0]) != 3
     # second implementation: the calibrator's own transform of the tree's group sums, shared
-    # back to the faults in proportion
+    # back to the faults in proportion (a group of probability 0 passes its own on)
     p = iso.fault_proba(rows[ok])
     gp = p @ iso.membership_
     g = iso.calibrator_.transform(gp)
-    share = p / gp[:, iso.group_of_]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(gp[:, iso.group_of_] > 0, p / gp[:, iso.group_of_], 1.0)
     np.testing.assert_allclose(out.group_proba[ok], g, rtol=1e-10, atol=1e-15)
     np.testing.assert_allclose(out.fault_proba[ok], g[:, iso.group_of_] * share, rtol=1e-10)
     np.testing.assert_array_equal(out.novelty[ok], iso.novelty_.score(rows[ok]))
     one = iso.update(rows[5])
     np.testing.assert_array_equal(one.group_proba, out.group_proba[5])
     assert one.novelty == out.novelty[5]
+    # each row's numbers are those it gets alone, wherever it stands in the batch
+    for i in range(rows.shape[0]):
+        alone = iso.run(rows[i : i + 1])
+        np.testing.assert_array_equal(alone.fault_proba[0], out.fault_proba[i])
+    backwards = iso.run(rows[::-1].copy())
+    np.testing.assert_array_equal(backwards.group_proba[::-1], out.group_proba)

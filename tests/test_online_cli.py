@@ -19,6 +19,7 @@ from bayes_fdi.datasets import load_lublin_example
 from bayes_fdi.deployment import fitting as model_fitting
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.detection import CUSUM, TwoSpeedCUSUM
+from bayes_fdi.diagnosis.isolation import ForestClassifier
 
 #: Runs ``bayes-fdi diagnose`` in a fresh interpreter and prints the bayes_fdi modules it loaded.
 _DIAGNOSE_AND_LIST_MODULES = """
@@ -117,11 +118,14 @@ def test_fit_default_writes_a_model_that_diagnose_reads(cache, tmp_path, capsys)
     assert isinstance(fitted.detector_, CUSUM) and not isinstance(fitted.detector_, TwoSpeedCUSUM)
     assert fitted.normal_models_.physics_inputs == ("command_lag",)
     assert fitted.normal_models_.std_coverage == 0.9
+    # a random forest names the faults, through the compiled per-second pass
+    assert isinstance(fitted.isolator_.classifier_, ForestClassifier)
+    assert fitted.isolator_.rows_independent
     # same seed, same settings: the same model as the cached default (same stream)
     hour = load_lublin_example().isel(run=0, time=slice(0, 600))
     a = fitted.run(hour)
     b = OnlineDiagnoser.load(path).run(hour)
-    for name in ("DD", "stat_X", "stat_F", "X_hat", "F_hat_std"):
+    for name in ("DD", "stat_X", "stat_F", "X_hat", "F_hat_std", "group_proba"):
         np.testing.assert_array_equal(a[name].values, b[name].values)
     out = tmp_path / "out"
     argv = ["diagnose", "--example", "--model", str(model_file), "--out", str(out), "--quiet",

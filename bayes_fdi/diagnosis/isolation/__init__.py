@@ -16,7 +16,10 @@
 - `bayes_fdi.diagnosis.isolation.compiled_tree`: `LeanTree`, the compiled predictor of a tree
   of RVCs.
 - `bayes_fdi.diagnosis.isolation.forest`: `ForestClassifier`, a random forest kept as arrays
-  with a compiled predictor (a commissioned valve's isolation classifier).
+  with a compiled predictor (the default model's isolation classifier, and a commissioned
+  valve's alternative).
+- `bayes_fdi.diagnosis.isolation.compiled_isolation`: the isolator's per-second pass of the tree
+  or the forest, compiled (group sums, temperature, novelty, row by row).
 
 May import `bayes_fdi.rvm`, `bayes_fdi.datasets`, `bayes_fdi.diagnosis.normal_models`,
 `bayes_fdi.diagnosis.component_state` and the foundation.

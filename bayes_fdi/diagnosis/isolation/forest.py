@@ -8,8 +8,9 @@ classes). A model file thus holds plain arrays, which load with any scikit-learn
 leaves' proportions in tree order, so a row's result never depends on the rows around it. It
 agrees with the fitted forest's ``predict_proba`` to rounding (tested).
 
-A commissioned diagnoser may name its faults with it (`bayes_fdi.commissioning.commission`,
-``isolation="forest"``): splits on one feature at a time ignore the scale of the signatures,
+The default model names its faults with it (`bayes_fdi.default_diagnoser.DEFAULT_ISOLATION`), and
+a commissioned diagnoser may (`bayes_fdi.commissioning.commission`, ``isolation="forest"``):
+splits on one feature at a time ignore the scale of the signatures,
 whose magnitudes span orders (a residual shift of 0.1 or of 80 noise standard deviations), and
 the features a fault does not move. Unlike the k-means tree of RVCs, whose probabilities fall
 towards even odds away from its training signatures, a forest can be confident about a
@@ -21,7 +22,7 @@ scikit-learn's.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -29,7 +30,20 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-__all__ = ["ForestClassifier", "forest_proba"]
+__all__ = ["ForestArrays", "ForestClassifier", "forest_proba"]
+
+
+class ForestArrays(NamedTuple):
+    """The arrays of a fitted `ForestClassifier` that `forest_proba` takes."""
+
+    roots: np.ndarray
+    feature: np.ndarray
+    threshold: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    offsets: np.ndarray
+    leaf_class: np.ndarray
+    leaf_proba: np.ndarray
 
 
 class ForestClassifier(ClassifierMixin, BaseEstimator):
@@ -120,14 +134,10 @@ class ForestClassifier(ClassifierMixin, BaseEstimator):
         self.leaf_proba_ = np.concatenate(proba)
         return self
 
-    def predict_proba(self, X: Any) -> np.ndarray:
-        """Class probabilities ``(n, n_classes)``: the mean over the trees of the class
-        proportions in the leaf each row reaches."""
+    def arrays(self) -> ForestArrays:
+        """The fitted arrays `forest_proba` takes."""
         check_is_fitted(self, "roots_")
-        X = np.ascontiguousarray(validate_data(self, X, dtype=np.float64, reset=False))
-        out = np.empty((X.shape[0], self.classes_.size))
-        _forest_rows(
-            X,
+        return ForestArrays(
             self.roots_,
             self.feature_,
             self.threshold_,
@@ -136,8 +146,15 @@ class ForestClassifier(ClassifierMixin, BaseEstimator):
             self.leaf_offsets_,
             self.leaf_class_,
             self.leaf_proba_,
-            out,
         )
+
+    def predict_proba(self, X: Any) -> np.ndarray:
+        """Class probabilities ``(n, n_classes)``: the mean over the trees of the class
+        proportions in the leaf each row reaches."""
+        check_is_fitted(self, "roots_")
+        X = np.ascontiguousarray(validate_data(self, X, dtype=np.float64, reset=False))
+        out = np.empty((X.shape[0], self.classes_.size))
+        _forest_rows(X, self.arrays(), out)
         return out
 
     def predict(self, X: Any) -> np.ndarray:
@@ -147,33 +164,29 @@ class ForestClassifier(ClassifierMixin, BaseEstimator):
 
 
 @njit(cache=True)
-def forest_proba(
-    x, roots, feature, threshold, left, right, offsets, leaf_class, leaf_proba, out
-):  # pragma: no cover - compiled
-    """Class probabilities of one row ``x`` into ``out`` (see `ForestClassifier`)."""
+def forest_proba(x, forest, out):  # pragma: no cover - compiled
+    """Class probabilities of one row ``x`` under ``forest`` (`ForestArrays`) into ``out``: the
+    mean over the trees, in tree order, of the class proportions of the leaf ``x`` reaches."""
+    feature, threshold, left, right = forest.feature, forest.threshold, forest.left, forest.right
     for c in range(out.size):
         out[c] = 0.0
-    n_trees = roots.size - 1
+    n_trees = forest.roots.size - 1
     for t in range(n_trees):
-        n = roots[t]
+        n = forest.roots[t]
         while left[n] >= 0:
             # scikit-learn compares the float32 feature with the float64 threshold
             if np.float64(np.float32(x[feature[n]])) <= threshold[n]:
                 n = left[n]
             else:
                 n = right[n]
-        for k in range(offsets[n], offsets[n + 1]):
-            out[leaf_class[k]] += leaf_proba[k]
+        for k in range(forest.offsets[n], forest.offsets[n + 1]):
+            out[forest.leaf_class[k]] += forest.leaf_proba[k]
     for c in range(out.size):
         out[c] /= n_trees
 
 
 @njit(cache=True)
-def _forest_rows(
-    X, roots, feature, threshold, left, right, offsets, leaf_class, leaf_proba, out
-):  # pragma: no cover - compiled
+def _forest_rows(X, forest, out):  # pragma: no cover - compiled
     """`forest_proba` of every row of ``X`` into the rows of ``out``."""
     for i in range(X.shape[0]):
-        forest_proba(
-            X[i], roots, feature, threshold, left, right, offsets, leaf_class, leaf_proba, out[i]
-        )
+        forest_proba(X[i], forest, out[i])

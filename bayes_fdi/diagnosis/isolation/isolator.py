@@ -13,36 +13,35 @@ class's training signatures is an "unknown" fault.
 
 Online, ``run`` (a chunk of seconds) and ``update`` (one) give the per-second isolation. It keeps
 no state: the memory of the stream is the signature window's. With a compiled tree
-(`~bayes_fdi.diagnosis.isolation.compiled_tree.LeanTree`) and a temperature scaling (possibly
+(`~bayes_fdi.diagnosis.isolation.compiled_tree.LeanTree`) or a
+`~bayes_fdi.diagnosis.isolation.forest.ForestClassifier`, and a temperature scaling (possibly
 followed by the beta map of the top group of `~bayes_fdi.calibration.TopLabelScaler`) or no
-recalibration they run `isolate_rows`, one compiled pass that takes the fitted values as one
-named tuple (`IsolationParams`): the tree's probabilities, their group sums recalibrated and
-shared back to the faults, and the novelty score, row by row.
+recalibration, they run one compiled pass of `bayes_fdi.diagnosis.isolation.compiled_isolation`
+that takes the fitted values as one named tuple: the classifier's probabilities, their group
+sums recalibrated and shared back to the faults, and the novelty score, row by row.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
 from sklearn.base import clone
 
-from bayes_fdi.diagnosis.isolation.class_novelty import (
-    ClassNovelty,
-    NoveltyArrays,
-    novelty_score_row,
+from bayes_fdi.diagnosis.isolation.class_novelty import ClassNovelty
+from bayes_fdi.diagnosis.isolation.compiled_isolation import (
+    IsolationParams,
+    isolate_forest_rows,
+    isolate_rows,
 )
-from bayes_fdi.diagnosis.isolation.compiled_tree import TreeArrays, lean_tree_or_none, tree_proba
+from bayes_fdi.diagnosis.isolation.compiled_tree import lean_tree_or_none
+from bayes_fdi.diagnosis.isolation.forest import ForestClassifier
 
 __all__ = [
     "FaultIsolator",
     "IsolationOutput",
-    "IsolationParams",
     "isolability_groups",
-    "isolate_rows",
     "naming_confusion",
     "pairwise_confusion",
 ]
@@ -54,18 +53,6 @@ class IsolationOutput(NamedTuple):
     fault_proba: Any  #: ``(n, n_faults)`` calibrated fault probabilities
     group_proba: Any  #: ``(n, n_groups)`` calibrated group probabilities
     novelty: Any  #: ``(n,)`` novelty scores
-
-
-class IsolationParams(NamedTuple):
-    """The fitted values `isolate_rows` takes."""
-
-    tree: TreeArrays  #: the compiled classifier
-    group_of: np.ndarray  #: ``(n_faults,)`` int64: the group of each fault
-    n_groups: int
-    temperature: float  #: the temperature scaling of the group probabilities (0: none)
-    floor: float  #: smallest group probability before taking its logarithm
-    top_map: np.ndarray  #: ``(3,)`` beta map of the top group after the temperature, or ``(0,)``
-    novelty: NoveltyArrays  #: the class novelty
 
 
 # ----------------------------------------------------------------------------------------------
@@ -318,10 +305,11 @@ class FaultIsolator:
     @property
     def rows_independent(self) -> bool:
         """Whether `run` gives each row the numbers it gives that row alone (the compiled
-        path: a compiled tree with no calibrator, a temperature scaling or a top-label
-        scaling)."""
+        path: a compiled tree or a `ForestClassifier`, with no calibrator, a temperature
+        scaling or a top-label scaling)."""
         compiled_calibration = self.calibrator_ is None or self.temperature() is not None
-        return self.lean_ is not None and compiled_calibration
+        forest = isinstance(self.classifier_, ForestClassifier)
+        return (self.lean_ is not None or forest) and compiled_calibration
 
     @property
     def group_of_(self) -> np.ndarray:
@@ -334,11 +322,11 @@ class FaultIsolator:
 
         The per-second isolation of the online diagnoser: the classifier's fault
         probabilities, summed over the groups and recalibrated, shared back to the faults in
-        proportion, and the novelty score. With a compiled tree (``lean_``) and no calibrator, a
-        temperature scaling or a top-label scaling, one compiled pass whose every row's result is
-        independent of the others; otherwise through the classifier's and calibrator's own
-        ``predict_proba`` and ``transform`` (batched: rounding may depend on the rows around). A
-        row with a NaN (no signature) gives NaN.
+        proportion, and the novelty score. With a compiled tree (``lean_``) or a forest and no
+        calibrator, a temperature scaling or a top-label scaling, one compiled pass whose every
+        row's result is independent of the others; otherwise through the classifier's and
+        calibrator's own ``predict_proba`` and ``transform`` (batched: rounding may depend on
+        the rows around). A row with a NaN (no signature) gives NaN.
 
         Parameters
         ----------
@@ -360,8 +348,9 @@ class FaultIsolator:
         T = self.temperature()
         if self.rows_independent:
             floor = float(getattr(self.calibrator_, "floor", 1e-12))
+            forest = self.lean_ is None
             params = IsolationParams(
-                tree=self.lean_.arrays(),
+                classifier=self.classifier_.arrays() if forest else self.lean_.arrays(),
                 group_of=self.group_of_,
                 n_groups=n_g,
                 temperature=0.0 if T is None else T,
@@ -369,7 +358,7 @@ class FaultIsolator:
                 top_map=self.top_map(),
                 novelty=self.novelty_.arrays(),
             )
-            isolate_rows(feats, params, fq, gq, nov)
+            (isolate_forest_rows if forest else isolate_rows)(feats, params, fq, gq, nov)
             return IsolationOutput(fq, gq, nov)
         fq[:], gq[:], nov[:] = np.nan, np.nan, np.nan
         ok = np.all(np.isfinite(feats), axis=1)
@@ -389,93 +378,3 @@ class FaultIsolator:
         """`run` on one signature ``(n_features,)``: ``(n_faults,)``, ``(n_groups,)``, a float."""
         out = self.run(np.asarray(features, dtype=np.float64).reshape(1, -1))
         return IsolationOutput(out.fault_proba[0], out.group_proba[0], float(out.novelty[0]))
-
-
-# ----------------------------------------------------------------------------------------------
-# the compiled per-second isolation
-# ----------------------------------------------------------------------------------------------
-@njit(cache=True, error_model="numpy")
-def _map_top(q, coef):  # pragma: no cover - compiled
-    """`bayes_fdi.calibration.top_label.top_label_map` of one row ``q``, in place."""
-    top, p1, p2 = 0, -np.inf, -np.inf
-    for g in range(q.size):
-        if q[g] > p1:
-            top, p2, p1 = g, p1, q[g]
-        elif q[g] > p2:
-            p2 = q[g]
-    edge = 1e-12
-    p = min(max(p1, edge), 1.0 - edge)
-    new = 1.0 / (1.0 + math.exp(-(coef[0] * math.log(p) - coef[1] * math.log1p(-p) + coef[2])))
-    if p2 > 0.0:  # the top stays on top (TIE_MARGIN of top_label)
-        new = max(new, min(p2 / (1.0 - p1 + p2) * (1.0 + 1e-9), p1))
-    rest = 0.0
-    for g in range(q.size):
-        if g != top:
-            rest += q[g]
-    for g in range(q.size):
-        if g == top:
-            continue
-        q[g] = (q[g] / rest if rest > 0.0 else 1.0 / (q.size - 1)) * (1.0 - new)
-    q[top] = new
-
-
-@njit(cache=True, error_model="numpy")
-def _posterior_row(p, params, gp, gq, fq):  # pragma: no cover - compiled
-    """Group sums of fault probabilities ``p``, temperature-scaled, shared back to faults."""
-    group_of, n_groups = params.group_of, params.n_groups
-    temperature, floor = params.temperature, params.floor
-    for g in range(n_groups):
-        gp[g] = 0.0
-    for f in range(p.size):
-        gp[group_of[f]] += p[f]
-    if temperature > 0.0:
-        top = -np.inf
-        for g in range(n_groups):
-            gq[g] = math.log(max(gp[g], floor)) / temperature
-            if gq[g] > top:
-                top = gq[g]
-        total = 0.0
-        for g in range(n_groups):
-            gq[g] = math.exp(gq[g] - top)
-            total += gq[g]
-        for g in range(n_groups):
-            gq[g] /= total
-    else:
-        for g in range(n_groups):
-            gq[g] = gp[g]
-    if params.top_map.size == 3:
-        _map_top(gq, params.top_map)
-    for f in range(p.size):
-        g = group_of[f]
-        fq[f] = gq[g] * p[f] / gp[g] if gp[g] > 0.0 else gq[g]
-
-
-@njit(cache=True, error_model="numpy")
-def isolate_rows(feats, params, out_fault, out_group, out_nov):  # pragma: no cover - compiled
-    """Per row of ``feats``: tree probabilities, calibrated group and fault probabilities and
-    novelty under ``params`` (`IsolationParams`); NaN for a row with a non-finite entry."""
-    tree = params.tree
-    width = 1
-    for n in range(tree.woffsets.size - 1):
-        width = max(width, tree.woffsets[n + 1] - tree.woffsets[n])
-    phi = np.empty(width)
-    right = np.empty(tree.offsets.size - 1)
-    z = np.empty(feats.shape[1])
-    p = np.empty(out_fault.shape[1])
-    gp = np.empty(out_group.shape[1])
-    for t in range(feats.shape[0]):
-        row = feats[t]
-        ok = True
-        for j in range(row.size):
-            if not np.isfinite(row[j]):
-                ok = False
-        if not ok:
-            for f in range(out_fault.shape[1]):
-                out_fault[t, f] = np.nan
-            for g in range(out_group.shape[1]):
-                out_group[t, g] = np.nan
-            out_nov[t] = np.nan
-            continue
-        tree_proba(row, tree, phi, right, z, p)
-        _posterior_row(p, params, gp, out_group[t], out_fault[t])
-        out_nov[t] = novelty_score_row(row, params.novelty)
