@@ -110,14 +110,10 @@ def isolate_rows(feats, params, out_fault, out_group, out_nov):  # pragma: no co
     p = np.empty(out_fault.shape[1])
     gp = np.empty(out_group.shape[1])
     for t in range(feats.shape[0]):
-        row = feats[t]
-        if not _finite(row):
-            _nan_row(out_fault[t], out_group[t])
-            out_nov[t] = np.nan
+        if _missing(t, feats, out_fault, out_group, out_nov):
             continue
-        tree_proba(row, tree, phi, right, z, p)
-        posterior_row(p, params, gp, out_group[t], out_fault[t])
-        out_nov[t] = novelty_score_row(row, params.novelty)
+        tree_proba(feats[t], tree, phi, right, z, p)
+        _finish_row(t, feats[t], p, params, gp, out_fault, out_group, out_nov)
 
 
 @njit(cache=True, error_model="numpy")
@@ -126,27 +122,27 @@ def isolate_forest_rows(feats, params, out_fault, out_group, out_nov):  # pragma
     p = np.empty(out_fault.shape[1])
     gp = np.empty(out_group.shape[1])
     for t in range(feats.shape[0]):
-        row = feats[t]
-        if not _finite(row):
-            _nan_row(out_fault[t], out_group[t])
-            out_nov[t] = np.nan
+        if _missing(t, feats, out_fault, out_group, out_nov):
             continue
-        forest_proba(row, params.classifier, p)
-        posterior_row(p, params, gp, out_group[t], out_fault[t])
-        out_nov[t] = novelty_score_row(row, params.novelty)
+        forest_proba(feats[t], params.classifier, p)
+        _finish_row(t, feats[t], p, params, gp, out_fault, out_group, out_nov)
 
 
 @njit(cache=True)
-def _finite(row):  # pragma: no cover - compiled
-    for j in range(row.size):
-        if not np.isfinite(row[j]):
-            return False
-    return True
+def _missing(t, feats, out_fault, out_group, out_nov):  # pragma: no cover - compiled
+    """Whether row ``t`` has a non-finite entry (no signature), its outputs then set to NaN."""
+    for j in range(feats.shape[1]):
+        if not np.isfinite(feats[t, j]):
+            out_fault[t, :] = np.nan
+            out_group[t, :] = np.nan
+            out_nov[t] = np.nan
+            return True
+    return False
 
 
-@njit(cache=True)
-def _nan_row(fault, group):  # pragma: no cover - compiled
-    for f in range(fault.size):
-        fault[f] = np.nan
-    for g in range(group.size):
-        group[g] = np.nan
+@njit(cache=True, error_model="numpy")
+def _finish_row(t, row, p, params, gp, out_fault, out_group, out_nov):  # pragma: no cover
+    """Row ``t``'s calibrated group and fault probabilities from its classifier's ``p``, and
+    its novelty."""
+    posterior_row(p, params, gp, out_group[t], out_fault[t])
+    out_nov[t] = novelty_score_row(row, params.novelty)
