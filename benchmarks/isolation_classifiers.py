@@ -1,0 +1,149 @@
+"""The default model's isolation refitted with other classifiers, scored on held-out seeds.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/isolation_classifiers.py MODEL --out DIR \
+        [--variants tree@0,tree@1,forest@0] [--seeds 4] [--shift]
+
+The online diagnoser of ``MODEL`` (e.g. the default model, fitted with seed 0) keeps its normal
+models, whitening and detector; its isolation is refitted on the signatures its own stream gives
+on the default training campaigns (`bayes_fdi.default_diagnoser.simulate_online_campaigns`,
+seed 0), as `fit_online_diagnoser` fits it, with each variant ``CLASSIFIER@SEED``: ``tree`` (the
+k-means tree of RVCs) or ``forest`` (`~bayes_fdi.diagnosis.isolation.ForestClassifier`), the seed
+drawing the training signatures kept per fault, the tree's design or the forest's bootstrap. The
+groups come from the validation runs, the temperature from the calibration runs, as in the fit.
+
+Each variant is then scored with the benchmark's harness on seeds the benchmark never uses:
+
+- nominal: the 44 Step-I scenarios with the noise seeds ``31000 + k`` (the evaluation seeds are
+  ``10000 + k``), half a simulated fault-free hour, no real hour;
+- ``--shift``: the shift families (``sim/shift-*.toml``) with input seed 35 000 and noise seeds
+  from 45 000 (the shift benchmark's are 30 000 and 40 000).
+
+Writes ``DIR/VARIANT/`` (the benchmark's report and JSON; the ECE's interval from 100 bootstrap
+resamples of the runs) and prints one line per variant (and family): the group-level ECE with its
+interval, accuracy and mean confidence, the big abrupt faults with group r_ti >= 0.9, the
+confident wrong share and the CPU seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: Noise seeds of the nominal selection runs are this plus the benchmark seed's index.
+NOMINAL_NOISE_OFFSET = 21_000
+#: Input and first noise seeds of the shift selection runs.
+SHIFT_INPUT_SEED, SHIFT_NOISE_SEED = 35_000, 45_000
+
+
+def refit_isolation(base, signatures, variant: str):
+    """A copy of ``base`` whose isolator is refitted with ``variant`` (``tree@S``, ``forest@S``)."""
+    from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.diagnosis.isolation import ForestClassifier, HierarchicalClassifier
+    from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
+    from bayes_fdi.diagnosis.online.training import GROUP_MIN_AGE, cap_rows
+    from bayes_fdi.rvm import RVC
+
+    kind, _, seed_text = variant.partition("@")
+    seed = int(seed_text or 0)
+    if kind == "tree":
+        classifier = HierarchicalClassifier(RVC(kernel="rbf", width=2.0), random_state=seed)
+    elif kind == "forest":
+        classifier = ForestClassifier(random_state=seed)
+    else:
+        raise SystemExit(f"unknown classifier {kind!r} in {variant!r}: tree or forest")
+    (X, y), (Xv, yv, av), (Xc, yc) = signatures
+    known = list(base.isolator_.faults_)
+    keep = np.flatnonzero(np.isin(y, known))
+    rng = np.random.default_rng([seed, 5])
+    keep = keep[cap_rows(y[keep], int(base.max_signatures_per_fault), rng)]
+    vkeep = np.isin(yv, known) & (av >= GROUP_MIN_AGE)
+    ckeep = np.isin(yc, known)
+    isolator = FaultIsolator(
+        classifier,
+        calibrator=TemperatureScaler(),
+        group_threshold=base.group_threshold,
+        random_state=seed,
+    ).fit(
+        X[keep],
+        y[keep],
+        validation=(Xv[vkeep], yv[vkeep]),
+        calibration=(Xc[ckeep], yc[ckeep]),
+    )
+    model = copy.deepcopy(base)
+    model.isolator_ = isolator
+    return model
+
+
+def summary(result: dict) -> str:
+    """One line of a benchmark result: calibration, the report's r_ti target, confident wrong."""
+    from bayes_fdi.benchmark.report import target_rows
+
+    cal = result["calibration"]
+    r_ti = next(m for t, m, _ in target_rows(result) if t.startswith("r_ti >= 0.9"))
+    return (
+        f"ECE {cal['ece']:.3f} [{cal['ci_low']:.3f}, {cal['ci_high']:.3f}], accuracy "
+        f"{cal['accuracy']:.3f} at confidence {cal['mean_confidence']:.3f}; r_ti >= 0.9: {r_ti}; "
+        f"confident wrong {100 * result['confident_wrong']['share']:.2f} %"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("model", help="a model file of a fitted OnlineDiagnoser with isolation")
+    parser.add_argument("--out", required=True, help="output folder (created)")
+    parser.add_argument("--variants", default="tree@0,tree@1,tree@2,forest@0,forest@1,forest@2")
+    parser.add_argument("--seeds", type=int, default=4, help="noise seeds per scenario")
+    parser.add_argument("--shift", action="store_true", help="under the shift families")
+    args = parser.parse_args()
+    import bayes_fdi.benchmark.shift as shift
+    from bayes_fdi.benchmark.harness import run_benchmark
+    from bayes_fdi.benchmark.scenarios import simulate_scenario
+    from bayes_fdi.default_diagnoser import simulate_online_campaigns
+    from bayes_fdi.deployment.fitting import load_online_model
+    from bayes_fdi.diagnosis.online.training import detection_components, training_signatures
+
+    base = load_online_model(args.model)
+    if base.isolator_ is None:
+        raise SystemExit(f"{args.model}: a detection-only model has no isolation to refit")
+    data = simulate_online_campaigns(seed=0, progress=False)
+    components = detection_components(base)
+    X, y, _, _ = training_signatures(components, data["train"])
+    Xv, yv, av, _ = training_signatures(components, data["validation"])
+    Xc, yc, _, _ = training_signatures(components, data["calibration"], per_second=True)
+    signatures = ((X, y), (Xv, yv, av), (Xc, yc))
+    # the selection seeds: the shift families' module seeds, the nominal scenarios' noise
+    shift.SHIFT_INPUT_SEED, shift.SHIFT_NOISE_SEED = SHIFT_INPUT_SEED, SHIFT_NOISE_SEED
+    cache: dict[str, object] = {}
+
+    def simulator(scenario, seeds):
+        if scenario.name not in cache:
+            runs = simulate_scenario(scenario, [NOMINAL_NOISE_OFFSET + s for s in seeds])
+            cache[scenario.name] = runs.assign_coords(run=list(seeds))
+        return cache[scenario.name].sel(run=list(seeds))
+
+    for variant in args.variants.split(","):
+        t0 = time.process_time()
+        model = refit_isolation(base, signatures, variant)
+        out = Path(args.out) / variant
+        options = dict(
+            n_seeds=args.seeds, hours=0.5, figures=False, progress=False, n_bootstrap=100
+        )
+        if args.shift:
+            result = shift.run_shift_benchmark(model, out, **options)
+            for family in result["families"]:
+                name = family["name"]
+                one = json.loads((out / name / "benchmark.json").read_text())
+                print(f"{variant} {name}: {summary(one)}", flush=True)
+        else:
+            result = run_benchmark(model, out, real_hour=False, simulator=simulator, **options)
+            print(f"{variant}: {summary(result)}", flush=True)
+        print(f"{variant}: {time.process_time() - t0:.0f} CPU s", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,70 @@
+"""The refit of ``benchmarks/isolation_classifiers.py``: the isolation as the fit fits it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from benchmark_scripts import load_benchmark
+
+from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
+from bayes_fdi.calibration import TemperatureScaler
+from bayes_fdi.diagnosis import OnlineDiagnoser
+from bayes_fdi.diagnosis.isolation import ForestClassifier
+from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
+from bayes_fdi.diagnosis.online.training import detection_components, training_signatures
+
+tool = load_benchmark("isolation_classifiers")
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    models = DynamicNormalModels(
+        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
+        calibration_folds=2, random_state=0,
+    )  # fmt: skip
+    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    kinds = ("f1", "f7", "f18")
+    specs = [Fault(f, s, 100.0) for f in kinds for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
+    faults = simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
+    held = [Fault(f, s, 80.0) for f in kinds for s in (0.5, 0.9)]
+    validation = simulate(benchmark_inputs(len(held), 300, seed=4, vary=True), held, seed=4)
+    calibration = simulate(benchmark_inputs(len(held), 300, seed=5, vary=True), held, seed=5)
+    diag = OnlineDiagnoser(
+        models, calibrator=TemperatureScaler(), max_signatures_per_fault=20, random_state=0
+    ).fit(normal, faults, validation_runs=validation, calibration_runs=calibration)
+    components = detection_components(diag)
+    X, y, _, _ = training_signatures(components, faults)
+    Xv, yv, av, _ = training_signatures(components, validation)
+    Xc, yc, _, _ = training_signatures(components, calibration, per_second=True)
+    return diag, ((X, y), (Xv, yv, av), (Xc, yc)), calibration
+
+
+def test_the_tree_at_the_fits_seed_is_the_fits_own_isolation(fitted):
+    diag, signatures, calibration = fitted
+    again = tool.refit_isolation(diag, signatures, "tree@0")
+    assert again is not diag and again.isolator_ is not diag.isolator_
+    assert again.groups_ == diag.groups_
+    assert again.isolator_.temperature() == diag.isolator_.temperature()
+    # the same decisions of every RVC; their weights may differ in the last bits between two
+    # fits (the BLAS's rounding can follow the arrays' memory alignment), not more
+    rows = signatures[2][0][:50]
+    np.testing.assert_allclose(again.isolator_.run(rows).group_proba,
+                               diag.isolator_.run(rows).group_proba, rtol=1e-10, atol=0)  # fmt: skip
+    # the detection is the model's own: the same stream but for the isolation
+    runs = calibration[["CV", "P1", "P2", "T1", "X", "F"]]
+    np.testing.assert_array_equal(again.run(runs)["DD"].values, diag.run(runs)["DD"].values)
+
+
+def test_a_forest_variant_and_an_unknown_one(fitted):
+    diag, signatures, _ = fitted
+    forest = tool.refit_isolation(diag, signatures, "forest@1")
+    assert isinstance(forest.isolator_.classifier_, ForestClassifier)
+    # a forest refitted at the same seed is the same forest, bit for bit
+    twice = tool.refit_isolation(diag, signatures, "forest@1")
+    rows = signatures[2][0][:50]
+    np.testing.assert_array_equal(twice.isolator_.run(rows).group_proba,
+                                  forest.isolator_.run(rows).group_proba)  # fmt: skip
+    assert forest.isolator_.classifier_.random_state == 1
+    assert not isinstance(diag.isolator_.classifier_, ForestClassifier)  # a copy was refitted
+    with pytest.raises(SystemExit, match="unknown classifier 'svm' in 'svm@0'"):
+        tool.refit_isolation(diag, signatures, "svm@0")
