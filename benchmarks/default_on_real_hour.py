@@ -9,10 +9,10 @@ SEVA statuses), then over its second half with each of the DAMADICS faults below
 into it (`bayes_fdi.twin.transplant` with the actuator's nominal parameters, not a twin of this
 valve; strength ``--strength`` with the benchmark's direction, from ``--onset`` s into the
 half). Per fault: the share of the seconds before the onset with DD on, the share after it, the
-seconds to the first detection, whether DD stayed on from then to the end, the two states
-named most often over the detected seconds, and the seconds after the onset that named another
-known group at a probability above 0.9 (confident wrong). The faults are those of the benchmark's big abrupt
-scenarios (`bayes_fdi.benchmark.scenarios.SCENARIOS`).
+seconds to the first detection, whether DD stayed on from then to the end, the two states named
+most often over the detected seconds, and the seconds after the onset that named another known
+group at a probability above 0.9 (confident wrong). The faults are those of the benchmark's big
+abrupt scenarios (`bayes_fdi.benchmark.scenarios.SCENARIOS`).
 """
 
 from __future__ import annotations

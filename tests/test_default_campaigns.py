@@ -147,3 +147,13 @@ def test_the_long_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones
     # the seeds of the long calibration stay below 1000 with the largest allowed seed
     top = simulation_plan(seed=548, training="dgen", calibration="top-label-long")
     assert max(s for _, _, s in top) < 1000
+
+
+def test_the_forest_option_names_the_faults_with_a_seeded_forest():
+    from bayes_fdi.diagnosis.isolation import ForestClassifier
+
+    diag = fit_online_diagnoser(seed=3, small=True, progress=False, isolation="forest")
+    forest = diag.isolator_.classifier_
+    assert isinstance(forest, ForestClassifier) and forest.random_state == 3
+    assert diag.isolator_.rows_independent  # its compiled per-second pass
+    assert diag.normal_models_.physics_inputs == DEFAULT_PHYSICS_INPUTS[DEFAULT_TRAINING]

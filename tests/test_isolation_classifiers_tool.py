@@ -48,8 +48,8 @@ def test_the_tree_at_the_fits_seed_is_the_fits_own_isolation(fitted):
     # the same decisions of every RVC; their weights may differ in the last bits between two
     # fits (the BLAS's rounding can follow the arrays' memory alignment), not more
     rows = signatures[2][0][:50]
-    np.testing.assert_allclose(again.isolator_.run(rows).group_proba,
-                               diag.isolator_.run(rows).group_proba, rtol=1e-10, atol=0)  # fmt: skip
+    want = diag.isolator_.run(rows).group_proba
+    np.testing.assert_allclose(again.isolator_.run(rows).group_proba, want, rtol=1e-10, atol=0)
     # the detection is the model's own: the same stream but for the isolation
     runs = calibration[["CV", "P1", "P2", "T1", "X", "F"]]
     np.testing.assert_array_equal(again.run(runs)["DD"].values, diag.run(runs)["DD"].values)

@@ -118,9 +118,9 @@ def test_fit_default_writes_a_model_that_diagnose_reads(cache, tmp_path, capsys)
     assert isinstance(fitted.detector_, CUSUM) and not isinstance(fitted.detector_, TwoSpeedCUSUM)
     assert fitted.normal_models_.physics_inputs == ("command_lag",)
     assert fitted.normal_models_.std_coverage == 0.9
-    # a random forest names the faults, through the compiled per-second pass
-    assert isinstance(fitted.isolator_.classifier_, ForestClassifier)
-    assert fitted.isolator_.rows_independent
+    # the k-means tree of RVCs names the faults, through the compiled per-second pass
+    assert not isinstance(fitted.isolator_.classifier_, ForestClassifier)
+    assert fitted.isolator_.lean_ is not None and fitted.isolator_.rows_independent
     # same seed, same settings: the same model as the cached default (same stream)
     hour = load_lublin_example().isel(run=0, time=slice(0, 600))
     a = fitted.run(hour)

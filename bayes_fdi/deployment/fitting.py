@@ -55,7 +55,7 @@ __all__ = [
 #: `bayes_fdi.default_diagnoser`, named here so that the command line starts without it).
 DEFAULT_TRAININGS = ("excitation-mix", "dgen")
 #: The default model's isolation classifier (`bayes_fdi.default_diagnoser.DEFAULT_ISOLATION`).
-DEFAULT_MODEL_ISOLATION = "forest"
+DEFAULT_MODEL_ISOLATION = "tree"
 #: Environment variable naming the cache folder of the default model.
 CACHE_ENV = "BAYES_FDI_CACHE"
 #: Environment variable asking for the small (quick) settings, as the notebooks use.

@@ -16,8 +16,8 @@
 - `bayes_fdi.diagnosis.isolation.compiled_tree`: `LeanTree`, the compiled predictor of a tree
   of RVCs.
 - `bayes_fdi.diagnosis.isolation.forest`: `ForestClassifier`, a random forest kept as arrays
-  with a compiled predictor (the default model's isolation classifier, and a commissioned
-  valve's alternative).
+  with a compiled predictor (an alternative isolation classifier of a commissioned valve and of
+  the default model).
 - `bayes_fdi.diagnosis.isolation.compiled_isolation`: the isolator's per-second pass of the tree
   or the forest, compiled (group sums, temperature, novelty, row by row).
 

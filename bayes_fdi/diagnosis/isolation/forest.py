@@ -8,13 +8,13 @@ classes). A model file thus holds plain arrays, which load with any scikit-learn
 leaves' proportions in tree order, so a row's result never depends on the rows around it. It
 agrees with the fitted forest's ``predict_proba`` to rounding (tested).
 
-The default model names its faults with it (`bayes_fdi.default_diagnoser.DEFAULT_ISOLATION`), and
-a commissioned diagnoser may (`bayes_fdi.commissioning.commission`, ``isolation="forest"``):
-splits on one feature at a time ignore the scale of the signatures,
-whose magnitudes span orders (a residual shift of 0.1 or of 80 noise standard deviations), and
-the features a fault does not move. Unlike the k-means tree of RVCs, whose probabilities fall
-towards even odds away from its training signatures, a forest can be confident about a
-signature unlike all of them.
+A commissioned diagnoser may name its faults with it (`bayes_fdi.commissioning.commission`,
+``isolation="forest"``), and so may the default model (`bayes_fdi.default_diagnoser`
+``fit_online_diagnoser(isolation="forest")``): splits on one feature at a time ignore the scale
+of the signatures, whose magnitudes span orders (a residual shift of 0.1 or of 80 noise standard
+deviations), and the features a fault does not move. Unlike the k-means tree of RVCs, whose
+probabilities fall towards even odds away from its training signatures, a forest can be
+confident about a signature unlike all of them.
 
 Written by hand: the per-row compiled evaluation of the fitted trees; the fit is
 scikit-learn's.
