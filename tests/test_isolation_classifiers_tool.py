@@ -5,12 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from benchmark_scripts import load_benchmark
+from small_online import small_normal_models, small_runs
 
-from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.calibration import TemperatureScaler
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.isolation import ForestClassifier
-from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 from bayes_fdi.diagnosis.online.training import detection_components, training_signatures
 
 tool = load_benchmark("isolation_classifiers")
@@ -18,20 +17,13 @@ tool = load_benchmark("isolation_classifiers")
 
 @pytest.fixture(scope="module")
 def fitted():
-    models = DynamicNormalModels(
-        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
-        calibration_folds=2, random_state=0,
-    )  # fmt: skip
-    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
-    kinds = ("f1", "f7", "f18")
-    specs = [Fault(f, s, 100.0) for f in kinds for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
-    faults = simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
-    held = [Fault(f, s, 80.0) for f in kinds for s in (0.5, 0.9)]
-    validation = simulate(benchmark_inputs(len(held), 300, seed=4, vary=True), held, seed=4)
-    calibration = simulate(benchmark_inputs(len(held), 300, seed=5, vary=True), held, seed=5)
+    runs = small_runs()
     diag = OnlineDiagnoser(
-        models, calibrator=TemperatureScaler(), max_signatures_per_fault=20, random_state=0
-    ).fit(normal, faults, validation_runs=validation, calibration_runs=calibration)
+        small_normal_models(), calibrator=TemperatureScaler(), max_signatures_per_fault=20,
+        random_state=0,
+    ).fit(runs.normal, runs.faults, validation_runs=runs.validation,
+          calibration_runs=runs.calibration)  # fmt: skip
+    faults, validation, calibration = runs.faults, runs.validation, runs.calibration
     components = detection_components(diag)
     X, y, _, _ = training_signatures(components, faults)
     Xv, yv, av, _ = training_signatures(components, validation)

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from small_online import small_normal_models, small_runs
 
-from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.calibration import TemperatureScaler, TopLabelScaler, expected_calibration_error
 from bayes_fdi.diagnosis import OnlineDiagnoser
-from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 from bayes_fdi.diagnosis.online.training import CALIBRATION_SECONDS_PER_RUN, detected_seconds
 
 
@@ -32,21 +31,12 @@ def test_detected_seconds_by_hand():
 
 @pytest.fixture(scope="module", params=[TemperatureScaler, TopLabelScaler])
 def fitted(request):
-    models = DynamicNormalModels(
-        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
-        calibration_folds=2, random_state=0,
-    )  # fmt: skip
-    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
-    kinds = ("f1", "f7", "f18")
-    specs = [Fault(f, s, 100.0) for f in kinds for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
-    faults = simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
-    held = [Fault(f, s, 80.0) for f in kinds for s in (0.5, 0.9)]
-    validation = simulate(benchmark_inputs(len(held), 300, seed=4, vary=True), held, seed=4)
-    calibration = simulate(benchmark_inputs(len(held), 300, seed=5, vary=True), held, seed=5)
-    diag = OnlineDiagnoser(models, calibrator=request.param(), max_signatures_per_fault=20).fit(
-        normal, faults, validation_runs=validation, calibration_runs=calibration
-    )
-    return diag, calibration
+    runs = small_runs()
+    diag = OnlineDiagnoser(
+        small_normal_models(), calibrator=request.param(), max_signatures_per_fault=20
+    ).fit(runs.normal, runs.faults, validation_runs=runs.validation,
+          calibration_runs=runs.calibration)  # fmt: skip
+    return diag, runs.calibration
 
 
 def _scored_seconds(stream, calibration, faults):
