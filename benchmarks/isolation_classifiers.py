@@ -1,13 +1,14 @@
 """The default model's isolation refitted with other classifiers, scored on held-out seeds.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/isolation_classifiers.py MODEL --out DIR \
-        [--variants tree@0,tree@1,forest@0] [--seeds 4] [--shift]
+        [--variants tree@0,tree@1,forest@0] [--seeds 4] [--shift | --plants 5,6]
 
 The online diagnoser of ``MODEL`` (e.g. the default model, fitted with seed 0) keeps its normal
 models, whitening and detector; its isolation is refitted on the signatures its own stream gives
 on the default training campaigns (`bayes_fdi.default_diagnoser.simulate_online_campaigns`,
 seed 0), as `fit_online_diagnoser` fits it, with each variant ``CLASSIFIER@SEED``: ``tree`` (the
-k-means tree of RVCs) or ``forest`` (`~bayes_fdi.diagnosis.isolation.ForestClassifier`), the seed
+k-means tree of RVCs), ``forest`` (`~bayes_fdi.diagnosis.isolation.ForestClassifier`) or
+``forest-t1`` (the forest, its temperature held at 1 or above so that it never sharpens), the seed
 drawing the training signatures kept per fault, the tree's design or the forest's bootstrap. The
 groups come from the validation runs, the temperature from the calibration runs, as in the fit.
 
@@ -16,7 +17,11 @@ Each variant is then scored with the benchmark's harness on seeds the benchmark 
 - nominal: the 44 Step-I scenarios with the noise seeds ``31000 + k`` (the evaluation seeds are
   ``10000 + k``), half a simulated fault-free hour, no real hour;
 - ``--shift``: the shift families (``sim/shift-*.toml``) with input seed 35 000 and noise seeds
-  from 45 000 (the shift benchmark's are 30 000 and 40 000).
+  from 45 000 (the shift benchmark's are 30 000 and 40 000);
+- ``--plants 5,6``: the 44 scenarios with 2 seeds on perturbed plants that the commissioning
+  benchmark never scores (it scores plants 0-4; `bayes_fdi.benchmark.plants.draw_plant`), whose
+  valves the default model was not trained on: the share of the faulty seconds named as a wrong
+  group at p > 0.9, and the big abrupt faults at r_ti >= 0.9.
 
 Writes ``DIR/VARIANT/`` (the benchmark's report and JSON; the ECE's interval from 100 bootstrap
 resamples of the runs) and prints one line per variant (and family): the group-level ECE with its
@@ -50,12 +55,13 @@ def refit_isolation(base, signatures, variant: str):
 
     kind, _, seed_text = variant.partition("@")
     seed = int(seed_text or 0)
+    bounds = (1.0, 50.0) if kind == "forest-t1" else (0.02, 50.0)
     if kind == "tree":
         classifier = HierarchicalClassifier(RVC(kernel="rbf", width=2.0), random_state=seed)
-    elif kind == "forest":
+    elif kind in ("forest", "forest-t1"):
         classifier = ForestClassifier(random_state=seed)
     else:
-        raise SystemExit(f"unknown classifier {kind!r} in {variant!r}: tree or forest")
+        raise SystemExit(f"unknown classifier {kind!r} in {variant!r}: tree, forest, forest-t1")
     (X, y), (Xv, yv, av), (Xc, yc) = signatures
     known = list(base.isolator_.faults_)
     keep = np.flatnonzero(np.isin(y, known))
@@ -65,7 +71,7 @@ def refit_isolation(base, signatures, variant: str):
     ckeep = np.isin(yc, known)
     isolator = FaultIsolator(
         classifier,
-        calibrator=TemperatureScaler(),
+        calibrator=TemperatureScaler(bounds=bounds),
         group_threshold=base.group_threshold,
         random_state=seed,
     ).fit(
@@ -92,6 +98,34 @@ def summary(result: dict) -> str:
     )
 
 
+def plant_summary(model, index: int) -> str:
+    """The model on perturbed plant ``index``: the 44 scenarios with its seeds 0 and 1, scored
+    as the commissioning benchmark scores its plants."""
+    from bayes_fdi.benchmark.cases import zeroed
+    from bayes_fdi.benchmark.plant_runs import POSITION, plant_case_row
+    from bayes_fdi.benchmark.plants import draw_plant, scenario_run
+    from bayes_fdi.benchmark.scenarios import SCENARIOS
+    from bayes_fdi.datasets import CHANNELS
+
+    plant = draw_plant(index)
+    wrong = faulty = 0
+    r_ti: dict[str, list[float]] = {}
+    for k in (0, 1):
+        for scenario in SCENARIOS:
+            run = scenario_run(plant, scenario, k, POSITION[scenario.name])[list(CHANNELS)]
+            row = plant_case_row(plant, scenario, k, zeroed(model.run(run).isel(run=0)))
+            wrong += row["confident_wrong_seconds"]
+            faulty += row["faulty_seconds"]
+            big = scenario.mode == "abrupt" and scenario.size == "big"
+            if big and row["indices"]["t_dt"] >= 0:
+                r_ti.setdefault(scenario.name, []).append(row["indices"]["r_ti"])
+    high = sum(float(np.median(v)) >= 0.9 for v in r_ti.values())
+    return (
+        f"confident wrong {100 * wrong / faulty:.2f} % of {faulty} faulty s; r_ti >= 0.9 for "
+        f"{high} of the {len(r_ti)} big abrupt faults detected in a seed"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("model", help="a model file of a fitted OnlineDiagnoser with isolation")
@@ -99,6 +133,7 @@ def main() -> None:
     parser.add_argument("--variants", default="tree@0,tree@1,tree@2,forest@0,forest@1,forest@2")
     parser.add_argument("--seeds", type=int, default=4, help="noise seeds per scenario")
     parser.add_argument("--shift", action="store_true", help="under the shift families")
+    parser.add_argument("--plants", default=None, help="perturbed plants, e.g. 5,6")
     args = parser.parse_args()
     import bayes_fdi.benchmark.shift as shift
     from bayes_fdi.benchmark.harness import run_benchmark
@@ -133,7 +168,10 @@ def main() -> None:
         options = dict(
             n_seeds=args.seeds, hours=0.5, figures=False, progress=False, n_bootstrap=100
         )
-        if args.shift:
+        if args.plants:
+            for plant in args.plants.split(","):
+                print(f"{variant} plant {plant}: {plant_summary(model, int(plant))}", flush=True)
+        elif args.shift:
             result = shift.run_shift_benchmark(model, out, **options)
             for family in result["families"]:
                 name = family["name"]
