@@ -157,3 +157,14 @@ def test_the_forest_option_names_the_faults_with_a_seeded_forest():
     assert isinstance(forest, ForestClassifier) and forest.random_state == 3
     assert diag.isolator_.rows_independent  # its compiled per-second pass
     assert diag.normal_models_.physics_inputs == DEFAULT_PHYSICS_INPUTS[DEFAULT_TRAINING]
+    # a stream in two chunks is the stream in one, probabilities included
+    from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
+
+    run = simulate(benchmark_inputs(1, 400, seed=7), [Fault("f18", 0.8, 150.0)], seed=7)
+    run = run[["CV", "P1", "P2", "T1", "X", "F"]].isel(run=0)
+    whole = diag.run(run)
+    first, state = diag.run(run.isel(time=slice(0, 230)), return_state=True)
+    second = diag.run(run.isel(time=slice(230, None)), state=state)
+    assert whole["DD"].values[230:].any()
+    joined = np.concatenate([first["group_proba"].values, second["group_proba"].values])
+    np.testing.assert_array_equal(joined, whole["group_proba"].values)
