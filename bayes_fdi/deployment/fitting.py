@@ -54,8 +54,6 @@ __all__ = [
 #: The trainings of ``bayes-fdi fit --default --training``, the default first (those of
 #: `bayes_fdi.default_diagnoser`, named here so that the command line starts without it).
 DEFAULT_TRAININGS = ("excitation-mix", "dgen")
-#: The default model's isolation classifier (`bayes_fdi.default_diagnoser.DEFAULT_ISOLATION`).
-DEFAULT_MODEL_ISOLATION = "tree"
 #: Environment variable naming the cache folder of the default model.
 CACHE_ENV = "BAYES_FDI_CACHE"
 #: Environment variable asking for the small (quick) settings, as the notebooks use.
@@ -82,8 +80,8 @@ def default_model_path(*, small: bool | None = None) -> Path:
 
     small = _small() if small is None else small
     training, suffix = DEFAULT_TRAININGS[0], "-small" if small else ""
-    name = f"online-diagnoser-{__version__}-f{model_files.FORMAT_VERSION}-{training}"
-    return cache_dir() / f"{name}-{DEFAULT_MODEL_ISOLATION}{suffix}.npz"
+    name = f"online-diagnoser-{__version__}-f{model_files.FORMAT_VERSION}-{training}{suffix}.npz"
+    return cache_dir() / name
 
 
 def _default_fitter() -> Callable[..., Any]:

@@ -302,14 +302,23 @@ class FaultIsolator:
         coef = getattr(self.calibrator_, "top_map_", None)
         return np.zeros(0) if coef is None else np.ascontiguousarray(coef, dtype=np.float64)
 
+    def _compiled_rows(self) -> tuple[Any, Any] | None:
+        """The compiled path's classifier arrays and the row loop that takes them, or None: a
+        compiled tree or a `ForestClassifier`, with no calibrator, a temperature scaling or a
+        top-label scaling."""
+        if self.calibrator_ is not None and self.temperature() is None:
+            return None
+        if self.lean_ is not None:
+            return self.lean_.arrays(), isolate_rows
+        if isinstance(self.classifier_, ForestClassifier):
+            return self.classifier_.arrays(), isolate_forest_rows
+        return None
+
     @property
     def rows_independent(self) -> bool:
         """Whether `run` gives each row the numbers it gives that row alone (the compiled
-        path: a compiled tree or a `ForestClassifier`, with no calibrator, a temperature
-        scaling or a top-label scaling)."""
-        compiled_calibration = self.calibrator_ is None or self.temperature() is not None
-        forest = isinstance(self.classifier_, ForestClassifier)
-        return (self.lean_ is not None or forest) and compiled_calibration
+        path, `_compiled_rows`)."""
+        return self._compiled_rows() is not None
 
     @property
     def group_of_(self) -> np.ndarray:
@@ -346,11 +355,12 @@ class FaultIsolator:
         n_f, n_g = self.faults_.size, len(self.groups_)
         fq, gq, nov = np.empty((n, n_f)), np.empty((n, n_g)), np.empty(n)
         T = self.temperature()
-        if self.rows_independent:
+        compiled = self._compiled_rows()
+        if compiled is not None:
             floor = float(getattr(self.calibrator_, "floor", 1e-12))
-            forest = self.lean_ is None
+            arrays, isolate = compiled
             params = IsolationParams(
-                classifier=self.classifier_.arrays() if forest else self.lean_.arrays(),
+                classifier=arrays,
                 group_of=self.group_of_,
                 n_groups=n_g,
                 temperature=0.0 if T is None else T,
@@ -358,7 +368,7 @@ class FaultIsolator:
                 top_map=self.top_map(),
                 novelty=self.novelty_.arrays(),
             )
-            (isolate_forest_rows if forest else isolate_rows)(feats, params, fq, gq, nov)
+            isolate(feats, params, fq, gq, nov)
             return IsolationOutput(fq, gq, nov)
         fq[:], gq[:], nov[:] = np.nan, np.nan, np.nan
         ok = np.all(np.isfinite(feats), axis=1)
