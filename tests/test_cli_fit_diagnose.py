@@ -238,15 +238,12 @@ def test_default_model_is_fitted_once_and_cached(tmp_path, monkeypatch, capsys):
 
 
 def test_fit_default_training_reaches_the_fitter_and_needs_default(tmp_path, monkeypatch, capsys):
-    from bayes_fdi.default_diagnoser import DEFAULT_ISOLATION, DEFAULT_TRAINING, TRAININGS
+    from bayes_fdi.default_diagnoser import DEFAULT_TRAINING, TRAININGS
 
     # the command line names the trainings without importing them: the same, the default first
     assert model_fitting.DEFAULT_TRAININGS[0] == DEFAULT_TRAINING
     assert set(model_fitting.DEFAULT_TRAININGS) == set(TRAININGS)
     assert DEFAULT_TRAINING in model_fitting.default_model_path(small=False).name
-    # and its isolation, so that a model cached with another classifier is not reused
-    assert model_fitting.DEFAULT_MODEL_ISOLATION == DEFAULT_ISOLATION[DEFAULT_TRAINING]
-    assert f"-{DEFAULT_ISOLATION[DEFAULT_TRAINING]}" in model_fitting.default_model_path().name
     calls = []
 
     def fake_fitter(seed, small, progress, **options):
