@@ -45,43 +45,33 @@ NOMINAL_NOISE_OFFSET = 21_000
 SHIFT_INPUT_SEED, SHIFT_NOISE_SEED = 35_000, 45_000
 
 
-def refit_isolation(base, signatures, variant: str):
-    """A copy of ``base`` whose isolator is refitted with ``variant`` (``tree@S``, ``forest@S``)."""
+def refit_isolation(base, runs, variant: str):
+    """A copy of ``base`` whose isolation is refitted on ``runs`` (training, validation and
+    calibration fault runs) with ``variant`` (``tree@S``, ``forest@S``, ``forest-t1@S``), as
+    `fit_online_diagnoser` fits it (`~bayes_fdi.diagnosis.online.training.fit_isolation`)."""
     from bayes_fdi.calibration import TemperatureScaler
-    from bayes_fdi.diagnosis.isolation import ForestClassifier, HierarchicalClassifier
-    from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
-    from bayes_fdi.diagnosis.online.training import GROUP_MIN_AGE, cap_rows
-    from bayes_fdi.rvm import RVC
+    from bayes_fdi.diagnosis.isolation import ForestClassifier
+    from bayes_fdi.diagnosis.online.training import detection_components, fit_isolation
 
     kind, _, seed_text = variant.partition("@")
     seed = int(seed_text or 0)
-    bounds = (1.0, 50.0) if kind == "forest-t1" else (0.02, 50.0)
-    if kind == "tree":
-        classifier = HierarchicalClassifier(RVC(kernel="rbf", width=2.0), random_state=seed)
-    elif kind in ("forest", "forest-t1"):
-        classifier = ForestClassifier(random_state=seed)
-    else:
+    if kind not in ("tree", "forest", "forest-t1"):
         raise SystemExit(f"unknown classifier {kind!r} in {variant!r}: tree, forest, forest-t1")
-    (X, y), (Xv, yv, av), (Xc, yc) = signatures
-    known = list(base.isolator_.faults_)
-    keep = np.flatnonzero(np.isin(y, known))
-    rng = np.random.default_rng([seed, 5])
-    keep = keep[cap_rows(y[keep], int(base.max_signatures_per_fault), rng)]
-    vkeep = np.isin(yv, known) & (av >= GROUP_MIN_AGE)
-    ckeep = np.isin(yc, known)
-    isolator = FaultIsolator(
-        classifier,
-        calibrator=TemperatureScaler(bounds=bounds),
+    fitted = fit_isolation(
+        detection_components(base),
+        *runs,
+        classifier=None if kind == "tree" else ForestClassifier(random_state=seed),
+        calibrator=TemperatureScaler(bounds=(1.0, 50.0) if kind == "forest-t1" else (0.02, 50.0)),
         group_threshold=base.group_threshold,
+        detect_rate=base.detect_rate,
+        max_signatures_per_fault=base.max_signatures_per_fault,
         random_state=seed,
-    ).fit(
-        X[keep],
-        y[keep],
-        validation=(Xv[vkeep], yv[vkeep]),
-        calibration=(Xc[ckeep], yc[ckeep]),
+        seconds={},
+        group_rule=base.isolator_.group_rule,
     )
     model = copy.deepcopy(base)
-    model.isolator_ = isolator
+    model.isolator_, model.undetectable_ = fitted.isolator, fitted.undetectable
+    model.detection_rates_ = fitted.detection_rates
     return model
 
 
@@ -102,27 +92,27 @@ def plant_summary(model, index: int) -> str:
     """The model on perturbed plant ``index``: the 44 scenarios with its seeds 0 and 1, scored
     as the commissioning benchmark scores its plants."""
     from bayes_fdi.benchmark.cases import zeroed
+    from bayes_fdi.benchmark.commissioning_summary import confident_wrong_share
     from bayes_fdi.benchmark.plant_runs import POSITION, plant_case_row
     from bayes_fdi.benchmark.plants import draw_plant, scenario_run
     from bayes_fdi.benchmark.scenarios import SCENARIOS
     from bayes_fdi.datasets import CHANNELS
 
     plant = draw_plant(index)
-    wrong = faulty = 0
-    r_ti: dict[str, list[float]] = {}
+    rows = []
     for k in (0, 1):
         for scenario in SCENARIOS:
             run = scenario_run(plant, scenario, k, POSITION[scenario.name])[list(CHANNELS)]
-            row = plant_case_row(plant, scenario, k, zeroed(model.run(run).isel(run=0)))
-            wrong += row["confident_wrong_seconds"]
-            faulty += row["faulty_seconds"]
-            big = scenario.mode == "abrupt" and scenario.size == "big"
-            if big and row["indices"]["t_dt"] >= 0:
-                r_ti.setdefault(scenario.name, []).append(row["indices"]["r_ti"])
+            rows.append(plant_case_row(plant, scenario, k, zeroed(model.run(run).isel(run=0))))
+    wrong = confident_wrong_share(rows)
+    r_ti: dict[str, list[float]] = {}
+    for row in rows:
+        if row["mode"] == "abrupt" and row["size"] == "big" and row["indices"]["t_dt"] >= 0:
+            r_ti.setdefault(row["scenario"], []).append(row["indices"]["r_ti"])
     high = sum(float(np.median(v)) >= 0.9 for v in r_ti.values())
     return (
-        f"confident wrong {100 * wrong / faulty:.2f} % of {faulty} faulty s; r_ti >= 0.9 for "
-        f"{high} of the {len(r_ti)} big abrupt faults detected in a seed"
+        f"confident wrong {100 * wrong['share']:.2f} % of {wrong['faulty_seconds']} faulty s; "
+        f"r_ti >= 0.9 for {high} of the {len(r_ti)} big abrupt faults detected in a seed"
     )
 
 
@@ -140,17 +130,12 @@ def main() -> None:
     from bayes_fdi.benchmark.scenarios import simulate_scenario
     from bayes_fdi.default_diagnoser import simulate_online_campaigns
     from bayes_fdi.deployment.fitting import load_online_model
-    from bayes_fdi.diagnosis.online.training import detection_components, training_signatures
 
     base = load_online_model(args.model)
     if base.isolator_ is None:
         raise SystemExit(f"{args.model}: a detection-only model has no isolation to refit")
     data = simulate_online_campaigns(seed=0, progress=False)
-    components = detection_components(base)
-    X, y, _, _ = training_signatures(components, data["train"])
-    Xv, yv, av, _ = training_signatures(components, data["validation"])
-    Xc, yc, _, _ = training_signatures(components, data["calibration"], per_second=True)
-    signatures = ((X, y), (Xv, yv, av), (Xc, yc))
+    runs = (data["train"], data["validation"], data["calibration"])
     # the selection seeds: the shift families' module seeds, the nominal scenarios' noise
     shift.SHIFT_INPUT_SEED, shift.SHIFT_NOISE_SEED = SHIFT_INPUT_SEED, SHIFT_NOISE_SEED
     cache: dict[str, object] = {}
@@ -163,7 +148,7 @@ def main() -> None:
 
     for variant in args.variants.split(","):
         t0 = time.process_time()
-        model = refit_isolation(base, signatures, variant)
+        model = refit_isolation(base, runs, variant)
         out = Path(args.out) / variant
         options = dict(
             n_seeds=args.seeds, hours=0.5, figures=False, progress=False, n_bootstrap=100
