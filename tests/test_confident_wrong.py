@@ -42,6 +42,7 @@ def _stream() -> xr.Dataset:
         "novelty": np.array([s[2] for s in SECONDS]),
         "novel_inputs": np.zeros(n, dtype=bool),
         "novel_onset": np.array([s[3] for s in SECONDS]),
+        "unproven_onset": np.zeros(n, dtype=bool),
         "stat_X": np.ones(n),
         "stat_F": np.zeros(n),
         "features": np.zeros((n, 2)),

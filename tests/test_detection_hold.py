@@ -22,7 +22,13 @@ from bayes_fdi.diagnosis.detection import (
 )
 from bayes_fdi.diagnosis.isolation import SignatureWindow
 from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
-from bayes_fdi.diagnosis.online import InputEnvelope, PerOutput, RunState, StreamState
+from bayes_fdi.diagnosis.online import (
+    FitProof,
+    InputEnvelope,
+    PerOutput,
+    RunState,
+    StreamState,
+)
 from bayes_fdi.scoring.picalc import first_detection, picalc
 
 NAN = np.nan
@@ -157,6 +163,7 @@ def test_a_checkpointed_stream_state_without_the_quiet_count_decodes():
         decision=DetectionDecision(1.0, hold=5).init_state(),
         signature=SignatureWindow().init_state(),
         onset=InputEnvelope().init_state(),
+        proof=FitProof().init_state(),
         seconds=4,
     )
     arrays = StreamState.of_runs([one, one]).arrays()
@@ -207,10 +214,10 @@ def test_training_signatures_are_those_of_plain_hysteresis():
     specs = [Fault(f, s, 100.0) for f in ("f1", "f18") for s in (0.3, 0.6, 1.0)]
     faults = simulate(benchmark_inputs(len(specs), 400, seed=2, vary=True), specs, seed=2)
     parts = (diag.normal_models_, PerOutput(diag.whiteners_["X"], diag.whiteners_["F"]))
-    rest = (diag.detector_, diag.decision_, diag.signature_, diag.envelope_, None)
+    rest = (diag.detector_, diag.decision_, diag.signature_, diag.envelope_, FitProof(), None)
     held = training_signatures(Components(*parts, *rest), faults)
     plain_decision = DetectionDecision(diag.threshold_, diag.clear_level_, 2, hold=0)
-    rest = (diag.detector_, plain_decision, diag.signature_, diag.envelope_, None)
+    rest = (diag.detector_, plain_decision, diag.signature_, diag.envelope_, FitProof(), None)
     plain = training_signatures(Components(*parts, *rest), faults)
     assert held.detected == plain.detected and held.rows.shape[0] > 0
     # while the streams' DD differ on these runs: the hold keeps alarms on longer
@@ -249,7 +256,7 @@ def test_training_signatures_do_not_depend_on_the_variance_hold():
     specs = [Fault(f, s, 100.0) for f in ("f11", "f18") for s in (0.5, 1.0)]
     faults = simulate(benchmark_inputs(len(specs), 400, seed=2, vary=True), specs, seed=2)
     parts = (diag.normal_models_, PerOutput(diag.whiteners_["X"], diag.whiteners_["F"]))
-    rest = (diag.decision_, diag.signature_, diag.envelope_, None)
+    rest = (diag.decision_, diag.signature_, diag.envelope_, FitProof(), None)
     held = Components(*parts, diag.detector_, *rest)
     plain = Components(*parts, CUSUM(k=0.5, threshold=diag.threshold_), *rest)
     a, b = training_signatures(held, faults), training_signatures(plain, faults)

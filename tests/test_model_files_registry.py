@@ -54,9 +54,10 @@ def test_online_diagnoser_saved_by_0_1_0_gives_the_same_stream_and_continues_it(
     expected = xr.load_dataset(FIXTURES / "online.expected.nc")
     stream = model.run(recording)
     # every variable 0.1.0 gave is given identically; variables added since come on top
-    added = {"evidence", "novel_inputs", "novel_signature", "novel_onset"}
+    added = {"evidence", "novel_inputs", "novel_signature", "novel_onset", "unproven_onset"}
     assert set(stream.data_vars) - set(expected.data_vars) == added
-    assert set(stream.attrs) - set(expected.attrs) == {"p_fault", "novelty_ratio"}  # added
+    added_attrs = {"p_fault", "novelty_ratio", "fit_proof_seconds"}
+    assert set(stream.attrs) - set(expected.attrs) == added_attrs
     same = stream[list(expected.data_vars)]
     same.attrs = {k: v for k, v in same.attrs.items() if k in expected.attrs}
     xr.testing.assert_identical(same, expected)

@@ -377,7 +377,7 @@ def test_settings_that_are_not_real_numbers_or_out_of_range_are_refused_by_name(
     params = OnlineDiagnoser().get_params()
     assert set(NUMERIC_SETTINGS) == {
         "false_alarm_hours", "cusum_k", "glr_window", "p_fault", "novelty_ratio", "coverage",
-        "detect_rate", "input_margin", "max_signatures_per_fault",
+        "detect_rate", "input_margin", "max_signatures_per_fault", "fit_proof_seconds",
     }  # fmt: skip
     check_settings(params)  # the defaults pass
     assert check_settings(dict(params, detect_rate=np.float64(0.25), glr_window=30)) is None
@@ -387,7 +387,8 @@ def test_settings_that_are_not_real_numbers_or_out_of_range_are_refused_by_name(
                 check_settings(dict(params, **{name: bad}))
     for name, bad in [("detect_rate", 1.5), ("detect_rate", float("nan")), ("p_fault", -0.1),
                       ("coverage", 1.0), ("false_alarm_hours", 0.0), ("glr_window", 2.5),
-                      ("max_signatures_per_fault", 1)]:  # fmt: skip
+                      ("max_signatures_per_fault", 1), ("fit_proof_seconds", 2.5),
+                      ("fit_proof_seconds", -1)]:  # fmt: skip
         with pytest.raises(ValueError, match=f"{name} is out of range"):
             check_settings(dict(params, **{name: bad}))
     # a fit refuses them too, before fitting anything

@@ -16,6 +16,7 @@ import pytest
 from bayes_fdi.benchmark.scenarios import SCENARIOS
 from bayes_fdi.cli import main
 from bayes_fdi.datasets import load_lublin_example
+from bayes_fdi.default_diagnoser import DEFAULT_FIT_PROOF_SECONDS
 from bayes_fdi.deployment import fitting as model_fitting
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.detection import CUSUM, TwoSpeedCUSUM
@@ -102,6 +103,30 @@ def test_diagnose_the_shipped_hour_writes_the_stream_of_the_model(cache):
     alarms = pd.read_csv(folder / "alarms.csv")
     assert len(alarms) == int(dd[0] + np.sum(dd[1:] & ~dd[:-1]))
     assert (folder / "timeline.png").stat().st_size > 10_000
+
+
+def test_diagnose_sets_the_fit_proof_of_the_model_it_loads(cache, tmp_path, capsys):
+    path, folder, *_, hour = cache
+    # the default model is trained on the simulator: it must see a valve fit before it names
+    # a fault there
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["isolation"]["fit_proof_seconds"] == DEFAULT_FIT_PROOF_SECONDS
+    argv = ["diagnose", str(hour), "--out", str(tmp_path), "--quiet", "--no-figure",
+            "--fit-proof-seconds", "3600"]  # fmt: skip
+    assert main(argv) == 0
+    summary = json.loads((tmp_path / "lublin-hour" / "summary.json").read_text())
+    assert summary["isolation"]["fit_proof_seconds"] == 3600
+    csv = pd.read_csv(tmp_path / "lublin-hour" / "seva.csv", keep_default_na=False)
+    model = OnlineDiagnoser.load(path).set_params(fit_proof_seconds=3600)
+    stream = model.run(load_lublin_example()[["CV", "P1", "P2", "T1", "X", "F"]].isel(run=0))
+    np.testing.assert_array_equal(csv["state"].to_numpy(), stream["state"].values.astype(str))
+    detected = csv["DD"].to_numpy().astype(bool)
+    assert set(csv["state"].to_numpy()[detected]) <= {"mismatch"}  # no fault within the hour
+    capsys.readouterr()
+    argv = ["diagnose", str(hour), "--out", str(tmp_path), "--commission-seconds", "1800",
+            "--fit-proof-seconds", "60"]  # fmt: skip
+    assert main(argv) == 2
+    assert "--fit-proof-seconds sets a loaded model's proof" in capsys.readouterr().err
 
 
 def test_fit_default_writes_a_model_that_diagnose_reads(cache, tmp_path, capsys):

@@ -14,7 +14,13 @@ from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.detection import ARWhitener, CUSUMState, DetectionDecision, GLRState
 from bayes_fdi.diagnosis.isolation import SignatureWindow
 from bayes_fdi.diagnosis.normal_models import DynamicNormalModels
-from bayes_fdi.diagnosis.online import InputEnvelope, PerOutput, RunState, StreamState
+from bayes_fdi.diagnosis.online import (
+    FitProof,
+    InputEnvelope,
+    PerOutput,
+    RunState,
+    StreamState,
+)
 from bayes_fdi.diagnosis.online.legacy import (
     upgrade_diagnoser,
     upgrade_run_state,
@@ -213,6 +219,7 @@ def test_stream_state_layout_is_checked():
         decision=DetectionDecision(1.0).init_state(),
         signature=SignatureWindow().init_state(),
         onset=InputEnvelope().init_state(),
+        proof=FitProof(60).init_state(),
         seconds=7,
     )
     state = StreamState.of_runs([one, one])
@@ -237,6 +244,7 @@ def test_stream_state_arrays_round_trip_by_path():
         decision=DetectionDecision(1.0).init_state(),
         signature=SignatureWindow().init_state(),
         onset=InputEnvelope().init_state(),
+        proof=FitProof(60).init_state(),
         seconds=3,
     )
     state = StreamState.of_runs([one])
@@ -252,6 +260,10 @@ def test_stream_state_arrays_round_trip_by_path():
     missing = {k: v for k, v in arrays.items() if k != "onset.average"}
     with pytest.raises(ValueError, match="no EnvelopeState at 'onset'"):
         StreamState.from_arrays(missing)
+    # a state saved before the fit proof: its fit counts as proven, as its model's detections were
+    older = StreamState.from_arrays({k: v for k, v in arrays.items() if not k.startswith("proof.")})
+    assert older.proof.proven.tolist() == [[True]] and older.proof.quiet.tolist() == [[0]]
+    assert not older.proof.detected.any() and not older.proof.unproven_at_onset.any()
 
 
 def test_a_checkpoint_of_the_flat_state_decodes_to_todays(saved):

@@ -281,7 +281,7 @@ def diagnose_files(
 # ----------------------------------------------------------------------------------------------
 def configure_parser(parser: argparse.ArgumentParser) -> None:
     """Add the arguments of ``bayes-fdi diagnose``."""
-    from bayes_fdi.cli_arguments import output_folder, positive_int
+    from bayes_fdi.cli_arguments import non_negative_int, output_folder, positive_int
     from bayes_fdi.deployment.fitting import add_reading_arguments
     from bayes_fdi.distributed import add_cluster_arguments
 
@@ -333,6 +333,17 @@ def configure_parser(parser: argparse.ArgumentParser) -> None:
         "classifier, the k-means tree of RVCs (default) or a random forest (as bayes-fdi "
         "commission --isolation)",
     )
+    parser.add_argument(
+        "--fit-proof-seconds",
+        type=non_negative_int,
+        default=None,
+        metavar="N",
+        help="with the default model or --model: seconds the stream must see the model fit the "
+        "valve, without detection, before it reads a detection as a fault; an earlier one is "
+        "'model mismatch: commission this valve' (default: the model's own, 600 for the "
+        "default model, which was trained on the simulator, 0 for a model fitted on the "
+        "valve's data)",
+    )
     parser.add_argument("--no-figure", action="store_true", help="do not draw timeline.png")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     add_reading_arguments(parser)
@@ -357,6 +368,11 @@ def run_from_cli(args: argparse.Namespace) -> int:
             "--isolation chooses the classifier of a model commissioned here: it belongs to "
             "--commission-seconds or --example (without --model)"
         )
+    if args.fit_proof_seconds is not None and commissions:
+        raise UsageError(
+            "--fit-proof-seconds sets a loaded model's proof; a model commissioned here was "
+            "fitted on the valve's own data and reads every detection as a fault"
+        )
     isolation = args.isolation or "tree"
     reading = reading_options(args)
     t0 = time.perf_counter()
@@ -379,6 +395,8 @@ def run_from_cli(args: argparse.Namespace) -> int:
         else:
             diagnoser = default_model(progress=not args.quiet)
             info = {"file": os.fspath(default_model_path()), "default": True}
+        if args.fit_proof_seconds is not None:
+            diagnoser.set_params(fit_proof_seconds=args.fit_proof_seconds)
         info["class"] = type(diagnoser).__name__
     if paths:
         results += diagnose_files(

@@ -181,7 +181,8 @@ def diagnose_recording(
 
 def isolation_summary(diagnoser: Any) -> dict[str, Any]:
     """What the model can name: ``detection_only`` (no fault library), its isolability
-    groups and the faults it treats as undetectable."""
+    groups, the faults it treats as undetectable, and ``fit_proof_seconds`` (the seconds it
+    must see the valve fit before it reads a detection as a fault)."""
     detection_only = getattr(diagnoser, "isolator_", True) is None
     groups = [list(g) for g in getattr(diagnoser, "groups_", ())]
     return {
@@ -194,6 +195,7 @@ def isolation_summary(diagnoser: Any) -> dict[str, Any]:
         ),
         "groups": groups,
         "undetectable": list(getattr(diagnoser, "undetectable_", ())),
+        "fit_proof_seconds": int(getattr(diagnoser, "fit_proof_seconds", 0)),
     }
 
 

@@ -109,6 +109,9 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
+#: 14: the online diagnoser's stream state holds its fit proof (``proof``, a `FitProofState`) and
+#: the diagnoser its ``fit_proof_seconds`` (older files load with 0: every detection proven, the
+#: stream they gave);
 #: 13: the online diagnoser may detect with `~bayes_fdi.diagnosis.detection.VarianceHoldCUSUM`
 #: (the CUSUM whose alarm holds while the innovations' variance stays high, and its state, which
 #: older readers do not know);
@@ -131,7 +134,7 @@ FORMAT_NAME = "bayes_fdi.model"
 #: 4: the detection decision's hold (``hold``, the state's ``quiet`` count); 3: the online
 #: diagnoser's components own their states; 2: classes named by their stable registered names;
 #: 1 (bayes_fdi 0.1.0): classes named by ``module:QualName``.
-FORMAT_VERSION = 13
+FORMAT_VERSION = 14
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.

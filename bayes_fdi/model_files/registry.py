@@ -70,6 +70,7 @@ PERSISTED: dict[str, str] = {
     "SignatureState": "bayes_fdi.diagnosis.isolation:SignatureState",
     "InputEnvelope": "bayes_fdi.diagnosis.online:InputEnvelope",
     "EnvelopeState": "bayes_fdi.diagnosis.online:EnvelopeState",
+    "FitProofState": "bayes_fdi.diagnosis.online:FitProofState",
     "RunState": "bayes_fdi.diagnosis.online:RunState",
     "PerOutput": "bayes_fdi.diagnosis.online:PerOutput",
     "NoveltyReference": "bayes_fdi.diagnosis.seva:NoveltyReference",

@@ -7,6 +7,8 @@ trust X and F.
   the seconds before it (the online components' states, nested).
 - `bayes_fdi.diagnosis.online.envelope`: `InputEnvelope`, the inputs' training range and the
   check of a detection's onset against it.
+- `bayes_fdi.diagnosis.online.fit_proof`: `FitProof`, whether the normal models were seen to
+  fit the valve before a detection, so that it may be read as a fault.
 - `bayes_fdi.diagnosis.online.change_point`: `change_ages`, the detector's estimated change
   point behind a detection, which that check looks up.
 - `bayes_fdi.diagnosis.online.stream`: the per-second decisions and the stream dataset.
@@ -21,12 +23,15 @@ May import the other concepts of `bayes_fdi.diagnosis`, `bayes_fdi.model_files`,
 
 from bayes_fdi.diagnosis.online.diagnoser import OnlineDiagnoser
 from bayes_fdi.diagnosis.online.envelope import EnvelopeState, InputEnvelope
+from bayes_fdi.diagnosis.online.fit_proof import FitProof, FitProofState
 from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
 from bayes_fdi.diagnosis.online.stream import FAULTS
 
 __all__ = [
     "FAULTS",
     "EnvelopeState",
+    "FitProof",
+    "FitProofState",
     "InputEnvelope",
     "OnlineDiagnoser",
     "PerOutput",

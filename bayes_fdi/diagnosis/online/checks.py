@@ -31,6 +31,7 @@ SETTING_RANGES: Mapping[str, Callable[[Any], bool]] = MappingProxyType(
         "detect_rate": lambda v: 0 <= v <= 1,
         "input_margin": lambda v: v >= 0,
         "max_signatures_per_fault": lambda v: v >= 2,
+        "fit_proof_seconds": lambda v: isinstance(v, int | np.integer) and v >= 0,
     }
 )
 #: The numeric settings `check_settings` checks, each of which must be a real number.

@@ -116,6 +116,15 @@ class OnlineDiagnoser(BaseEstimator):
         novel: the normal models extrapolate, the second is DAZZLED (default 0.1).
     coverage
         Coverage of the validated uncertainty VU = z * std (default 0.95).
+    fit_proof_seconds
+        Seconds without detection (inputs inside the envelope, every channel measured) the
+        stream must have seen, before a detection's estimated change point, for the detection
+        to be read as a fault (`bayes_fdi.diagnosis.online.fit_proof.FitProof`); a detection
+        before that proof is a model mismatch (``"mismatch"``). 0 (default): every detection
+        is read as a fault, for normal models fitted on the valve's own data. The default
+        model, trained on the simulator, sets it
+        (`bayes_fdi.default_diagnoser.DEFAULT_FIT_PROOF_SECONDS`). Read at every
+        ``run``/``update``, so it may be changed after fitting.
     random_state
         Seed of the normal models, the isolation tree, the splits and the white-noise floor.
 
@@ -169,6 +178,7 @@ class OnlineDiagnoser(BaseEstimator):
         novelty_ratio: float = 1.5,
         input_margin: float = 0.1,
         coverage: float = 0.95,
+        fit_proof_seconds: int = 0,
         random_state: int | None = 0,
     ) -> None:
         self.normal_models = normal_models
@@ -187,6 +197,7 @@ class OnlineDiagnoser(BaseEstimator):
         self.novelty_ratio = novelty_ratio
         self.input_margin = input_margin
         self.coverage = coverage
+        self.fit_proof_seconds = fit_proof_seconds
         self.random_state = random_state
 
     # ------------------------------------------------------------------ fitting
@@ -390,8 +401,9 @@ class OnlineDiagnoser(BaseEstimator):
         dec = self._decide(arrays, out)
         self.last_ = last_values(out, dec, t)
         reasons = status_reasons(
-            out, dec, self.threshold_, self.isolator_ is not None, self.novelty_ratio, self.p_fault
-        )
+            out, dec, self.threshold_, self.isolator_ is not None, self.novelty_ratio, self.p_fault,
+            fit_proof_seconds=self.fit_proof_seconds,
+        )  # fmt: skip
         return second_record(arrays, out, dec, t, self._group_labels, self.coverage, reasons)
 
     # ------------------------------------------------------------------ batch
@@ -432,11 +444,12 @@ class OnlineDiagnoser(BaseEstimator):
               and no channel missing;
             - ``state`` (str): the diagnosed group's label, ``"unknown"`` (detected, but no fault
               library or a signature unlike every known fault), ``"mismatch"`` (a detection whose
-              change began with the inputs outside the normal models' envelope: the model does not
-              fit this valve) or ``"fn"`` (no detection); ``probability``: that group's
-              calibrated probability (NaN unless isolated); ``evidence`` (str): while DD is on,
-              which residual raised it and its sign (``"X high"``, ``"F low"``, ``"X low, F
-              high"``), else ``""``;
+              change began with the inputs outside the normal models' envelope, or before the
+              stream had seen the normal models fit the valve for ``fit_proof_seconds``: the
+              model does not fit this valve) or ``"fn"`` (no detection); ``probability``: that
+              group's calibrated probability (NaN unless isolated); ``evidence`` (str): while DD
+              is on, which residual raised it and its sign (``"X high"``, ``"F low"``, ``"X low,
+              F high"``), else ``""``;
             - ``status`` (str): the SEVA status ``CLEAR``, ``BLURRED``, ``DAZZLED`` or ``BLIND``;
             - ``indicated`` (bool, per group): the diagnosed group; ``group_proba`` (per group) and
               ``fault_proba`` (per fault: the group's probability shared in proportion to the
@@ -487,6 +500,7 @@ class OnlineDiagnoser(BaseEstimator):
             coverage=self.coverage,
             p_fault=self.p_fault,
             novelty_ratio=self.novelty_ratio,
+            fit_proof_seconds=self.fit_proof_seconds,
         )
         stream = assemble_stream(
             ds, out, decisions, faults=self._faults, group_labels=self._group_labels, attrs=attrs

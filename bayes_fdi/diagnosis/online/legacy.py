@@ -23,14 +23,17 @@ from bayes_fdi.diagnosis.detection.whitening import WhitenState
 from bayes_fdi.diagnosis.isolation.signatures import SignatureState, SignatureWindow
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import NormalModelsState
 from bayes_fdi.diagnosis.online.envelope import EnvelopeState, InputEnvelope
+from bayes_fdi.diagnosis.online.fit_proof import FitProofState
 from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
 
 __all__ = ["upgrade_diagnoser", "upgrade_run_state", "upgrade_stream_state"]
 
 
 def upgrade_diagnoser(data: dict[str, Any]) -> dict[str, Any]:
-    """An `OnlineDiagnoser`'s saved attributes in today's layout (today's returned unchanged)."""
+    """An `OnlineDiagnoser`'s saved attributes in today's layout (today's returned unchanged; a
+    file saved before the fit proof gets ``fit_proof_seconds = 0``, the stream it gave)."""
     data = dict(data)
+    data.setdefault("fit_proof_seconds", 0)  # saved before the fit proof: every detection a fault
     if "input_low_" in data:
         low, high = data.pop("input_low_"), data.pop("input_high_")
         margin = data.get("input_margin", 0.1)
@@ -108,6 +111,7 @@ def _nested(
             np.zeros((*np.shape(onset)[:-1], 1), dtype=np.int64),
             np.zeros((*np.shape(onset)[:-1], 2), dtype=np.int64),
         ),
+        "proof": FitProofState.proven_state(np.shape(onset)[:-1]),  # 0.1.0 had no fit proof
     }
 
 
@@ -132,6 +136,8 @@ def upgrade_stream_state(fields: dict[str, Any]) -> dict[str, Any]:
     ``model_history``, ``whiten_X``, ``detect_X``, ``features``, ...) are nested, today's are
     returned as they are."""
     if "model_history" not in fields:
+        if "proof" not in fields and "seconds" in fields:  # saved before the fit proof
+            fields = {**fields, "proof": FitProofState.proven_state(np.shape(fields["seconds"]))}
         return fields
     nested = _nested(
         (fields["model_history"], fields["model_seen"]),

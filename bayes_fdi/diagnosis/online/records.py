@@ -34,9 +34,11 @@ def status_reasons(
     novelty_ratio: float,
     p_fault: float,
     i: int = 0,
+    *,
+    fit_proof_seconds: int = 0,
 ) -> tuple[str, ...]:
     """Why second ``i`` of ``out``/``dec`` has its status, in words (``isolating``: an
-    isolator is fitted)."""
+    isolator is fitted; ``fit_proof_seconds``: the diagnoser's)."""
     if dec["blind"][i]:
         return ("a measurement is missing this second",)
     if not out["DD"][i]:
@@ -52,6 +54,12 @@ def status_reasons(
             f"model mismatch: commission this valve (a detection{raised} whose change began while "
             "the inputs lay outside what the normal models were fitted on; it is not read as a "
             "fault)",
+        )
+    if dec["unproven_onset"][i]:
+        return (
+            f"model mismatch: commission this valve (a detection{raised} before the stream had "
+            f"seen the normal models fit this valve for {fit_proof_seconds} s without detection; "
+            "it is not read as a fault)",
         )
     if not isolating:
         return (
@@ -84,7 +92,16 @@ def stream_reasons(stream: xr.Dataset) -> np.ndarray:
     a = stream.attrs
     texts = [
         "; ".join(
-            status_reasons(out, dec, a["threshold"], isolating, a["novelty_ratio"], a["p_fault"], i)
+            status_reasons(
+                out,
+                dec,
+                a["threshold"],
+                isolating,
+                a["novelty_ratio"],
+                a["p_fault"],
+                i,
+                fit_proof_seconds=int(a.get("fit_proof_seconds", 0)),
+            )
         )
         for i in range(int(np.prod(shape)))
     ]

@@ -5,7 +5,8 @@ owns a small state (a named tuple of arrays that it creates, checks and returns 
 step): the normal models' input history (`NormalModelsState`), the AR whitening memory of each
 output (`WhitenState`), the sequential detector of each output (`CUSUMState` or `GLRState`), the
 hysteresis of the detection decision (`DecisionState`), the running sums of the isolation window
-(`SignatureState`) and the input average of the envelope's onset check (`EnvelopeState`).
+(`SignatureState`), the input average of the envelope's onset check (`EnvelopeState`) and the
+quiet seconds of the fit proof (`FitProofState`).
 
 - `RunState` nests them for one run (what ``update`` carries from second to second);
 - `StreamState` nests the same states for every run of a recording, each array with a leading
@@ -33,6 +34,7 @@ from bayes_fdi.diagnosis.detection.whitening import WhitenState
 from bayes_fdi.diagnosis.isolation.signatures import SignatureState
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import NormalModelsState
 from bayes_fdi.diagnosis.online.envelope import EnvelopeState
+from bayes_fdi.diagnosis.online.fit_proof import FitProofState
 
 __all__ = ["PerOutput", "RunState", "StreamState"]
 
@@ -53,7 +55,16 @@ class RunState(NamedTuple):
     decision: DecisionState  #: the detection decision's hysteresis
     signature: SignatureState  #: the isolation window
     onset: EnvelopeState  #: the input envelope's onset check
+    proof: FitProofState  #: the fit proof's quiet seconds
     seconds: int  #: seconds processed so far
+
+    @classmethod
+    def upgrade_model_file(cls, fields: dict, format_version: int) -> dict:
+        """The fields of a run state saved before the fit proof (model-file format <= 13): its
+        fit counts as proven, as its model's detections all were."""
+        fields = dict(fields)
+        fields.setdefault("proof", FitProofState.proven_state())
+        return fields
 
 
 class StreamState(NamedTuple):
@@ -70,6 +81,7 @@ class StreamState(NamedTuple):
     decision: DecisionState
     signature: SignatureState
     onset: EnvelopeState
+    proof: FitProofState
     seconds: np.ndarray  #: ``(runs,)`` int64
 
     @property
@@ -147,6 +159,10 @@ class StreamState(NamedTuple):
         arrays = dict(arrays)
         if "decision.on" in arrays and "decision.quiet" not in arrays:  # saved before the hold
             arrays["decision.quiet"] = np.zeros(np.shape(arrays["decision.on"]), dtype=np.int64)
+        if "seconds" in arrays and "proof.quiet" not in arrays:  # saved before the fit proof
+            runs = np.shape(arrays["seconds"])
+            for name, value in FitProofState.proven_state(runs)._asdict().items():
+                arrays[f"proof.{name}"] = value
 
         def build(options: tuple[type, ...], where: str) -> Any:
             for option in options:
@@ -193,4 +209,5 @@ _COMPONENT_STATES: dict[str, tuple[type, ...]] = {
     "decision": (DecisionState,),
     "signature": (SignatureState,),
     "onset": (EnvelopeState,),
+    "proof": (FitProofState,),
 }

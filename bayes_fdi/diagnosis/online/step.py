@@ -6,10 +6,10 @@ components.
 per-second quantity and the state after the last second; the state passed in is never changed.
 Per second: the normal models' predictions, the standardised residuals and their whitened
 innovations, the sequential tests and the detection decision DD, the isolation signature since
-the detection and its fault and group probabilities with novelty, and the input envelope's
-checks. `step_runs` advances many runs at once (each component's ``run_stacked``); `step` is
-`step_runs` of one run. ``run`` over a recording and ``update`` for one second both go through
-`step_runs`, so they give the same numbers.
+the detection and its fault and group probabilities with novelty, the input envelope's checks
+and the fit proof. `step_runs` advances many runs at once (each component's ``run_stacked``);
+`step` is `step_runs` of one run. ``run`` over a recording and ``update`` for one second both
+go through `step_runs`, so they give the same numbers.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from bayes_fdi.diagnosis.normal_models.dynamic import standardised_residuals
 from bayes_fdi.diagnosis.normal_models.dynamic_kernel import signed_root
 from bayes_fdi.diagnosis.online.change_point import change_ages
 from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, InputEnvelope
+from bayes_fdi.diagnosis.online.fit_proof import FitProof
 from bayes_fdi.diagnosis.online.state import PerOutput, RunState, StreamState
 from bayes_fdi.diagnosis.online.stream import MODEL_OUTPUTS
 
@@ -42,6 +43,7 @@ class Components(NamedTuple):
     decision: DetectionDecision
     signature: SignatureWindow
     envelope: InputEnvelope
+    fit_proof: FitProof
     isolator: FaultIsolator | None  #: None: detection only
 
 
@@ -54,6 +56,7 @@ def init_run_state(components: Components) -> RunState:
         decision=components.decision.init_state(),
         signature=components.signature.init_state(),
         onset=components.envelope.init_state(),
+        proof=components.fit_proof.init_state(),
         seconds=0,
     )
 
@@ -78,6 +81,7 @@ def check_stream_state(components: Components, state: Any, n_runs: int) -> None:
     components.decision.check_state(one.decision)
     components.signature.check_state(one.signature)
     components.envelope.check_state(one.onset)
+    components.fit_proof.check_state(one.proof)
 
 
 def _isolate(isolator: FaultIsolator | None, feats: np.ndarray) -> dict[str, np.ndarray]:
@@ -122,8 +126,8 @@ def step_runs(
     quantities : dict
         ``(runs, n)`` arrays ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``, ``r_X``,
         ``r_F`` (innovations), ``stat_X``, ``stat_F``, ``DD``, ``novel_inputs``,
-        ``novel_onset``, ``novelty``; ``features`` ``(runs, n, 10)``, ``fault_proba``
-        ``(runs, n, n_faults)``, ``group_proba`` ``(runs, n, n_groups)``.
+        ``novel_onset``, ``unproven_onset``, ``novelty``; ``features`` ``(runs, n, 10)``,
+        ``fault_proba`` ``(runs, n, n_faults)``, ``group_proba`` ``(runs, n, n_groups)``.
     state : StreamState
         Read-only.
     """
@@ -156,6 +160,10 @@ def step_runs(
     )
     onset = onset._replace(excursion=excursion)
     out["novel_inputs"] = novel_levels | fast
+    measured = np.all(np.isfinite(np.stack(list(c.values()), axis=-1)), axis=-1)
+    out["unproven_onset"], proof = components.fit_proof.run_stacked(
+        dd, measured & ~out["novel_inputs"], state.proof, ages
+    )
     out.update(_isolate(components.isolator, out["features"]))
     end = StreamState(
         models=models_state,
@@ -164,6 +172,7 @@ def step_runs(
         decision=decision,
         signature=signature,
         onset=onset,
+        proof=proof,
         seconds=np.asarray(state.seconds, dtype=np.int64) + dd.shape[1],
     )
     for array in end.arrays().values():

@@ -44,7 +44,7 @@ RAISED_SHARE = 0.5
 #: The normal models' outputs in the stream.
 MODEL_OUTPUTS = ("X_hat", "X_hat_std", "F_hat", "F_hat_std")
 #: The stream's flags of what makes a second DAZZLED (with a detection not yet isolated).
-NOVELTY_FLAGS = ("novel_inputs", "novel_signature", "novel_onset")
+NOVELTY_FLAGS = ("novel_inputs", "novel_signature", "novel_onset", "unproven_onset")
 
 
 @functools.lru_cache(maxsize=16)
@@ -102,8 +102,9 @@ def decide(
         The run's ``(n,)`` channels CV, P1, P2, T1, X, F (NaN = missing).
     out
         The per-second quantities: ``DD``, ``group_proba`` ``(n, n_groups)``, ``novelty``,
-        ``novel_inputs`` (inputs outside the envelope now) and ``novel_onset`` (the detection's
-        estimated change began outside it).
+        ``novel_inputs`` (inputs outside the envelope now), ``novel_onset`` (the detection's
+        estimated change began outside it) and ``unproven_onset`` (it began before the fit
+        proof, `bayes_fdi.diagnosis.online.fit_proof.FitProof`).
     group_labels
         The isolability groups' labels, columns of ``group_proba``.
     threshold
@@ -115,11 +116,13 @@ def decide(
     -------
     dict
         ``state``, ``probability``, ``status``, ``indicated`` ``(n, n_groups)``, ``FFID``,
-        ``blind``, ``novel_inputs``, ``novel_signature``, ``novel_onset``, ``evidence``
+        ``blind``, ``novel_inputs``, ``novel_signature``, ``novel_onset``, ``unproven_onset``,
+        ``evidence``
         (arrays of ``n``) and ``z`` (the normal quantile of ``coverage``).
 
     A detection is named ``"mismatch"`` when its estimated change began while the inputs lay
-    outside the normal models' envelope (the model does not fit this valve: commission it),
+    outside the normal models' envelope, or before the stream had seen the normal models fit
+    the valve (the model does not fit this valve: commission it),
     ``"unknown"`` when no isolator is fitted or the signature is unlike every known fault, else
     by the most probable isolability group.
     """
@@ -137,10 +140,11 @@ def decide(
     else:
         top = np.zeros(n, dtype=np.int64)
     prob = np.where(isolated, gq[np.arange(n), top] if gq.shape[1] else np.nan, np.nan)
-    novel_onset = out["novel_onset"]
-    novel_sig = isolated & (out["novelty"] > novelty_ratio) & ~novel_onset
-    known = isolated & ~novel_sig & ~novel_onset
-    unnamed = np.where(novel_onset, len(labels) - 3, len(labels) - 2)
+    novel_onset, unproven = out["novel_onset"], out["unproven_onset"]
+    mismatch = novel_onset | unproven
+    novel_sig = isolated & (out["novelty"] > novelty_ratio) & ~mismatch
+    known = isolated & ~novel_sig & ~mismatch
+    unnamed = np.where(mismatch, len(labels) - 3, len(labels) - 2)
     code = np.where(~dd, len(labels) - 1, np.where(known, top, unnamed))
     state = labels[code].astype(str)
     prob = np.where(known, prob, np.nan)
@@ -162,6 +166,7 @@ def decide(
         "novel_inputs": novel_in,
         "novel_signature": novel_sig,
         "novel_onset": novel_onset,
+        "unproven_onset": unproven,
         "evidence": evidence(out, threshold),
         "z": z,
     }
@@ -235,10 +240,11 @@ def stream_attrs(
     coverage: float,
     p_fault: float,
     novelty_ratio: float,
+    fit_proof_seconds: int = 0,
 ) -> dict[str, Any]:
     """The stream's attributes: ``groups`` and ``undetectable`` (JSON), the detector, its
-    threshold and clear level, the coverage of VU, the decision's ``p_fault`` and
-    ``novelty_ratio`` and the isolation features."""
+    threshold and clear level, the coverage of VU, the decision's ``p_fault``,
+    ``novelty_ratio`` and ``fit_proof_seconds`` and the isolation features."""
     return {
         "groups": json.dumps({"|".join(g): list(g) for g in groups}),
         "undetectable": json.dumps(list(undetectable)),
@@ -248,5 +254,6 @@ def stream_attrs(
         "coverage": float(coverage),
         "p_fault": float(p_fault),
         "novelty_ratio": float(novelty_ratio),
+        "fit_proof_seconds": int(fit_proof_seconds),
         "features": ",".join(ISOLATION_FEATURES),
     }

@@ -33,6 +33,7 @@ from bayes_fdi.diagnosis.detection.thresholds import fit_threshold
 from bayes_fdi.diagnosis.detection.whitening import ARWhitener
 from bayes_fdi.diagnosis.isolation.isolator import FaultIsolator
 from bayes_fdi.diagnosis.isolation.signatures import ISOLATION_FEATURES
+from bayes_fdi.diagnosis.online.fit_proof import FitProof
 from bayes_fdi.diagnosis.online.state import PerOutput
 from bayes_fdi.diagnosis.online.step import Components, init_run_state, step
 
@@ -425,6 +426,7 @@ def detection_components(diagnoser: Any) -> Components:
         decision=diagnoser.decision_,
         signature=diagnoser.signature_,
         envelope=diagnoser.envelope_,
+        fit_proof=FitProof(diagnoser.fit_proof_seconds),
         isolator=None,
     )
 
