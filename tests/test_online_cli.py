@@ -116,6 +116,10 @@ def test_diagnose_sets_the_fit_proof_of_the_model_it_loads(cache, tmp_path, caps
     assert main(argv) == 0
     summary = json.loads((tmp_path / "lublin-hour" / "summary.json").read_text())
     assert summary["isolation"]["fit_proof_seconds"] == 3600
+    assert (
+        "once the stream has seen this valve fit the normal models for 3600 s"
+        in (summary["isolation"]["note"])
+    )
     csv = pd.read_csv(tmp_path / "lublin-hour" / "seva.csv", keep_default_na=False)
     model = OnlineDiagnoser.load(path).set_params(fit_proof_seconds=3600)
     stream = model.run(load_lublin_example()[["CV", "P1", "P2", "T1", "X", "F"]].isel(run=0))

@@ -185,13 +185,20 @@ def isolation_summary(diagnoser: Any) -> dict[str, Any]:
     must see the valve fit before it reads a detection as a fault)."""
     detection_only = getattr(diagnoser, "isolator_", True) is None
     groups = [list(g) for g in getattr(diagnoser, "groups_", ())]
+    proof = int(getattr(diagnoser, "fit_proof_seconds", 0))
+    named = f"faults named up to {len(groups)} isolability groups"
+    if proof:
+        named += (
+            f", once the stream has seen this valve fit the normal models for {proof} s without "
+            "an alarm (an earlier alarm is a model mismatch)"
+        )
     return {
         "detection_only": bool(detection_only),
         "note": (
             "detection only: this model has no fault library, so every alarm is an unknown "
             "fault; commission the valve with faults (bayes-fdi commission) to name them"
             if detection_only
-            else f"faults named up to {len(groups)} isolability groups"
+            else named
         ),
         "groups": groups,
         "undetectable": list(getattr(diagnoser, "undetectable_", ())),
