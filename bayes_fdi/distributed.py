@@ -87,12 +87,17 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None) -> 
 
 
 def _single_threaded(fn: Callable[[Any], Any], task: Any) -> Any:
-    """Run ``fn(task)`` with torch on one thread (inside a worker)."""
+    """Run ``fn(task)`` with torch on one thread (inside a worker), and the dask collections it
+    computes (a lazily read recording's chunks) in its own thread: inside a worker dask would
+    otherwise hand them to the worker's other threads, where netCDF reads them while the task
+    writes its own netCDF file, and the HDF5 library is not thread-safe ("NetCDF: HDF error")."""
+    import dask
     import torch
 
     if torch.get_num_threads() != 1:
         torch.set_num_threads(1)
-    return fn(task)
+    with dask.config.set(scheduler="synchronous"):
+        return fn(task)
 
 
 def run_tasks(

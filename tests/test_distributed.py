@@ -28,6 +28,16 @@ def _square_and_threads(x):
     return x * x, torch.get_num_threads(), os.environ.get("OMP_NUM_THREADS")
 
 
+def _dask_chunks_in_the_task_thread(x):
+    import threading
+
+    import dask.array as da
+
+    me = threading.get_ident()
+    here = da.zeros(4, chunks=1).map_blocks(lambda b: b + (threading.get_ident() == me))
+    return bool(here.compute().all())
+
+
 @pytest.fixture(scope="module")
 def client():
     with cluster_client(workers=2) as c:
@@ -45,6 +55,14 @@ def test_run_tasks_keeps_order_and_single_threads(client):
     assert [o[0] for o in serial] == [o[0] for o in out]
     with pytest.raises(ValueError, match="negative task -3"):
         run_tasks(_square_and_threads, [1, -3], scheduler=address, progress=False)
+
+
+def test_a_task_computes_its_dask_chunks_in_its_own_thread(client):
+    """A recording read lazily is computed where the task writes its netCDF output: HDF5 is
+    not thread-safe, so no other worker thread may read netCDF meanwhile."""
+    address = client.scheduler.address
+    out = run_tasks(_dask_chunks_in_the_task_thread, range(4), scheduler=address, progress=False)
+    assert out == [True] * 4
 
 
 def test_simulate_on_two_workers_equals_serial(client):
