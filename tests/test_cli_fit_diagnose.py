@@ -450,3 +450,22 @@ def test_a_detection_only_model_says_so_and_names_the_residuals(tmp_path):
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
     assert summary["isolation"]["detection_only"] is True
     assert summary["isolation"]["note"].startswith("detection only")
+
+
+def test_seva_nc_takes_a_mismatch_that_first_appears_in_a_later_chunk(model, tmp_path, rng):
+    """The text width of seva.nc is fixed by the first chunk: it must hold every answer the
+    diagnoser can give, "mismatch" (8 bytes) included, also with short group labels."""
+    from bayes_fdi.deployment.stream_files import StreamNetCDFWriter
+
+    rec = recording(rng, 600, faults=())
+    stream = model.run(rec).assign_coords(group=["g1", "g2"])
+    state = np.full(stream["state"].shape, "fn", dtype=object)
+    state[:, 450:470] = "mismatch"  # a model mismatch in the second chunk only
+    stream["state"] = (("run", "time"), state.astype(str))
+    writer = StreamNetCDFWriter(tmp_path / "seva.nc")
+    for a, b in ((0, 300), (300, 600)):
+        part = {"time": slice(a, b)}
+        writer.append(stream.isel(part), rec.isel(part))
+    writer.close()
+    back = xr.load_dataset(tmp_path / "seva.nc")
+    np.testing.assert_array_equal(back["state"].values.astype(str), state.astype(str))

@@ -293,8 +293,11 @@ class StreamNetCDFWriter:
 
 
 def _text_width(stream: xr.Dataset) -> int:
-    """Bytes of the longest label a stream can hold (statuses, groups, faults, ``unknown``)."""
-    labels = [*STATUS_SEVERITY, "unknown", "fn"]
+    """Bytes of the longest label a stream can hold (statuses, groups, faults, and the plain
+    answers ``mismatch``, ``unknown`` and ``fn``), whichever chunk first holds it."""
+    from bayes_fdi.diagnosis.online.stream import MISMATCH
+
+    labels = [*STATUS_SEVERITY, MISMATCH, "unknown", "fn"]
     labels += [str(g) for g in stream["group"].values] + [str(f) for f in stream["fault"].values]
     current = [str(v) for name in ("state", "status") for v in np.unique(stream[name].values)]
     return max(len(text.encode("utf-8")) for text in labels + current)
