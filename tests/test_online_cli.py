@@ -186,3 +186,8 @@ def test_benchmark_small_end_to_end(tmp_path):
     assert by_name[("f1", "abrupt", "big")]["t_dt"] >= 0
     assert (out / "benchmark.md").stat().st_size > 1000
     assert len(list((out / "timelines").glob("*.png"))) == 44
+    # the default model's fit proof, recorded and said
+    assert data["settings"]["fit_proof_seconds"] == DEFAULT_FIT_PROOF_SECONDS
+    assert f"only after {DEFAULT_FIT_PROOF_SECONDS} s without detection" in (
+        (out / "benchmark.md").read_text()
+    )

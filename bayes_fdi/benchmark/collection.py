@@ -170,7 +170,8 @@ class RunCollector:
         labels = [str(g) for g in one["group"].values]
         if self.labels is None:
             self.labels = labels
-            self.attrs = {k: one.attrs.get(k) for k in ("groups", "undetectable")}
+            keys = ("groups", "undetectable", "fit_proof_seconds")
+            self.attrs = {k: one.attrs.get(k) for k in keys}
         elif labels != self.labels:
             raise ValueError("run_benchmark: the stream's groups changed between runs")
         proba = one["group_proba"].transpose("time", "group").values

@@ -257,6 +257,7 @@ def run_benchmark(
         "hours": hours,
         "n_scenarios": len(scenarios),
         "full_benchmark": _is_full(scenarios),
+        "fit_proof_seconds": int(col.attrs.get("fit_proof_seconds") or 0),
         **dict(settings or {}),
     }
     write_report(results, out)

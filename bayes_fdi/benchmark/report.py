@@ -396,7 +396,14 @@ def render_report(results: Mapping[str, Any]) -> str:
         f"{results['fault_free']['seed']}). Wall time {timing['wall_s']:.0f} s: simulation "
         f"{timing['simulation_cpu_s']:.0f} CPU s, diagnosis {timing['run_cpu_s']:.0f} CPU s for "
         f"{timing['run_samples']:,} samples"
-        + (f"; training took {s['fit_wall_s']:.0f} s wall." if "fit_wall_s" in s else "."),
+        + (f"; training took {s['fit_wall_s']:.0f} s wall." if "fit_wall_s" in s else ".")
+        + (
+            f" The diagnoser reads a detection as a fault only after {s['fit_proof_seconds']} s "
+            "without detection before its change point (its fit proof); an earlier one is a "
+            "model mismatch."
+            if s.get("fit_proof_seconds")
+            else ""
+        ),
         "",
         *in_short_section(targets, summary, blind),
         "## Glossary",
