@@ -202,7 +202,7 @@ def isolation_summary(diagnoser: Any) -> dict[str, Any]:
         ),
         "groups": groups,
         "undetectable": list(getattr(diagnoser, "undetectable_", ())),
-        "fit_proof_seconds": int(getattr(diagnoser, "fit_proof_seconds", 0)),
+        "fit_proof_seconds": proof,
     }
 
 

@@ -112,7 +112,8 @@ class FitProof:
         return int(s)
 
     def init_state(self) -> FitProofState:
-        """A fresh state: no quiet second yet, not proven (proven at once for ``seconds = 0``)."""
+        """A fresh state: no quiet second yet, not proven (with ``seconds = 0`` the first
+        detection proves the fit)."""
         self._check_params()
         flag = np.zeros(1, dtype=np.bool_)
         return FitProofState(np.zeros(1, dtype=np.int64), flag, flag.copy(), flag.copy())

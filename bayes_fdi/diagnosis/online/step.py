@@ -160,7 +160,7 @@ def step_runs(
     )
     onset = onset._replace(excursion=excursion)
     out["novel_inputs"] = novel_levels | fast
-    measured = np.all(np.isfinite(np.stack(list(c.values()), axis=-1)), axis=-1)
+    measured = np.isfinite(inputs).all(axis=-1) & np.isfinite(c["X"]) & np.isfinite(c["F"])
     out["unproven_onset"], proof = components.fit_proof.run_stacked(
         dd, measured & ~out["novel_inputs"], state.proof, ages
     )
