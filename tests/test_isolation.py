@@ -222,3 +222,34 @@ def test_isolator_run_equals_the_temperature_scaled_group_sums(rng, classifier):
         np.testing.assert_array_equal(alone.fault_proba[0], out.fault_proba[i])
     backwards = iso.run(rows[::-1].copy())
     np.testing.assert_array_equal(backwards.group_proba[::-1], out.group_proba)
+
+
+def test_the_window_reports_its_complete_seconds_by_hand():
+    # DD on at 2-5 and 7-8; second 4 has a NaN residual (skipped by the window); the reference
+    # exists from second 0
+    n = 9
+    dd = np.array([0, 0, 1, 1, 1, 1, 0, 1, 1], dtype=bool)
+    cols = [np.full(n, 0.01), np.full(n, 0.02), np.full(n, 0.5), np.full(n, 0.5),
+            np.full(n, 0.4), np.full(n, 0.87), np.full(n, 0.65), np.full(n, 0.22)]  # fmt: skip
+    cols[0][4] = np.nan
+    seconds = np.full(n, -1.0)
+    window = SignatureWindow()
+    feats, state = window.run(SignatureInputs(dd, *cols), seconds=seconds)
+    np.testing.assert_array_equal(seconds, [0, 0, 1, 2, 2, 3, 0, 1, 2])
+    # features exist exactly where the window holds a complete second
+    np.testing.assert_array_equal(np.isfinite(feats).all(axis=1), seconds > 0)
+    assert state.count[0] == seconds[-1]
+    # stacked runs and a chunked run report the same seconds
+    stacked = np.empty((2, n))
+    both = SignatureInputs(*(np.stack([c, c]) for c in (dd, *cols)))
+    fresh = window.init_state()
+    pair = type(fresh)(*(np.stack([f, f]) for f in fresh))
+    window.run_stacked(both, pair, seconds=stacked)
+    np.testing.assert_array_equal(stacked, [seconds, seconds])
+    first = np.empty(4)
+    _, mid = window.run(SignatureInputs(dd[:4], *(c[:4] for c in cols)), seconds=first)
+    rest = np.empty(n - 4)
+    window.run(SignatureInputs(dd[4:], *(c[4:] for c in cols)), mid, seconds=rest)
+    np.testing.assert_array_equal(np.concatenate([first, rest]), seconds)
+    with pytest.raises(ValueError, match="seconds must be a C-contiguous float64 array"):
+        window.run(SignatureInputs(dd, *cols), seconds=np.empty(n, dtype=np.float32))

@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 from small_online import small_normal_models, small_runs
 
-from bayes_fdi.calibration import TemperatureScaler, TopLabelScaler, expected_calibration_error
+from bayes_fdi.calibration import (
+    AgeTemperatureScaler,
+    TemperatureScaler,
+    TopLabelScaler,
+    expected_calibration_error,
+)
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.online.training import CALIBRATION_SECONDS_PER_RUN, detected_seconds
 
@@ -29,7 +34,7 @@ def test_detected_seconds_by_hand():
     assert not hit  # DD on from 5: no rise at or after 6
 
 
-@pytest.fixture(scope="module", params=[TemperatureScaler, TopLabelScaler])
+@pytest.fixture(scope="module", params=[TemperatureScaler, TopLabelScaler, AgeTemperatureScaler])
 def fitted(request):
     runs = small_runs()
     diag = OnlineDiagnoser(
@@ -73,6 +78,23 @@ def test_recalibration_is_fitted_on_the_streams_per_second_probabilities(fitted)
     group = {f: g for g, members in zip(iso.group_labels_, iso.groups_, strict=True)
              for f in members}  # fmt: skip
     y = [group[str(calibration["state"].values[r])] for r, _ in picks]
+    if isinstance(fitted_cal, AgeTemperatureScaler):
+        # the ages: the seconds DD has been on (the signature window's seconds; these runs
+        # have no missing samples), counted here from the decision stream
+        dd = raw["DD"].transpose("run", "time").values
+        run_length = np.zeros(dd.shape)
+        for k in range(dd.shape[1]):
+            run_length[:, k] = np.where(dd[:, k], (run_length[:, k - 1] if k else 0) + 1, 0)
+        ages = np.array([run_length[r, k] for r, k in picks])
+        assert ages.min() >= 1 and ages.max() > 100
+        again = AgeTemperatureScaler(classes=list(iso.group_labels_)).fit(gp, y, ages)
+        np.testing.assert_allclose(fitted_cal.temperatures_, again.temperatures_, rtol=1e-9)
+        assert (again.rows_per_bin_ >= again.min_rows).sum() >= 2  # two bins of their own
+        assert iso.rows_independent and iso.uses_ages  # the compiled path takes the ages
+        stream = diag.run(calibration)
+        got = np.array([stream["group_proba"].values[r, k] for r, k in picks])
+        np.testing.assert_allclose(got, again.transform(gp, ages), rtol=1e-9, atol=1e-12)
+        return
     again = type(fitted_cal)(classes=list(iso.group_labels_)).fit(gp, y)
     assert fitted_cal.temperature_ == pytest.approx(again.temperature_, rel=1e-9)
     if isinstance(again, TopLabelScaler):
@@ -89,6 +111,8 @@ def test_the_recalibration_survives_a_model_file(fitted, tmp_path):
     path = diag.save(tmp_path / "diag.bfdi")
     back = OnlineDiagnoser.load(path)
     assert back.isolator_.temperature() == diag.isolator_.temperature()
+    for a, b in zip(back.isolator_.temperatures(), diag.isolator_.temperatures(), strict=True):
+        np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(back.isolator_.top_map(), diag.isolator_.top_map())
     a, b = diag.run(calibration), back.run(calibration)
     np.testing.assert_array_equal(a["group_proba"].values, b["group_proba"].values)

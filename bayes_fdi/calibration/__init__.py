@@ -9,6 +9,8 @@ calibrated when its 95 % predictive intervals contain about 95 % of fault-free m
   probability matrix they and the recalibrators share.
 - `bayes_fdi.calibration.temperature`: temperature scaling (`TemperatureScaler`, and
   `check_temperature_bounds` for its search interval).
+- `bayes_fdi.calibration.age_temperature`: one temperature per age bin of the evidence
+  (`AgeTemperatureScaler`), for probabilities that grow more reliable as a signature settles.
 - `bayes_fdi.calibration.top_label`: a temperature and a beta map of the top class
   (`TopLabelScaler`), which bends the reliability curve.
 - `bayes_fdi.calibration.dirichlet`: Dirichlet calibration and vector scaling (`DirichletScaler`).
@@ -22,6 +24,7 @@ calibrated when its 95 % predictive intervals contain about 95 % of fault-free m
   (cross-fitted recalibration and the choice of recalibrator) and `.report_markdown` (its text).
 """
 
+from bayes_fdi.calibration.age_temperature import AgeTemperatureScaler
 from bayes_fdi.calibration.dirichlet import DEFAULT_REG_GRID, DirichletScaler
 from bayes_fdi.calibration.intervals import (
     DEFAULT_LEVELS,
@@ -51,6 +54,7 @@ __all__ = [
     "DEFAULT_LEVELS",
     "DEFAULT_REG_GRID",
     "PROBABILITY_ROUNDING",
+    "AgeTemperatureScaler",
     "CoverageResult",
     "DirichletScaler",
     "ECEResult",

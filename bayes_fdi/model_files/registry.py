@@ -80,6 +80,7 @@ PERSISTED: dict[str, str] = {
     "ClassDistribution": "bayes_fdi.diagnosis.seva:ClassDistribution",
     # recalibrators
     "TemperatureScaler": "bayes_fdi.calibration:TemperatureScaler",
+    "AgeTemperatureScaler": "bayes_fdi.calibration:AgeTemperatureScaler",
     "TopLabelScaler": "bayes_fdi.calibration:TopLabelScaler",
     "DirichletScaler": "bayes_fdi.calibration:DirichletScaler",
     "NodeCalibration": "bayes_fdi.calibration:NodeCalibration",

@@ -3,9 +3,10 @@
 `isolate_rows` (the k-means tree of RVCs, `~bayes_fdi.diagnosis.isolation.compiled_tree`) and
 `isolate_forest_rows` (the random forest, `~bayes_fdi.diagnosis.isolation.forest`) give, row by
 row, what `~bayes_fdi.diagnosis.isolation.isolator.FaultIsolator.run` gives: the classifier's
-fault probabilities, their sums over the isolability groups recalibrated by a temperature
-(possibly followed by the beta map of the top group of `~bayes_fdi.calibration.TopLabelScaler`)
-and shared back to the faults in proportion, and the class-novelty score. One compiled pass with
+fault probabilities, their sums over the isolability groups recalibrated by a temperature (one,
+or one per age bin of the signature as `~bayes_fdi.calibration.AgeTemperatureScaler`; possibly
+followed by the beta map of the top group of `~bayes_fdi.calibration.TopLabelScaler`) and shared
+back to the faults in proportion, and the class-novelty score. One compiled pass with
 a fixed summation order, so a row's numbers never depend on the rows around it nor on the BLAS
 library: the same in ``update``, ``run`` and any chunking of a stream.
 
@@ -24,7 +25,14 @@ from bayes_fdi.diagnosis.isolation.class_novelty import NoveltyArrays, novelty_s
 from bayes_fdi.diagnosis.isolation.compiled_tree import tree_proba
 from bayes_fdi.diagnosis.isolation.forest import forest_proba
 
-__all__ = ["IsolationParams", "isolate_forest_rows", "isolate_rows", "map_top", "posterior_row"]
+__all__ = [
+    "IsolationParams",
+    "isolate_forest_rows",
+    "isolate_rows",
+    "map_top",
+    "posterior_row",
+    "row_temperature",
+]
 
 
 class IsolationParams(NamedTuple):
@@ -33,7 +41,8 @@ class IsolationParams(NamedTuple):
     classifier: Any  #: the compiled classifier: `TreeArrays` or `ForestArrays`
     group_of: np.ndarray  #: ``(n_faults,)`` int64: the group of each fault
     n_groups: int
-    temperature: float  #: the temperature scaling of the group probabilities (0: none)
+    temperatures: np.ndarray  #: ``(n_bins,)`` temperature of each age bin; ``(0,)``: none
+    age_edges: np.ndarray  #: ``(n_bins - 1,)`` upper edges (seconds) of the age bins
     floor: float  #: smallest group probability before taking its logarithm
     top_map: np.ndarray  #: ``(3,)`` beta map of the top group after the temperature, or ``(0,)``
     novelty: NoveltyArrays  #: the class novelty
@@ -65,10 +74,22 @@ def map_top(q, coef):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def posterior_row(p, params, gp, gq, fq):  # pragma: no cover - compiled
-    """Group sums of fault probabilities ``p``, temperature-scaled, shared back to faults."""
+def row_temperature(params, age):  # pragma: no cover - compiled
+    """The temperature of a row whose signature is ``age`` seconds old (0.0: no scaling)."""
+    if params.temperatures.size == 0:
+        return 0.0
+    k = 0
+    while k < params.age_edges.size and age >= params.age_edges[k]:
+        k += 1
+    return params.temperatures[k]
+
+
+@njit(cache=True, error_model="numpy")
+def posterior_row(p, params, temperature, gp, gq, fq):  # pragma: no cover - compiled
+    """Group sums of fault probabilities ``p``, scaled by ``temperature`` (0.0: not scaled),
+    shared back to faults."""
     group_of, n_groups = params.group_of, params.n_groups
-    temperature, floor = params.temperature, params.floor
+    floor = params.floor
     for g in range(n_groups):
         gp[g] = 0.0
     for f in range(p.size):
@@ -96,10 +117,10 @@ def posterior_row(p, params, gp, gq, fq):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def isolate_rows(feats, params, out_fault, out_group, out_nov):  # pragma: no cover - compiled
-    """Per row of ``feats``: the tree's probabilities, calibrated group and fault probabilities
-    and novelty under ``params`` (`IsolationParams` of `TreeArrays`); NaN for a row with a
-    non-finite entry."""
+def isolate_rows(feats, ages, params, out_fault, out_group, out_nov):  # pragma: no cover
+    """Per row of ``feats`` (signatures ``ages`` seconds old): the tree's probabilities,
+    calibrated group and fault probabilities and novelty under ``params`` (`IsolationParams` of
+    `TreeArrays`); NaN for a row with a non-finite entry."""
     tree = params.classifier
     width = 1
     for n in range(tree.woffsets.size - 1):
@@ -113,11 +134,11 @@ def isolate_rows(feats, params, out_fault, out_group, out_nov):  # pragma: no co
         if _missing(t, feats, out_fault, out_group, out_nov):
             continue
         tree_proba(feats[t], tree, phi, right, z, p)
-        _finish_row(t, feats[t], p, params, gp, out_fault, out_group, out_nov)
+        _finish_row(t, feats[t], ages[t], p, params, gp, out_fault, out_group, out_nov)
 
 
 @njit(cache=True, error_model="numpy")
-def isolate_forest_rows(feats, params, out_fault, out_group, out_nov):  # pragma: no cover
+def isolate_forest_rows(feats, ages, params, out_fault, out_group, out_nov):  # pragma: no cover
     """`isolate_rows` with a forest: ``params`` is an `IsolationParams` of `ForestArrays`."""
     p = np.empty(out_fault.shape[1])
     gp = np.empty(out_group.shape[1])
@@ -125,7 +146,7 @@ def isolate_forest_rows(feats, params, out_fault, out_group, out_nov):  # pragma
         if _missing(t, feats, out_fault, out_group, out_nov):
             continue
         forest_proba(feats[t], params.classifier, p)
-        _finish_row(t, feats[t], p, params, gp, out_fault, out_group, out_nov)
+        _finish_row(t, feats[t], ages[t], p, params, gp, out_fault, out_group, out_nov)
 
 
 @njit(cache=True)
@@ -141,8 +162,9 @@ def _missing(t, feats, out_fault, out_group, out_nov):  # pragma: no cover - com
 
 
 @njit(cache=True, error_model="numpy")
-def _finish_row(t, row, p, params, gp, out_fault, out_group, out_nov):  # pragma: no cover
-    """Row ``t``'s calibrated group and fault probabilities from its classifier's ``p``, and
-    its novelty."""
-    posterior_row(p, params, gp, out_group[t], out_fault[t])
+def _finish_row(t, row, age, p, params, gp, out_fault, out_group, out_nov):  # pragma: no cover
+    """Row ``t``'s calibrated group and fault probabilities from its classifier's ``p`` (its
+    signature ``age`` seconds old), and its novelty."""
+    temperature = row_temperature(params, age)
+    posterior_row(p, params, temperature, gp, out_group[t], out_fault[t])
     out_nov[t] = novelty_score_row(row, params.novelty)

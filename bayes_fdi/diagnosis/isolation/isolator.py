@@ -14,9 +14,11 @@ class's training signatures is an "unknown" fault.
 Online, ``run`` (a chunk of seconds) and ``update`` (one) give the per-second isolation. It keeps
 no state: the memory of the stream is the signature window's. With a compiled tree
 (`~bayes_fdi.diagnosis.isolation.compiled_tree.LeanTree`) or a
-`~bayes_fdi.diagnosis.isolation.forest.ForestClassifier`, and a temperature scaling (possibly
-followed by the beta map of the top group of `~bayes_fdi.calibration.TopLabelScaler`) or no
-recalibration, they run one compiled pass of `bayes_fdi.diagnosis.isolation.compiled_isolation`
+`~bayes_fdi.diagnosis.isolation.forest.ForestClassifier`, and a temperature scaling (one
+temperature, possibly followed by the beta map of the top group of
+`~bayes_fdi.calibration.TopLabelScaler`, or one per age bin of the signature,
+`~bayes_fdi.calibration.AgeTemperatureScaler`, which takes each row's age) or no recalibration,
+they run one compiled pass of `bayes_fdi.diagnosis.isolation.compiled_isolation`
 that takes the fitted values as one named tuple: the classifier's probabilities, their group
 sums recalibrated and shared back to the faults, and the novelty score, row by row.
 """
@@ -220,7 +222,9 @@ class FaultIsolator:
     ) -> FaultIsolator:
         """Fit the classifier on ``(X, y)``, the groups on ``validation``, the calibrator on
         ``calibration`` (each a ``(rows, labels)`` pair; without one, every fault is its own
-        group / no recalibration)."""
+        group / no recalibration). A calibrator that takes ages
+        (`~bayes_fdi.calibration.AgeTemperatureScaler`) needs ``calibration=(rows, labels,
+        ages)``, the ages being the seconds each row's signature has grown."""
         if self.group_rule not in ("pairwise", "naming"):
             raise ValueError(f"group_rule must be 'pairwise' or 'naming', got {self.group_rule!r}")
         X = np.asarray(X, dtype=np.float64)
@@ -266,7 +270,15 @@ class FaultIsolator:
             cal = clone(self.calibrator)
             if "classes" in cal.get_params():
                 cal.set_params(classes=list(self.group_labels_))
-            self.calibrator_ = cal.fit(gp, labels)
+            if _uses_ages(cal):
+                if len(calibration) < 3:
+                    raise ValueError(
+                        f"{type(cal).__name__} needs the calibration rows' ages: pass "
+                        "calibration=(rows, labels, ages)"
+                    )
+                self.calibrator_ = cal.fit(gp, labels, np.asarray(calibration[2])[known])
+            else:
+                self.calibrator_ = cal.fit(gp, labels)
         return self
 
     # ------------------------------------------------------------------ prediction
@@ -296,6 +308,22 @@ class FaultIsolator:
         t = getattr(cal, "temperature_", None)
         return float(t) if t is not None and not hasattr(cal, "weights_") else None
 
+    def temperatures(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The calibrator's temperatures and the upper edges of their age bins (``(1,)`` and
+        ``(0,)`` for one temperature scaling; an `~bayes_fdi.calibration.AgeTemperatureScaler`'s
+        bins), or None when the calibrator is not a temperature scaling (or there is none)."""
+        T = self.temperature()
+        if T is not None:
+            return np.array([T]), np.zeros(0)
+        cal = self.calibrator_
+        temps = getattr(cal, "temperatures_", None)
+        if temps is None or not _uses_ages(cal):
+            return None
+        return (
+            np.ascontiguousarray(temps, dtype=np.float64),
+            np.ascontiguousarray(cal.edges_, dtype=np.float64),
+        )
+
     def top_map(self) -> np.ndarray:
         """The calibrator's beta map of the top group after its temperature (``(3,)``, a
         `~bayes_fdi.calibration.TopLabelScaler`), or an empty array."""
@@ -304,9 +332,9 @@ class FaultIsolator:
 
     def _compiled_rows(self) -> tuple[Any, Any] | None:
         """The compiled path's classifier arrays and the row loop that takes them, or None: a
-        compiled tree or a `ForestClassifier`, with no calibrator, a temperature scaling or a
-        top-label scaling."""
-        if self.calibrator_ is not None and self.temperature() is None:
+        compiled tree or a `ForestClassifier`, with no calibrator, a temperature scaling (one or
+        one per age bin) or a top-label scaling."""
+        if self.calibrator_ is not None and self.temperatures() is None:
             return None
         if self.lean_ is not None:
             return self.lean_.arrays(), isolate_rows
@@ -326,21 +354,30 @@ class FaultIsolator:
         return np.ascontiguousarray(np.argmax(self.membership_, axis=1).astype(np.int64))
 
     # ------------------------------------------------------------------ online
-    def run(self, features: Any) -> IsolationOutput:
+    @property
+    def uses_ages(self) -> bool:
+        """Whether the calibrated probabilities depend on the signatures' ages (`run`'s
+        ``ages``)."""
+        return getattr(self, "calibrator_", None) is not None and _uses_ages(self.calibrator_)
+
+    def run(self, features: Any, ages: Any = None) -> IsolationOutput:
         """Fault and group probabilities and novelty of signature rows, row by row.
 
         The per-second isolation of the online diagnoser: the classifier's fault
         probabilities, summed over the groups and recalibrated, shared back to the faults in
         proportion, and the novelty score. With a compiled tree (``lean_``) or a forest and no
-        calibrator, a temperature scaling or a top-label scaling, one compiled pass whose every
-        row's result is independent of the others; otherwise through the classifier's and
-        calibrator's own ``predict_proba`` and ``transform`` (batched: rounding may depend on
-        the rows around). A row with a NaN (no signature) gives NaN.
+        calibrator, a temperature scaling (one, or one per age bin) or a top-label scaling, one
+        compiled pass whose every row's result is independent of the others; otherwise through
+        the classifier's and calibrator's own ``predict_proba`` and ``transform`` (batched:
+        rounding may depend on the rows around). A row with a NaN (no signature) gives NaN.
 
         Parameters
         ----------
         features
             ``(n, n_features)`` signatures.
+        ages
+            ``(n,)`` seconds each signature has grown (the signature window's complete
+            seconds); needed when the calibration depends on them (`uses_ages`), else ignored.
 
         Returns
         -------
@@ -352,23 +389,25 @@ class FaultIsolator:
         if feats.ndim != 2:
             raise ValueError(f"features must be (n, n_features), got shape {feats.shape}")
         n = feats.shape[0]
+        ages = self._ages(ages, n)
         n_f, n_g = self.faults_.size, len(self.groups_)
         fq, gq, nov = np.empty((n, n_f)), np.empty((n, n_g)), np.empty(n)
-        T = self.temperature()
         compiled = self._compiled_rows()
         if compiled is not None:
             floor = float(getattr(self.calibrator_, "floor", 1e-12))
+            temps, edges = self.temperatures() or (np.zeros(0), np.zeros(0))
             arrays, isolate = compiled
             params = IsolationParams(
                 classifier=arrays,
                 group_of=self.group_of_,
                 n_groups=n_g,
-                temperature=0.0 if T is None else T,
+                temperatures=temps,
+                age_edges=edges,
                 floor=floor,
                 top_map=self.top_map(),
                 novelty=self.novelty_.arrays(),
             )
-            isolate(feats, params, fq, gq, nov)
+            isolate(feats, ages, params, fq, gq, nov)
             return IsolationOutput(fq, gq, nov)
         fq[:], gq[:], nov[:] = np.nan, np.nan, np.nan
         ok = np.all(np.isfinite(feats), axis=1)
@@ -376,7 +415,12 @@ class FaultIsolator:
             group_of = self.group_of_
             p = self.fault_proba(feats[ok])
             gp = self.summed_groups(p)
-            g = self.calibrator_.transform(gp) if self.calibrator_ is not None else gp
+            if self.calibrator_ is None:
+                g = gp
+            elif self.uses_ages:
+                g = self.calibrator_.transform(gp, ages[ok])
+            else:
+                g = self.calibrator_.transform(gp)
             with np.errstate(invalid="ignore", divide="ignore"):
                 share = np.where(gp[:, group_of] > 0, p / gp[:, group_of], 1.0)
             gq[ok] = g
@@ -384,7 +428,31 @@ class FaultIsolator:
             nov[ok] = self.novelty_.score(feats[ok])
         return IsolationOutput(fq, gq, nov)
 
-    def update(self, features: Any) -> IsolationOutput:
-        """`run` on one signature ``(n_features,)``: ``(n_faults,)``, ``(n_groups,)``, a float."""
-        out = self.run(np.asarray(features, dtype=np.float64).reshape(1, -1))
+    def _ages(self, ages: Any, n: int) -> np.ndarray:
+        """``ages`` as ``(n,)`` float64, checked; zeros where the calibration does not use
+        them and none are given."""
+        if ages is None:
+            if self.uses_ages:
+                raise ValueError(
+                    "this isolator's calibration depends on the signatures' ages: pass ages "
+                    "(the seconds each signature has grown)"
+                )
+            return np.zeros(n)
+        a = np.ascontiguousarray(np.asarray(ages, dtype=np.float64).reshape(-1))
+        if a.size != n:
+            raise ValueError(f"ages must have one value per row ({n}), got {a.size}")
+        if not np.all(np.isfinite(a) & (a >= 0)):
+            raise ValueError("ages must be finite and >= 0 (seconds)")
+        return a
+
+    def update(self, features: Any, age: float | None = None) -> IsolationOutput:
+        """`run` on one signature ``(n_features,)`` of ``age`` seconds: ``(n_faults,)``,
+        ``(n_groups,)``, a float."""
+        ages = None if age is None else [age]
+        out = self.run(np.asarray(features, dtype=np.float64).reshape(1, -1), ages)
         return IsolationOutput(out.fault_proba[0], out.group_proba[0], float(out.novelty[0]))
+
+
+def _uses_ages(calibrator: Any) -> bool:
+    """Whether a recalibrator's ``fit`` and ``transform`` take the rows' ages."""
+    return bool(getattr(calibrator, "uses_ages", False))

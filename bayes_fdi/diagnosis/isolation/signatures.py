@@ -93,8 +93,9 @@ class SignatureState(NamedTuple):
 
 # one compiled loop over the seconds, clearer whole than cut into pieces
 @njit(cache=True, error_model="numpy")
-def _signature_kernel(x, alpha, ridge, state, out):  # pragma: no cover - compiled
-    """Running-sum isolation features of consecutive seconds (``state`` updated in place)."""
+def _signature_kernel(x, alpha, ridge, state, out, seconds):  # pragma: no cover - compiled
+    """Running-sum isolation features of consecutive seconds and the window's complete seconds
+    after each (``state`` updated in place)."""
     dd, rx, rf, xh, fh, s = x.detected, x.r_x, x.r_f, x.x_hat, x.f_hat, x.s
     p1, p2, t1 = x.p1, x.p2, x.t1
     sums = state.sums
@@ -119,6 +120,7 @@ def _signature_kernel(x, alpha, ridge, state, out):  # pragma: no cover - compil
                     ref[2] += alpha * (t1[t] - ref[2])
             for j in range(out.shape[1]):
                 out[t, j] = np.nan
+            seconds[t] = 0.0
             continue
         ok = (
             np.isfinite(rx[t])
@@ -149,6 +151,7 @@ def _signature_kernel(x, alpha, ridge, state, out):  # pragma: no cover - compil
             sums[14] += p2[t]
             sums[15] += t1[t]
         n = state.count[0]
+        seconds[t] = n
         if n < 0.5 or not state.reference_set[0]:
             for j in range(out.shape[1]):
                 out[t, j] = np.nan
@@ -171,7 +174,7 @@ def _signature_kernel(x, alpha, ridge, state, out):  # pragma: no cover - compil
 
 
 @njit(cache=True, error_model="numpy")
-def _signature_runs(x, alpha, ridge, state, out):  # pragma: no cover - compiled
+def _signature_runs(x, alpha, ridge, state, out, seconds):  # pragma: no cover - compiled
     """`_signature_kernel` over each run (row) of the inputs; ``state`` stacks the runs'."""
     for r in range(x.detected.shape[0]):
         inputs = SignatureInputs(
@@ -185,7 +188,7 @@ def _signature_runs(x, alpha, ridge, state, out):  # pragma: no cover - compiled
             state.reference_set[r],
             state.detected[r],
         )
-        _signature_kernel(inputs, alpha, ridge, run_state, out[r])
+        _signature_kernel(inputs, alpha, ridge, run_state, out[r], seconds[r])
 
 
 class SignatureWindow:
@@ -234,7 +237,11 @@ class SignatureWindow:
         check_state(state, self.init_state(), "signature state")
 
     def run(
-        self, inputs: SignatureInputs, state: SignatureState | None = None
+        self,
+        inputs: SignatureInputs,
+        state: SignatureState | None = None,
+        *,
+        seconds: np.ndarray | None = None,
     ) -> tuple[np.ndarray, SignatureState]:
         """The features of consecutive seconds of one run.
 
@@ -244,6 +251,9 @@ class SignatureWindow:
             `SignatureInputs` of ``(n,)`` sequences.
         state
             The state after the preceding second (default: a fresh one); not changed.
+        seconds
+            Optional ``(n,)`` float64 array that receives, second by second, the complete
+            seconds the window holds (its age in measured seconds; 0 while DD is off).
 
         Returns
         -------
@@ -260,16 +270,24 @@ class SignatureWindow:
             raise ValueError("SignatureWindow: every input must be a (n,) sequence")
         state = working_state(self, state)
         out = np.empty((n, len(ISOLATION_FEATURES)))
+        held = _seconds_buffer(seconds, flags.shape)
         alpha = 1.0 / self.reference_seconds
-        _signature_kernel(SignatureInputs(flags, *values), alpha, self.slope_ridge, state, out)
+        _signature_kernel(
+            SignatureInputs(flags, *values), alpha, self.slope_ridge, state, out, held
+        )
         return out, state
 
     def run_stacked(
-        self, inputs: SignatureInputs, state: SignatureState
+        self,
+        inputs: SignatureInputs,
+        state: SignatureState,
+        *,
+        seconds: np.ndarray | None = None,
     ) -> tuple[np.ndarray, SignatureState]:
         """`run` of many runs at once: `SignatureInputs` of ``(runs, n)`` arrays, ``state``
         their states stacked along a leading run axis; returns ``(runs, n, 10)`` features and
-        the stacked states after them (each run's equal to `run`'s)."""
+        the stacked states after them (each run's equal to `run`'s); ``seconds``, if given, a
+        ``(runs, n)`` float64 array, receives the windows' complete seconds."""
         self._check_params()
         flags = np.ascontiguousarray(np.asarray(inputs.detected, dtype=np.bool_))
         values = [np.ascontiguousarray(np.asarray(a, dtype=np.float64)) for a in inputs[1:]]
@@ -278,8 +296,9 @@ class SignatureWindow:
         check_stacked_state(state, self.init_state(), flags.shape[0], "signature state")
         state = writable_copy(state)
         out = np.empty((*flags.shape, len(ISOLATION_FEATURES)))
+        held = _seconds_buffer(seconds, flags.shape)
         alpha = 1.0 / self.reference_seconds
-        _signature_runs(SignatureInputs(flags, *values), alpha, self.slope_ridge, state, out)
+        _signature_runs(SignatureInputs(flags, *values), alpha, self.slope_ridge, state, out, held)
         return out, state
 
     def update(
@@ -288,3 +307,16 @@ class SignatureWindow:
         """The features of one second (`run` on one sample): ``(10,)`` and the new state."""
         out, state = self.run(SignatureInputs(*([v] for v in inputs)), state)
         return out[0], state
+
+
+def _seconds_buffer(seconds: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """The array the kernel writes the window's seconds into: ``seconds`` itself (checked:
+    float64, C-contiguous, of ``shape``) or a scratch array."""
+    if seconds is None:
+        return np.empty(shape)
+    if seconds.shape != shape or seconds.dtype != np.float64 or not seconds.flags.c_contiguous:
+        raise ValueError(
+            f"seconds must be a C-contiguous float64 array of shape {shape}, got "
+            f"{seconds.dtype} {seconds.shape}"
+        )
+    return seconds

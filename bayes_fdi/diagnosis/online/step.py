@@ -84,10 +84,12 @@ def check_stream_state(components: Components, state: Any, n_runs: int) -> None:
     components.fit_proof.check_state(one.proof)
 
 
-def _isolate(isolator: FaultIsolator | None, feats: np.ndarray) -> dict[str, np.ndarray]:
-    """Fault/group probabilities and novelty of ``(runs, n, 10)`` signatures (NaN rows stay
-    NaN): every row at once where the rows are independent, else one call per run (the rows of
-    one run together, as `run` of one run)."""
+def _isolate(
+    isolator: FaultIsolator | None, feats: np.ndarray, ages: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Fault/group probabilities and novelty of ``(runs, n, 10)`` signatures ``(runs, n)``
+    seconds old (NaN rows stay NaN): every row at once where the rows are independent, else one
+    call per run (the rows of one run together, as `run` of one run)."""
     shape = feats.shape[:2]
     if isolator is None:
         return {
@@ -96,9 +98,9 @@ def _isolate(isolator: FaultIsolator | None, feats: np.ndarray) -> dict[str, np.
             "novelty": np.full(shape, np.nan),
         }
     if isolator.rows_independent:
-        out = isolator.run(feats.reshape(-1, feats.shape[2]))
+        out = isolator.run(feats.reshape(-1, feats.shape[2]), ages.reshape(-1))
         return {k: v.reshape(*shape, *v.shape[1:]) for k, v in out._asdict().items()}
-    per_run = [isolator.run(run_feats)._asdict() for run_feats in feats]
+    per_run = [isolator.run(f, a)._asdict() for f, a in zip(feats, ages, strict=True)]
     return {k: np.stack([o[k] for o in per_run]) for k in per_run[0]}
 
 
@@ -126,7 +128,8 @@ def step_runs(
     quantities : dict
         ``(runs, n)`` arrays ``X_hat``, ``X_hat_std``, ``F_hat``, ``F_hat_std``, ``r_X``,
         ``r_F`` (innovations), ``stat_X``, ``stat_F``, ``DD``, ``novel_inputs``,
-        ``novel_onset``, ``unproven_onset``, ``novelty``; ``features`` ``(runs, n, 10)``,
+        ``novel_onset``, ``unproven_onset``, ``novelty``, ``window_seconds`` (the complete
+        seconds of the signature window, its age); ``features`` ``(runs, n, 10)``,
         ``fault_proba`` ``(runs, n, n_faults)``, ``group_proba`` ``(runs, n, n_groups)``.
     state : StreamState
         Read-only.
@@ -149,7 +152,10 @@ def step_runs(
     window = SignatureInputs(
         dd, r_x, r_f, pred[:, :, 0], pred[:, :, 2], signed_root(p1, p2), p1, p2, t1
     )
-    out["features"], signature = components.signature.run_stacked(window, state.signature)
+    out["window_seconds"] = np.empty(dd.shape)
+    out["features"], signature = components.signature.run_stacked(
+        window, state.signature, seconds=out["window_seconds"]
+    )
     inputs = np.stack([c[k] for k in ENVELOPE_CHANNELS], axis=-1)
     novel_levels = components.envelope.outside(inputs.reshape(-1, 4)).reshape(dd.shape)
     since = np.stack([test_x.since, test_f.since], axis=-1)
@@ -164,7 +170,7 @@ def step_runs(
     out["unproven_onset"], proof = components.fit_proof.run_stacked(
         dd, measured & ~out["novel_inputs"], state.proof, ages
     )
-    out.update(_isolate(components.isolator, out["features"]))
+    out.update(_isolate(components.isolator, out["features"], out["window_seconds"]))
     end = StreamState(
         models=models_state,
         whiten=PerOutput(whiten_x, whiten_f),

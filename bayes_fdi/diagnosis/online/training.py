@@ -199,13 +199,16 @@ def detected_seconds(
     times: np.ndarray,
     onset: float,
     cap: int = CALIBRATION_SECONDS_PER_RUN,
+    window_seconds: np.ndarray | None = None,
 ) -> tuple[list[np.ndarray], list[int], bool]:
     """The signatures of one fault run at its detected seconds after the fault's onset.
 
     Every second at or after ``onset`` with DD on and a finite signature, at most ``cap`` of
     them evenly spaced over those seconds: the rows whose group probabilities the online
     diagnoser reports for the fault. Parameters and returns as `detection_signatures`; the
-    ages are the seconds since the detection each second belongs to.
+    ages are the seconds since the detection each second belongs to or, given the stream's
+    ``window_seconds`` (the signature window's complete seconds, second by second), those: the
+    age the isolation's calibration reads online.
     """
     dd = np.asarray(detected, dtype=bool)
     rise = np.flatnonzero(dd & ~np.concatenate([[False], dd[:-1]]))
@@ -215,7 +218,8 @@ def detected_seconds(
         seconds = seconds[np.round(np.linspace(0, seconds.size - 1, cap)).astype(np.int64)]
     since = rise[np.searchsorted(rise, seconds, side="right") - 1] if seconds.size else seconds
     rows = [features[t] for t in seconds]
-    return rows, [int(a) for a in seconds - since], bool(np.any(times[rise] >= onset))
+    ages = seconds - since if window_seconds is None else np.asarray(window_seconds)[seconds]
+    return rows, [int(a) for a in ages], bool(np.any(times[rise] >= onset))
 
 
 def cap_rows(y: np.ndarray, cap: int, rng: np.random.Generator) -> np.ndarray:
@@ -275,7 +279,7 @@ def fit_detection(
 
 
 def training_signatures(
-    components: Components, runs: Runs, *, per_second: bool = False
+    components: Components, runs: Runs, *, per_second: bool = False, window_ages: bool = False
 ) -> Signatures:
     """The isolation signatures of fault runs as the fit uses them.
 
@@ -298,8 +302,10 @@ def training_signatures(
         Fault runs (coordinates ``state`` and, optionally, ``onset``): a dataset or a list.
     per_second
         Keep the detected seconds (the recalibration's rows) instead of the ages.
+    window_ages
+        With ``per_second``: the rows' ages are the signature window's complete seconds (what
+        the online isolation's calibration reads) rather than the seconds since the detection.
     """
-    pick = detected_seconds if per_second else detection_signatures
     rows, labels, ages = [], [], []
     detected: dict[str, list[bool]] = {}
     decision, detector = components.decision, components.detector
@@ -326,7 +332,12 @@ def training_signatures(
                 continue
             arrays = {c: np.ascontiguousarray(v[i]) for c, v in data.items()}
             out, _ = step(components, arrays, init_run_state(components))
-            found, found_ages, hit = pick(out["DD"], out["features"], times, onset[i])
+            args = (out["DD"], out["features"], times, onset[i])
+            if per_second:
+                window = out["window_seconds"] if window_ages else None
+                found, found_ages, hit = detected_seconds(*args, window_seconds=window)
+            else:
+                found, found_ages, hit = detection_signatures(*args)
             detected.setdefault(state, []).append(hit)
             rows += found
             labels += [state] * len(found)
@@ -379,7 +390,9 @@ def fit_isolation(
     rates = {f: float(np.mean(v)) for f, v in detected.items()}
     per_second = group_rule == "naming"
     Xv, yv, av, _ = training_signatures(components, validation_runs, per_second=per_second)
-    Xc, yc, _, _ = training_signatures(components, calibration_runs, per_second=True)
+    Xc, yc, ac, _ = training_signatures(
+        components, calibration_runs, per_second=True, window_ages=True
+    )
     seconds["signatures"] = time.perf_counter() - t0
     counts = {f: int(np.sum(y == f)) for f in rates}
     undetectable = sorted(
@@ -405,7 +418,7 @@ def fit_isolation(
         X[keep],
         y[keep],
         validation=(Xv[vkeep], yv[vkeep]) if vkeep.any() else None,
-        calibration=(Xc[ckeep], yc[ckeep]) if ckeep.any() else None,
+        calibration=(Xc[ckeep], yc[ckeep], ac[ckeep]) if ckeep.any() else None,
     )
     seconds["isolation"] = time.perf_counter() - t0
     counts = {
