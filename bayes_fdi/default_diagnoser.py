@@ -28,10 +28,13 @@ the valve law; `bayes_fdi.diagnosis.normal_models.physics_inputs`) default to ea
 Each fault file is simulated with three seeds for the training, validation (isolability groups)
 and calibration (group probabilities) sets (`simulation_plan`). Every seed is below 1000, apart
 from the benchmark's evaluation seeds (>= 10 000, see ``bayes_fdi.benchmark.scenarios``). The
-group probabilities are recalibrated in one of two ways (`CALIBRATIONS`):
+group probabilities are recalibrated in one of three ways (`CALIBRATIONS`):
 
-- ``"temperature"`` (default): a `~bayes_fdi.calibration.TemperatureScaler` on the calibration
-  runs of the fault files;
+- ``"age-temperature"`` (default, `DEFAULT_CALIBRATION`): an
+  `~bayes_fdi.calibration.AgeTemperatureScaler` on the calibration runs of the fault files, one
+  temperature per age bin of the signature (a signature seconds old and a settled one are not
+  equally reliable);
+- ``"temperature"``: one `~bayes_fdi.calibration.TemperatureScaler` on the same runs;
 - ``"top-label-long"``: a `~bayes_fdi.calibration.TopLabelScaler` (a temperature, then a beta map
   of the top group's probability) on calibration runs that look more like faults in service: the
   abrupt runs last `CALIBRATION_AFTER_ONSET` (1500 s) after the onset instead of 480 s, and
@@ -58,6 +61,7 @@ __all__ = [
     "CALIBRATIONS",
     "CALIBRATION_AFTER_ONSET",
     "CAMPAIGNS",
+    "DEFAULT_CALIBRATION",
     "DEFAULT_DETECTORS",
     "DEFAULT_FIT_PROOF_SECONDS",
     "DEFAULT_ISOLATION",
@@ -139,7 +143,9 @@ CAMPAIGNS: dict[str, tuple[str, ...]] = {
 #: the ``seed`` argument): every seed stays below 1000.
 SET_SEED_OFFSETS: dict[str, int] = {"train": 0, "validation": 100, "calibration": 200}
 #: The recalibrations of the group probabilities (``calibration`` of `fit_online_diagnoser`).
-CALIBRATIONS: tuple[str, ...] = ("temperature", "top-label-long")
+CALIBRATIONS: tuple[str, ...] = ("age-temperature", "temperature", "top-label-long")
+#: The default recalibration of the group probabilities.
+DEFAULT_CALIBRATION = "age-temperature"
 #: With ``calibration="top-label-long"``: the calibration runs of the abrupt fault campaigns last
 #: this long after the fault's onset (s), so that the recalibration meets settled faults as often
 #: as a fault that lasts shows them, not only their first minutes (except with ``small=True``) ...
@@ -182,7 +188,7 @@ def _check_calibration(calibration: Any) -> str:
 
 
 def online_campaigns(
-    *, small: bool = False, training: str = DEFAULT_TRAINING, calibration: str = "temperature"
+    *, small: bool = False, training: str = DEFAULT_TRAINING, calibration: str = DEFAULT_CALIBRATION
 ) -> dict[str, tuple[Campaign, ...]]:
     """The campaigns of each set of ``training`` (`TRAININGS`; ``small``: the quick version);
     with ``calibration="top-label-long"`` (not ``small``), the `LONG_CALIBRATION_FILES` too under
@@ -217,7 +223,7 @@ def simulation_plan(
     seed: int = 0,
     small: bool = False,
     training: str = DEFAULT_TRAINING,
-    calibration: str = "temperature",
+    calibration: str = DEFAULT_CALIBRATION,
 ) -> list[tuple[str, Campaign, int]]:
     """What `simulate_online_campaigns` simulates, in order: ``(part, campaign, seed)`` with part
     ``"normal"``, ``"train"``, ``"validation"`` or ``"calibration"``.
@@ -254,7 +260,7 @@ def simulate_online_campaigns(
     small: bool = False,
     progress: bool = True,
     training: str = DEFAULT_TRAINING,
-    calibration: str = "temperature",
+    calibration: str = DEFAULT_CALIBRATION,
 ) -> dict[str, list[xr.Dataset]]:
     """Simulate the training data of ``training`` (`simulation_plan`): ``{"normal": [...],
     "train": [...], "validation": [...], "calibration": [...]}`` (lists of datasets, one per
@@ -273,7 +279,7 @@ def fit_online_diagnoser(
     small: bool = False,
     progress: bool = True,
     training: str = DEFAULT_TRAINING,
-    calibration: str = "temperature",
+    calibration: str = DEFAULT_CALIBRATION,
     physics_inputs: tuple[str, ...] | None = None,
     isolation: str | None = None,
     **params: Any,
@@ -292,8 +298,9 @@ def fit_online_diagnoser(
     training
         ``"excitation-mix"`` (default) or ``"dgen"`` (`TRAININGS`).
     calibration
-        ``"temperature"`` (default) or ``"top-label-long"`` (`CALIBRATIONS`): the recalibration
-        of the group probabilities and the calibration runs it is fitted on.
+        ``"age-temperature"`` (default), ``"temperature"`` or ``"top-label-long"``
+        (`CALIBRATIONS`): the recalibration of the group probabilities and the calibration runs
+        it is fitted on.
     physics_inputs
         The normal models' physics inputs (``"command_lag"``, ``"valve_law"``:
         `~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``physics_inputs``;
@@ -303,8 +310,9 @@ def fit_online_diagnoser(
         ``"tree"`` or ``"forest"`` (`ISOLATIONS`; default: the training's `DEFAULT_ISOLATION`);
         ignored where ``params`` gives ``isolation_classifier``.
     **params
-        Parameters of `OnlineDiagnoser` (default: ``calibrator=TemperatureScaler()``, or
-        ``TopLabelScaler()`` with ``calibration="top-label-long"``;
+        Parameters of `OnlineDiagnoser` (default: ``calibrator=AgeTemperatureScaler()``,
+        ``TemperatureScaler()`` with ``calibration="temperature"``, ``TopLabelScaler()`` with
+        ``calibration="top-label-long"``;
         ``fit_proof_seconds=DEFAULT_FIT_PROOF_SECONDS``; ``random_state=seed``; with
         ``small``, lighter normal models).
 
@@ -315,7 +323,7 @@ def fit_online_diagnoser(
     """
     import sys
 
-    from bayes_fdi.calibration import TemperatureScaler, TopLabelScaler
+    from bayes_fdi.calibration import AgeTemperatureScaler, TemperatureScaler, TopLabelScaler
     from bayes_fdi.diagnosis import OnlineDiagnoser
     from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 
@@ -328,8 +336,12 @@ def fit_online_diagnoser(
         seed=seed, small=small, progress=progress, training=training, calibration=calibration
     )
     simulated = time.perf_counter() - t0
-    top_label = _check_calibration(calibration) == "top-label-long"
-    params.setdefault("calibrator", TopLabelScaler() if top_label else TemperatureScaler())
+    calibrators = {
+        "temperature": TemperatureScaler,
+        "age-temperature": AgeTemperatureScaler,
+        "top-label-long": TopLabelScaler,
+    }
+    params.setdefault("calibrator", calibrators[_check_calibration(calibration)]())
     params.setdefault("random_state", seed)
     params.setdefault("fit_proof_seconds", DEFAULT_FIT_PROOF_SECONDS)
     params.setdefault("detector", DEFAULT_DETECTORS[training])

@@ -3,8 +3,9 @@
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/calibration_families.py [--model FILE] \
         [--seed 0] [--covariates inputs|window] [--window 120] [--heldout-seed 601]
 
-The default model (``--model``, or `fit_online_diagnoser` with ``--seed``, which is the default
-model at seed 0) runs over its own calibration runs: the seven fault campaign files of its
+A model recalibrated by one temperature (``--model``, or `fit_online_diagnoser` with
+``--seed`` and ``calibration="temperature"``: the default model at seed 0 but for its
+recalibration by age bins) runs over its own calibration runs: the seven fault campaign files of its
 training mix (the DGen sines, sums of sines, steps and ramps, a PI level loop; abrupt and
 incipient), simulated with the calibration set's seeds, the runs its temperature was fitted
 on. Every detected second after a fault's onset with a group probability counts, as in the
@@ -163,7 +164,7 @@ def main() -> None:
     if args.model:
         diagnoser = load_online_model(args.model)
     else:
-        diagnoser = fit_online_diagnoser(seed=args.seed, progress=False)
+        diagnoser = fit_online_diagnoser(seed=args.seed, progress=False, calibration="temperature")
     model_scaler = diagnoser.isolator_.calibrator_
     temperature = diagnoser.isolator_.temperature()
     if temperature is None:

@@ -142,7 +142,9 @@ def test_the_long_calibration_sees_settled_abrupt_faults_and_slow_incipient_ones
     assert [(part, c.duration) for part, c, _ in small] == [
         (part, c.duration) for part, c, _ in simulation_plan(small=True)
     ]
-    with pytest.raises(ValueError, match="calibration must be one of temperature, top-label"):
+    with pytest.raises(
+        ValueError, match="calibration must be one of age-temperature, temperature, top-label"
+    ):
         simulation_plan(calibration="isotonic")
     # the seeds of the long calibration stay below 1000 with the largest allowed seed
     top = simulation_plan(seed=548, training="dgen", calibration="top-label-long")
@@ -156,6 +158,10 @@ def test_the_forest_option_names_the_faults_with_a_seeded_forest():
     forest = diag.isolator_.classifier_
     assert isinstance(forest, ForestClassifier) and forest.random_state == 3
     assert diag.isolator_.rows_independent  # its compiled per-second pass
+    # the default recalibration: one temperature per age bin of the signature
+    from bayes_fdi.calibration import AgeTemperatureScaler
+
+    assert isinstance(diag.isolator_.calibrator_, AgeTemperatureScaler) and diag.isolator_.uses_ages
     assert diag.normal_models_.physics_inputs == DEFAULT_PHYSICS_INPUTS[DEFAULT_TRAINING]
     # a stream in two chunks is the stream in one, probabilities included
     from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
