@@ -150,9 +150,11 @@ class FaultIsolator:
         (``HierarchicalClassifier(RVC(kernel="rbf", width=2.0))``).
     calibrator
         Unfitted recalibrator of the group probabilities (``fit(proba, y)``,
-        ``transform(proba)``; e.g. ``bayes_fdi.calibration.TemperatureScaler()``), cloned and
-        fitted on the calibration set. None: no recalibration. Not fitted when every known
-        fault falls into one group (its probability is 1).
+        ``transform(proba)``; e.g. ``bayes_fdi.calibration.TemperatureScaler()``, or one whose
+        ``uses_ages`` is true and whose ``fit`` and ``transform`` also take the rows' ages,
+        ``bayes_fdi.calibration.AgeTemperatureScaler()``), cloned and fitted on the calibration
+        set. None: no recalibration. Not fitted when every known fault falls into one group
+        (its probability is 1).
     group_threshold
         Held-out confusion from which two faults (or groups) share a group (default 0.15, the
         threshold of the paper pipeline's 20-state analysis).

@@ -97,8 +97,8 @@ class OnlineDiagnoser(BaseEstimator):
         Unfitted classifier over the faults (default: the k-means tree of RVCs; the SVM
         baseline is ``HierarchicalClassifier(svm_classifier())``).
     calibrator
-        Unfitted recalibrator of the group probabilities, fitted on the calibration runs (e.g.
-        ``bayes_fdi.calibration.TemperatureScaler()``); None: none.
+        Unfitted recalibrator of the group probabilities, fitted on the calibration runs' seconds
+        (e.g. ``bayes_fdi.calibration.AgeTemperatureScaler()``, by the signature's age); None: none.
     max_signatures_per_fault
         Training signatures kept per fault for the classifier (a seeded subset; bounds the
         cost of the RVC tree, default 80).
