@@ -61,6 +61,8 @@ class AgeTemperatureScaler(BaseEstimator):
     ----------
     temperatures_ : numpy.ndarray
         ``(len(edges) + 1,)``: the temperature of each bin.
+    edges_ : numpy.ndarray
+        The bins' upper edges (seconds), as fitted.
     pooled_temperature_ : float
     rows_per_bin_ : numpy.ndarray
         ``(len(edges) + 1,)`` int64: the fitting rows in each bin.
@@ -88,7 +90,8 @@ class AgeTemperatureScaler(BaseEstimator):
         self.bounds = bounds
         self.classes = classes
 
-    def _edges(self) -> np.ndarray:
+    def _check_params(self) -> np.ndarray:
+        """The bins' edges as an array, after checking ``edges`` and ``min_rows``."""
         e = np.asarray(self.edges, dtype=np.float64)
         if e.ndim != 1 or not np.all(np.isfinite(e)) or np.any(e <= 0) or np.any(np.diff(e) <= 0):
             raise ValueError(f"edges must be increasing finite values > 0, got {self.edges!r}")
@@ -101,7 +104,7 @@ class AgeTemperatureScaler(BaseEstimator):
 
     def fit(self, proba: Any, y: Any, ages: Any) -> AgeTemperatureScaler:
         """Fit the bins' temperatures on held-out ``(proba, y)`` with the rows' ``ages``."""
-        edges = self._edges()
+        edges = self._check_params()
         z = log_probabilities(proba, input="proba", floor=self.floor)
         bins = age_bins(ages, edges)
         if bins.size != z.shape[0]:
