@@ -14,6 +14,7 @@ from bayes_fdi.campaigns.simulation import simulate_campaign
 from bayes_fdi.default_diagnoser import (
     CALIBRATION_AFTER_ONSET,
     CAMPAIGNS,
+    DEFAULT_GROUP_RULES,
     DEFAULT_PHYSICS_INPUTS,
     DEFAULT_TRAINING,
     SET_SEED_OFFSETS,
@@ -163,6 +164,9 @@ def test_the_forest_option_names_the_faults_with_a_seeded_forest():
 
     assert isinstance(diag.isolator_.calibrator_, AgeTemperatureScaler) and diag.isolator_.uses_ages
     assert diag.normal_models_.physics_inputs == DEFAULT_PHYSICS_INPUTS[DEFAULT_TRAINING]
+    # the groups from how the validation runs' seconds are named, as commissioning finds them
+    assert diag.group_rule == DEFAULT_GROUP_RULES[DEFAULT_TRAINING] == "naming"
+    assert diag.isolator_.group_rule == "naming"
     # a stream in two chunks is the stream in one, probabilities included
     from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 

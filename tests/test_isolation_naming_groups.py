@@ -111,3 +111,74 @@ def test_every_profile_of_a_signed_fault_meets_both_signs():
         for s in range(12)
     ]  # fmt: skip
     assert set(one) == {-1.0, 1.0}
+
+
+@pytest.fixture(scope="module")
+def small_naming_diagnoser():
+    from sklearn.linear_model import LogisticRegression
+    from small_online import small_normal_models, small_runs
+
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+
+    runs = small_runs()
+    # a weak classifier (strong regularisation), so that the validation seconds are misnamed:
+    # f1 and f7 confused (0.18 by this rule, 0.25 by the pairwise one on these runs)
+    diag = OnlineDiagnoser(
+        small_normal_models(), group_rule="naming", max_signatures_per_fault=20,
+        isolation_classifier=LogisticRegression(C=0.01),
+    ).fit(runs.normal, runs.faults, validation_runs=runs.validation)  # fmt: skip
+    return diag, runs.validation
+
+
+def test_the_online_diagnoser_finds_its_groups_by_how_its_stream_names_the_seconds(
+    small_naming_diagnoser,
+):
+    from bayes_fdi.diagnosis.online.training import CALIBRATION_SECONDS_PER_RUN, GROUP_MIN_AGE
+
+    diag, validation = small_naming_diagnoser
+    iso = diag.isolator_
+    assert diag.group_rule == iso.group_rule == "naming" and iso.calibrator_ is None
+    # read off the decision stream: every detected second at or after the onset (at most
+    # CALIBRATION_SECONDS_PER_RUN of them, evenly spaced) at least GROUP_MIN_AGE s after the
+    # rise of its detection, named by the most probable fault (no recalibration: the stream's
+    # fault probabilities are the classifier's)
+    stream = diag.run(validation)
+    t = stream["time"].values
+    faults = list(iso.faults_)
+    true, named = [], []
+    for r in range(stream.sizes["run"]):
+        state = str(validation["state"].values[r])
+        if state not in faults:
+            continue
+        dd = stream["DD"].isel(run=r).values.astype(bool)
+        fp = stream["fault_proba"].isel(run=r).sel(fault=faults).transpose("time", "fault").values
+        seconds = np.flatnonzero(dd & (t >= float(validation["onset"].values[r])))
+        seconds = seconds[np.isfinite(fp[seconds]).all(axis=1)]
+        if seconds.size > CALIBRATION_SECONDS_PER_RUN:
+            pick = np.linspace(0, seconds.size - 1, CALIBRATION_SECONDS_PER_RUN)
+            seconds = seconds[np.round(pick).astype(np.int64)]
+        rise = np.flatnonzero(dd & ~np.concatenate([[False], dd[:-1]]))
+        for k in seconds:
+            if k - rise[rise <= k][-1] >= GROUP_MIN_AGE:
+                true.append(state)
+                named.append(faults[int(np.argmax(fp[k]))])
+    assert len(true) > 100
+    expected = naming_confusion(np.array(true), np.array(named), faults)
+    assert expected.max() > 0.15  # a merge
+    np.testing.assert_allclose(iso.validation_confusion_, expected, rtol=0, atol=1e-12)
+    order = sorted(range(len(faults)), key=lambda i: int(faults[i][1:]))  # f1, f7, f18
+    groups = isolability_groups(
+        [faults[i] for i in order], expected[np.ix_(order, order)], threshold=0.15
+    )
+    assert [tuple(g) for g in groups] == list(iso.groups_)
+
+
+def test_the_group_rule_is_checked_before_a_fit_and_older_diagnosers_load_with_theirs():
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+
+    with pytest.raises(ValueError, match="group_rule must be one of pairwise, naming, got 'one'"):
+        OnlineDiagnoser(group_rule="one").fit(None)
+    # a diagnoser saved in format 3 (before either rule was recorded) found its groups pairwise
+    old = model_files.load(FORMAT3 / "online.npz")
+    assert old.group_rule == old.isolator_.group_rule == "pairwise"
+    assert old.get_params()["group_rule"] == "pairwise"

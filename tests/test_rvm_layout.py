@@ -62,7 +62,14 @@ def _imports(path: Path) -> list[tuple[str, list[str], bool, int]]:
 
 
 def _files(*folders: str) -> list[Path]:
-    return sorted(p for folder in folders for p in (ROOT / folder).rglob("*.py"))
+    """The project's Python files under ``folders``, not those of a hidden folder such as the
+    peers' environment that ``benchmarks/rvm_fit.py`` creates in ``benchmarks/.venv-peers``."""
+    return sorted(
+        p
+        for folder in folders
+        for p in (ROOT / folder).rglob("*.py")
+        if not any(part.startswith(".") for part in p.relative_to(ROOT).parts)
+    )
 
 
 def test_every_module_of_the_family_has_a_layer():

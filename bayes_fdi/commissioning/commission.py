@@ -247,6 +247,7 @@ def commission(
         detector=TwoSpeedCUSUM(k_slow=DETECTOR_K_SLOW),
         calibrator=TemperatureScaler(bounds=(low, high)),
         isolation_classifier=ForestClassifier(random_state=seed) if isolation == "forest" else None,
+        group_rule=GROUP_RULE,
         detect_rate=detect_rate,
         random_state=seed,
     )

@@ -41,12 +41,18 @@ from bayes_fdi.diagnosis.isolation.compiled_tree import lean_tree_or_none
 from bayes_fdi.diagnosis.isolation.forest import ForestClassifier
 
 __all__ = [
+    "GROUP_RULES",
     "FaultIsolator",
     "IsolationOutput",
     "isolability_groups",
     "naming_confusion",
     "pairwise_confusion",
 ]
+
+
+#: How the isolability groups may be found: ``"pairwise"`` (`pairwise_confusion` of the
+#: signatures at fixed ages) or ``"naming"`` (`naming_confusion` of every detected second).
+GROUP_RULES: tuple[str, ...] = ("pairwise", "naming")
 
 
 class IsolationOutput(NamedTuple):
@@ -227,7 +233,7 @@ class FaultIsolator:
         group / no recalibration). A calibrator that takes ages
         (`~bayes_fdi.calibration.AgeTemperatureScaler`) needs ``calibration=(rows, labels,
         ages)``, the ages being the seconds each row's signature has grown."""
-        if self.group_rule not in ("pairwise", "naming"):
+        if self.group_rule not in GROUP_RULES:
             raise ValueError(f"group_rule must be 'pairwise' or 'naming', got {self.group_rule!r}")
         X = np.asarray(X, dtype=np.float64)
         y = np.asarray(y).astype(str)

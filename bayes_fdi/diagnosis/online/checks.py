@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from bayes_fdi.diagnosis.isolation.isolator import GROUP_RULES
+
 __all__ = ["NUMERIC_SETTINGS", "SETTING_RANGES", "check_fitted_values", "check_settings"]
 
 
@@ -40,8 +42,9 @@ NUMERIC_SETTINGS: tuple[str, ...] = tuple(SETTING_RANGES)
 
 def check_settings(params: Mapping[str, Any]) -> None:
     """Refuse settings that are not real numbers (a bool, a string) or out of range
-    (`SETTING_RANGES`; ``params``: ``get_params()`` of an `OnlineDiagnoser`); the error names
-    the setting."""
+    (`SETTING_RANGES`; ``params``: ``get_params()`` of an `OnlineDiagnoser`), and a
+    ``group_rule`` not in `~bayes_fdi.diagnosis.isolation.isolator.GROUP_RULES`; the error
+    names the setting."""
     for name in NUMERIC_SETTINGS:
         value = params[name]
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
@@ -49,6 +52,10 @@ def check_settings(params: Mapping[str, Any]) -> None:
     for name, in_range in SETTING_RANGES.items():
         if not in_range(params[name]):
             raise ValueError(f"{name} is out of range: {params[name]!r}")
+    if params["group_rule"] not in GROUP_RULES:
+        raise ValueError(
+            f"group_rule must be one of {', '.join(GROUP_RULES)}, got {params['group_rule']!r}"
+        )
 
 
 def _finite(value: Any) -> bool:

@@ -102,8 +102,9 @@ class OnlineDiagnoser(BaseEstimator):
     max_signatures_per_fault
         Training signatures kept per fault for the classifier (a seeded subset; bounds the
         cost of the RVC tree, default 80).
-    group_threshold
-        Held-out pairwise confusion from which two faults form one isolability group.
+    group_threshold, group_rule
+        Held-out confusion from which two faults form one isolability group, and how it is
+        measured (``"pairwise"``, default, or ``"naming"``: `fit_isolation`'s ``group_rule``).
     detect_rate
         A fault whose training runs are detected less often than this is treated as not
         detectable (DGN0, the stream's ``undetectable``; default 0.5).
@@ -173,6 +174,7 @@ class OnlineDiagnoser(BaseEstimator):
         calibrator: Any = None,
         max_signatures_per_fault: int = 80,
         group_threshold: float = 0.15,
+        group_rule: str = "pairwise",
         detect_rate: float = 0.5,
         p_fault: float = 0.8,
         novelty_ratio: float = 1.5,
@@ -192,6 +194,7 @@ class OnlineDiagnoser(BaseEstimator):
         self.calibrator = calibrator
         self.max_signatures_per_fault = max_signatures_per_fault
         self.group_threshold = group_threshold
+        self.group_rule = group_rule
         self.detect_rate = detect_rate
         self.p_fault = p_fault
         self.novelty_ratio = novelty_ratio
@@ -211,10 +214,8 @@ class OnlineDiagnoser(BaseEstimator):
     ) -> OnlineDiagnoser:
         """Fit detection on fault-free runs and, given fault runs, isolation.
 
-        The normal models, the whitening filters and the detector's threshold
-        (`~bayes_fdi.diagnosis.online.training.fit_detection`) and the input envelope on the
-        fault-free runs; the isolator on the signatures the stream gives on the fault runs
-        (`~bayes_fdi.diagnosis.online.training.fit_isolation`).
+        The normal models, whitening filters, detector's threshold (`fit_detection`) and input
+        envelope on the fault-free runs; the isolator on the fault runs (`fit_isolation`).
 
         Parameters
         ----------

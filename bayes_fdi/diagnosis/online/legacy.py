@@ -31,9 +31,12 @@ __all__ = ["upgrade_diagnoser", "upgrade_run_state", "upgrade_stream_state"]
 
 def upgrade_diagnoser(data: dict[str, Any]) -> dict[str, Any]:
     """An `OnlineDiagnoser`'s saved attributes in today's layout (today's returned unchanged; a
-    file saved before the fit proof gets ``fit_proof_seconds = 0``, the stream it gave)."""
+    file saved before the fit proof gets ``fit_proof_seconds = 0``, the stream it gave; one
+    saved before the diagnoser chose its ``group_rule``, its isolator's rule, or the pairwise
+    rule that fitted every other)."""
     data = dict(data)
     data.setdefault("fit_proof_seconds", 0)  # saved before the fit proof: every detection a fault
+    data.setdefault("group_rule", getattr(data.get("isolator_"), "group_rule", "pairwise"))
     if "input_low_" in data:
         low, high = data.pop("input_low_"), data.pop("input_high_")
         margin = data.get("input_margin", 0.1)
