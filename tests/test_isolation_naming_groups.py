@@ -182,3 +182,18 @@ def test_the_group_rule_is_checked_before_a_fit_and_older_diagnosers_load_with_t
     old = model_files.load(FORMAT3 / "online.npz")
     assert old.group_rule == old.isolator_.group_rule == "pairwise"
     assert old.get_params()["group_rule"] == "pairwise"
+
+
+def test_a_commissioned_diagnoser_saved_before_the_rule_was_its_own_keeps_its_isolators(
+    small_naming_diagnoser,
+):
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+
+    diag, _ = small_naming_diagnoser
+    # a format-15 file's state: the isolator records the naming rule, the diagnoser no rule
+    saved = {k: v for k, v in vars(diag).items() if k != "group_rule"}
+    upgraded = OnlineDiagnoser.upgrade_model_file(saved, 15)
+    assert upgraded["group_rule"] == "naming"
+    # a detection-only diagnoser of that age (no isolator) was fitted by the pairwise default
+    saved["isolator_"] = None
+    assert OnlineDiagnoser.upgrade_model_file(saved, 15)["group_rule"] == "pairwise"
