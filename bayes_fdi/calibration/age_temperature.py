@@ -105,6 +105,7 @@ class AgeTemperatureScaler(BaseEstimator):
     def fit(self, proba: Any, y: Any, ages: Any) -> AgeTemperatureScaler:
         """Fit the bins' temperatures on held-out ``(proba, y)`` with the rows' ``ages``."""
         edges = self._check_params()
+        proba = np.asarray(proba)
         z = log_probabilities(proba, input="proba", floor=self.floor)
         bins = age_bins(ages, edges)
         if bins.size != z.shape[0]:
@@ -120,7 +121,7 @@ class AgeTemperatureScaler(BaseEstimator):
         for k in range(n_bins):
             if self.rows_per_bin_[k] >= self.min_rows:
                 sel = bins == k
-                temps[k] = float(scaler.fit(np.asarray(proba)[sel], y[sel]).temperature_)
+                temps[k] = float(scaler.fit(proba[sel], y[sel]).temperature_)
         self.temperatures_ = temps
         self.edges_ = edges
         rows = np.arange(z.shape[0])
@@ -139,12 +140,10 @@ class AgeTemperatureScaler(BaseEstimator):
     def transform(self, proba: Any, ages: Any) -> np.ndarray:
         """Recalibrated probabilities ``softmax(log(p) / T_k)``, ``k`` the bin of each row's
         age; rows sum to 1."""
+        t = self.temperature_of(ages)
         z = log_probabilities(proba, input="proba", floor=self.floor)
-        if not hasattr(self, "temperatures_"):
-            raise ValueError("AgeTemperatureScaler is not fitted; call fit first")
         if z.shape[1] != len(self.classes_):
             raise ValueError(f"expected {len(self.classes_)} columns, got {z.shape[1]}")
-        t = self.temperature_of(ages)
         if t.size != z.shape[0]:
             raise ValueError(f"ages must have one value per row ({z.shape[0]}), got {t.size}")
         return np.exp(log_softmax(z / t[:, None]))

@@ -37,7 +37,8 @@ def fit_commissioned_isolation(
     diagnoser
         Fitted on the healthy data without fault runs; its parameters (``calibrator``,
         ``isolation_classifier``, ``group_threshold``, ``detect_rate``,
-        ``max_signatures_per_fault``, ``random_state``) set the isolation's.
+        ``max_signatures_per_fault``, ``random_state``) set the isolation's; its
+        ``group_rule`` is set to `GROUP_RULE`.
     training, validation, calibration
         The libraries that train the classifier, find the groups (`GROUP_RULE`) and
         calibrate the group probabilities.
@@ -46,9 +47,8 @@ def fit_commissioned_isolation(
         raise ValueError("the diagnoser already has an isolator: fit it without fault runs")
     t0 = time.perf_counter()
     seconds = dict(diagnoser.fit_seconds_)
-    attach_isolation(
-        diagnoser, training, validation, calibration, seconds=seconds, group_rule=GROUP_RULE
-    )
+    diagnoser.set_params(group_rule=GROUP_RULE)
+    attach_isolation(diagnoser, training, validation, calibration, seconds=seconds)
     seconds["total"] = seconds.get("total", 0.0) + time.perf_counter() - t0
     diagnoser.fit_seconds_ = seconds
     return diagnoser.reset()

@@ -78,10 +78,8 @@ def row_temperature(params, age):  # pragma: no cover - compiled
     """The temperature of a row whose signature is ``age`` seconds old (0.0: no scaling)."""
     if params.temperatures.size == 0:
         return 0.0
-    k = 0
-    while k < params.age_edges.size and age >= params.age_edges[k]:
-        k += 1
-    return params.temperatures[k]
+    # the bin as `~bayes_fdi.calibration.age_temperature.age_bins` finds it
+    return params.temperatures[np.searchsorted(params.age_edges, age, side="right")]
 
 
 @njit(cache=True, error_model="numpy")

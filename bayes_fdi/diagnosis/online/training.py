@@ -451,13 +451,11 @@ def attach_isolation(
     calibration_runs: Runs | None,
     *,
     seconds: dict[str, float],
-    group_rule: str | None = None,
 ) -> None:
     """Fit the isolation of ``diagnoser`` (an `OnlineDiagnoser` whose detection is fitted) on
     fault runs with `fit_isolation` and set its ``isolator_``, ``undetectable_``,
     ``detection_rates_`` (and ``n_signatures_``) in place; the diagnoser's parameters set the
-    isolation's (``group_rule``: the diagnoser's unless given), ``seconds`` receives the
-    timings."""
+    isolation's, ``seconds`` receives the timings."""
     fitted = fit_isolation(
         detection_components(diagnoser),
         fault_runs,
@@ -466,7 +464,7 @@ def attach_isolation(
         classifier=diagnoser.isolation_classifier,
         calibrator=diagnoser.calibrator,
         group_threshold=diagnoser.group_threshold,
-        group_rule=diagnoser.group_rule if group_rule is None else group_rule,
+        group_rule=diagnoser.group_rule,
         detect_rate=diagnoser.detect_rate,
         max_signatures_per_fault=diagnoser.max_signatures_per_fault,
         random_state=diagnoser.random_state,
