@@ -1,0 +1,119 @@
+"""The group probabilities' calibration of a diagnoser, abrupt and incipient faults apart.
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/calibration_by_fault_kind.py [--model FILE] \
+        [--seeds 5000,5001]
+
+The benchmark's group-level ECE pools the detected faulty seconds of every scenario (at most
+600 a run). This script scores the same sample on the 44 Step-I scenarios with noise seeds that
+neither the training (below 1000) nor the benchmark's evaluation (10 000 and up) uses (default
+5000 and 5001), with the benchmark's own collector (`bayes_fdi.benchmark.collection`), and
+reports the top-label ECE, accuracy and mean confidence of the abrupt scenarios' seconds, of the
+incipient scenarios' and of both together, then the scenarios whose named group is most often
+wrong. ``--model``: a model file (default: the default model, fitted and cached on first use).
+Results go to stdout and ``benchmarks/out/calibration_by_fault_kind.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Noise seeds of the selection runs: neither training (< 1000) nor evaluation (>= 10 000).
+SELECTION_SEEDS = (5000, 5001)
+
+
+def _summary(col, n_bootstrap: int) -> dict:
+    from bayes_fdi.benchmark.collection import group_calibration
+
+    cal = group_calibration(col, n_bootstrap, seed=0, figure=None)
+    keys = ("n_seconds", "n_runs", "ece", "ci_low", "ci_high", "accuracy", "mean_confidence")
+    return {k: cal[k] for k in keys if k in cal}
+
+
+def collect(diagnoser, scenarios, seeds) -> tuple[dict, list[dict]]:
+    """Stream every scenario with every seed through ``diagnoser`` and collect the benchmark's
+    calibration sample three ways: ``{"abrupt": ..., "incipient": ..., "all": ...}``
+    (`~bayes_fdi.benchmark.collection.RunCollector`), and one row per run that gave calibration
+    seconds (its scenario, seed, true group, the group it names most often, accuracy and mean
+    confidence of its seconds)."""
+    from bayes_fdi.benchmark.collection import RunCollector
+    from bayes_fdi.benchmark.scenarios import simulate_scenario
+
+    collectors = {k: RunCollector(seed=0) for k in ("abrupt", "incipient", "all")}
+    per_run = []
+    for scenario in scenarios:
+        runs = simulate_scenario(scenario, seeds)
+        truth = [c for c in ("state", "strength", "onset", "profile", "ramp") if c in runs.coords]
+        stream = diagnoser.run(runs.drop_vars(truth))
+        kind = collectors["abrupt" if scenario.mode == "abrupt" else "incipient"]
+        for i, seed in enumerate(seeds):
+            one = stream.isel(run=i)
+            n_before = len(kind.proba)
+            kind.add(scenario, seed, one)
+            collectors["all"].add(scenario, seed, one)
+            if len(kind.proba) > n_before:  # this run gave calibration seconds
+                proba, true = kind.proba[-1], kind.true[-1]
+                named = np.argmax(proba, axis=1)
+                per_run.append(
+                    {
+                        "scenario": scenario.name,
+                        "seed": int(seed),
+                        "seconds": int(true.size),
+                        "true_group": kind.labels[int(true[0])],
+                        "named": kind.labels[int(np.bincount(named).argmax())],
+                        "accuracy": float(np.mean(named == true)),
+                        "confidence": float(np.mean(np.max(proba, axis=1))),
+                    }
+                )
+    return collectors, per_run
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", default=None, help="a model file (default: the default model)")
+    parser.add_argument("--seeds", default=",".join(str(s) for s in SELECTION_SEEDS))
+    parser.add_argument("--bootstrap", type=int, default=200)
+    args = parser.parse_args()
+    from bayes_fdi.benchmark.scenarios import SCENARIOS
+    from bayes_fdi.deployment.fitting import default_model, load_online_model
+
+    seeds = [int(s) for s in args.seeds.split(",")]
+    if min(seeds) < 1000 or max(seeds) >= 10_000:
+        raise SystemExit("--seeds: use seeds in [1000, 10000), apart from training and evaluation")
+    diagnoser = load_online_model(args.model) if args.model else default_model(progress=True)
+    t0 = time.process_time()
+    collectors, per_run = collect(diagnoser, SCENARIOS, seeds)
+    result = {
+        "seeds": seeds,
+        "model": args.model or "default",
+        "cpu_seconds": time.process_time() - t0,
+        **{k: _summary(c, args.bootstrap) for k, c in collectors.items()},
+        "runs": per_run,
+    }
+    print("| scenarios | seconds | runs | ECE [95 % interval] | accuracy | mean confidence |")
+    print("|---|---:|---:|---|---:|---:|")
+    for name in ("abrupt", "incipient", "all"):
+        s = result[name]
+        print(
+            f"| {name} | {s['n_seconds']} | {s['n_runs']} | {s['ece']:.3f} [{s['ci_low']:.3f}, "
+            f"{s['ci_high']:.3f}] | {s['accuracy']:.3f} | {s['mean_confidence']:.3f} |"
+        )
+    print("\nruns whose seconds are named wrong most often:")
+    for row in sorted(per_run, key=lambda r: r["accuracy"])[:12]:
+        print(
+            f"  {row['scenario']} (seed {row['seed']}): true {row['true_group']}, named "
+            f"{row['named']}; right in {row['accuracy']:.0%} at confidence {row['confidence']:.2f}"
+        )
+    print(f"\n{result['cpu_seconds']:.0f} CPU s")
+    out = ROOT / "benchmarks" / "out"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "calibration_by_fault_kind.json").write_text(json.dumps(result, indent=1))
+
+
+if __name__ == "__main__":
+    main()

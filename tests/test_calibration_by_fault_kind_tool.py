@@ -1,0 +1,60 @@
+"""``benchmarks/calibration_by_fault_kind.py``: the benchmark's calibration sample, split."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from benchmark_scripts import load_benchmark
+from small_online import small_normal_models, small_runs
+
+from bayes_fdi.benchmark.harness import run_benchmark
+from bayes_fdi.benchmark.scenarios import SCENARIOS, benchmark_seeds
+from bayes_fdi.calibration import TemperatureScaler
+from bayes_fdi.diagnosis import OnlineDiagnoser
+
+tool = load_benchmark("calibration_by_fault_kind")
+
+
+@pytest.fixture(scope="module")
+def case():
+    runs = small_runs()
+    diag = OnlineDiagnoser(
+        small_normal_models(), calibrator=TemperatureScaler(), max_signatures_per_fault=20,
+        random_state=0,
+    ).fit(runs.normal, runs.faults, validation_runs=runs.validation,
+          calibration_runs=runs.calibration)  # fmt: skip
+    by_name = {s.name: s for s in SCENARIOS}
+    # the small model's faults (f1, f7, f18), abrupt and incipient, cut short
+    names = ("f18 abrupt big", "f7 abrupt big", "f18 incipient")
+    scenarios = [by_name[n].truncated(1500.0) for n in names]
+    return diag, scenarios
+
+
+def test_the_pooled_sample_is_the_benchmarks_own(case, tmp_path):
+    """The split's "all" sample is the one `run_benchmark` scores: same seconds, same ECE."""
+    diag, scenarios = case
+    seeds = benchmark_seeds(1)
+    collectors, per_run = tool.collect(diag, scenarios, seeds)
+    run_benchmark(
+        diag, tmp_path, n_seeds=1, scenarios=scenarios, hours=0.05, real_hour=False,
+        figures=False, n_bootstrap=0, progress=False,
+    )  # fmt: skip
+    want = json.loads((tmp_path / "benchmark.json").read_text())["calibration"]
+    got = tool._summary(collectors["all"], 0)
+    assert got["n_seconds"] == want["n_seconds"] > 0
+    assert got["ece"] == pytest.approx(want["ece"], abs=1e-12)
+    assert got["accuracy"] == pytest.approx(want["accuracy"], abs=1e-12)
+    # the two kinds partition the pooled sample, in the scenarios' order
+    split = collectors["abrupt"].proba + collectors["incipient"].proba
+    assert sum(p.shape[0] for p in split) == got["n_seconds"]
+    abrupt = np.concatenate(collectors["abrupt"].proba)
+    np.testing.assert_array_equal(np.concatenate(collectors["all"].proba)[: len(abrupt)], abrupt)
+    # one row per run with seconds; its accuracy is that of its own seconds
+    assert len(per_run) == len(collectors["all"].proba)
+    for row, proba, true in zip(
+        per_run, collectors["all"].proba, collectors["all"].true, strict=True
+    ):
+        assert row["seconds"] == proba.shape[0]
+        assert row["accuracy"] == pytest.approx(np.mean(proba.argmax(axis=1) == true))
