@@ -328,7 +328,7 @@ def test_the_report_opens_with_its_targets_in_short_a_glossary_and_the_fault_nam
 def test_an_alarm_left_on_through_the_fault_free_hours_fails_their_target():
     """One rising edge whose alarm then stays on is one alarm, but not a quiet 8 hours: the
     fault-free target also bounds the share of seconds with DD on (r_fd <= 0.01)."""
-    from bayes_fdi.benchmark.report import fault_free_target
+    from bayes_fdi.benchmark.report_detection import fault_free_target
 
     def target(alarms: int, on: float) -> tuple[str, str, bool]:
         ff = {"hours": 8.0, "alarms": alarms, "alarms_per_8h": float(alarms), "r_fd": on}
@@ -337,3 +337,34 @@ def test_an_alarm_left_on_through_the_fault_free_hours_fails_their_target():
     _, measured, met = target(1, 0.999)
     assert not met and measured == "1 alarm(s) = 1.00 per 8 h, DD on 99.90 %"
     assert target(1, 0.004)[2] and not target(2, 0.0)[2]
+
+
+def test_declared_false_detections_leave_out_the_model_mismatch_answers(double):
+    """``declared_r_fd`` counts the fault-free seconds with DD on that the diagnoser does not
+    answer "mismatch"; PICalc's r_fd counts them all."""
+    from bayes_fdi.benchmark.collection import RunCollector
+    from bayes_fdi.benchmark.report_detection import declared_r_fd_median
+
+    s = BY_NAME["f1 abrupt big"]
+    one = double.run(simulate_scenario(s, [10_000])[["CV", "P1", "P2", "T1", "X", "F"]])
+    one = one.isel(run=0)
+    t = one.time.values
+    fault_free = (t >= s.t_on) & (t < s.t_from)
+    # an alarm in the fault-free part, answered "mismatch" in its first 40 seconds only
+    dd = one.DD.values.astype(bool).copy()
+    dd[(t >= 500) & (t < 600)] = True
+    state = one.state.values.astype(str).copy()
+    state[dd] = "f1"
+    state[(t >= 500) & (t < 540)] = "mismatch"
+    one = one.assign(DD=("time", dd), state=("time", state.astype(object)))
+    col = RunCollector(seed=0)
+    row = col.add(s, 10_000, one)
+    want_all = dd[fault_free].mean()
+    want = (dd & (state != "mismatch"))[fault_free].mean()
+    assert row["indices"]["r_fd"] == pytest.approx(want_all, abs=1e-12)
+    assert row["declared_r_fd"] == pytest.approx(want, abs=1e-12)
+    assert want == pytest.approx(want_all - 40 / fault_free.sum(), abs=1e-12)
+    assert declared_r_fd_median({"scenarios": [row, {**row, "declared_r_fd": 1.0}]}) == (
+        pytest.approx((want + 1.0) / 2)
+    )
+    assert declared_r_fd_median({"scenarios": [{"indices": row["indices"]}]}) is None

@@ -18,6 +18,7 @@ import xarray as xr
 
 from bayes_fdi.benchmark.report_detection import alarm_at_onset
 from bayes_fdi.benchmark.scenarios import BenchmarkScenario
+from bayes_fdi.diagnosis.online.stream import MISMATCH
 from bayes_fdi.scoring.decision_signals import decision_signals
 from bayes_fdi.scoring.picalc import first_detection, picalc
 
@@ -102,7 +103,9 @@ class RunCollector:
     `add` scores one run's decision stream; the attributes hold what the benchmark reports:
     ``rows`` (one per run: fault, mode, size, seed, PICalc indices, ``first_detection``:
     `bayes_fdi.scoring.picalc.first_detection`'s ``t_dt_first`` and ``dd_permanent``;
-    ``alarm_at_onset``: DD on at the last second before the fault; the run's
+    ``alarm_at_onset``: DD on at the last second before the fault; ``declared_r_fd``: the share
+    of the fault-free part with DD on and the answer not ``"mismatch"``, the false detections
+    the diagnoser declares faults (r_fd counts its "model mismatch" alarms too); the run's
     ``faulty_seconds``, ``confident_wrong_seconds`` and ``confident_wrong_named``, the wrong
     groups those seconds named and how often; ``states``, `faulty_states`); over all runs,
     ``faulty_seconds``, ``confident_wrong`` (faulty seconds answered with a wrong group above
@@ -151,8 +154,10 @@ class RunCollector:
             t, sig.dd, t_on=scenario.t_on, t_from=scenario.t_from, t_hor=scenario.t_hor
         )
         faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
+        fault_free = (t >= scenario.t_on) & (t < scenario.t_from)
         answers, wrong = confident_wrong(one, sig.true_group)
         state = np.asarray(one["state"].values).astype(str)
+        declared = sig.dd & (state != MISMATCH)
         row = {
             "fault": scenario.fault,
             "mode": scenario.mode,
@@ -161,6 +166,7 @@ class RunCollector:
             "indices": indices,
             "first_detection": first,
             "alarm_at_onset": alarm_at_onset(t, sig.dd, t_from=scenario.t_from),
+            "declared_r_fd": float(declared[fault_free].mean()) if fault_free.any() else 0.0,
             "faulty_seconds": int(faulty.sum()),
             "confident_wrong_seconds": int((answers & faulty).sum()),
             "confident_wrong_named": _seconds_per_state(state[answers & faulty]),
@@ -179,7 +185,6 @@ class RunCollector:
         self.faulty_seconds += row["faulty_seconds"]
         self.confident_wrong += row["confident_wrong_seconds"]
         self.confident_wrong_probabilities += int((wrong & faulty).sum())
-        fault_free = (t >= scenario.t_on) & (t < scenario.t_from)
         for c in ("X", "F"):
             std = one[f"{c}_hat_std"].values[fault_free]
             if np.isfinite(std).any():
