@@ -37,3 +37,16 @@ def small_runs() -> SmallRuns:
     validation = simulate(benchmark_inputs(len(held), 300, seed=4, vary=True), held, seed=4)
     calibration = simulate(benchmark_inputs(len(held), 300, seed=5, vary=True), held, seed=5)
     return SmallRuns(normal, faults, validation, calibration)
+
+
+def small_calibrated_diagnoser(runs: SmallRuns):
+    """An `OnlineDiagnoser` with the small normal models fitted on ``runs``, its group
+    probabilities recalibrated by one temperature on their calibration runs."""
+    from bayes_fdi.calibration import TemperatureScaler
+    from bayes_fdi.diagnosis import OnlineDiagnoser
+
+    return OnlineDiagnoser(
+        small_normal_models(), calibrator=TemperatureScaler(), max_signatures_per_fault=20,
+        random_state=0,
+    ).fit(runs.normal, runs.faults, validation_runs=runs.validation,
+          calibration_runs=runs.calibration)  # fmt: skip

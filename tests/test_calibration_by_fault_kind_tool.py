@@ -7,24 +7,17 @@ import json
 import numpy as np
 import pytest
 from benchmark_scripts import load_benchmark
-from small_online import small_normal_models, small_runs
+from small_online import small_calibrated_diagnoser, small_runs
 
 from bayes_fdi.benchmark.harness import run_benchmark
 from bayes_fdi.benchmark.scenarios import SCENARIOS, benchmark_seeds
-from bayes_fdi.calibration import TemperatureScaler
-from bayes_fdi.diagnosis import OnlineDiagnoser
 
 tool = load_benchmark("calibration_by_fault_kind")
 
 
 @pytest.fixture(scope="module")
 def case():
-    runs = small_runs()
-    diag = OnlineDiagnoser(
-        small_normal_models(), calibrator=TemperatureScaler(), max_signatures_per_fault=20,
-        random_state=0,
-    ).fit(runs.normal, runs.faults, validation_runs=runs.validation,
-          calibration_runs=runs.calibration)  # fmt: skip
+    diag = small_calibrated_diagnoser(small_runs())
     by_name = {s.name: s for s in SCENARIOS}
     # the small model's faults (f1, f7, f18), abrupt and incipient, cut short
     names = ("f18 abrupt big", "f7 abrupt big", "f18 incipient")

@@ -5,10 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from benchmark_scripts import load_benchmark
-from small_online import small_normal_models, small_runs
+from small_online import small_calibrated_diagnoser, small_runs
 
-from bayes_fdi.calibration import TemperatureScaler
-from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.isolation import ForestClassifier
 from bayes_fdi.diagnosis.online.training import detection_components, training_signatures
 
@@ -18,11 +16,7 @@ tool = load_benchmark("isolation_classifiers")
 @pytest.fixture(scope="module")
 def fitted():
     runs = small_runs()
-    diag = OnlineDiagnoser(
-        small_normal_models(), calibrator=TemperatureScaler(), max_signatures_per_fault=20,
-        random_state=0,
-    ).fit(runs.normal, runs.faults, validation_runs=runs.validation,
-          calibration_runs=runs.calibration)  # fmt: skip
+    diag = small_calibrated_diagnoser(runs)
     # signatures the stream gives on the calibration runs: rows to compare the isolations on
     rows = training_signatures(detection_components(diag), runs.calibration, per_second=True)[0]
     return diag, (runs.faults, runs.validation, runs.calibration), rows[:50], runs.calibration
