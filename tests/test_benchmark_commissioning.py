@@ -241,3 +241,20 @@ def test_the_isolation_option_belongs_to_the_commissioning_benchmark(tmp_path, c
         assert args.isolation == name
     assert main(["benchmark", "--out", out, "--isolation", "forest"]) == 2
     assert "--isolation belongs to --commissioning" in capsys.readouterr().err
+
+
+def test_score_case_declares_faults_only_outside_model_mismatch(detection_only):
+    """``declared_r_fd``: the fault-free seconds with DD on and an answer other than
+    "mismatch"; PICalc's r_fd counts every second with DD on."""
+    run = simulate(benchmark_inputs(n_runs=1, duration=700), seed=5)
+    one = detection_only.run(run[["CV", "P1", "P2", "T1", "X", "F"]]).isel(run=0)
+    t = one["time"].values
+    dd = (t >= 150) & (t < 250)  # a false alarm of 100 s in the fault-free part [100, 400)
+    state = np.where(dd, "unknown", "fn").astype(object)
+    state[(t >= 150) & (t < 190)] = "mismatch"  # its first 40 s answered "model mismatch"
+    one = one.assign(DD=("time", dd), state=("time", state))
+    out = score_case(
+        one, "f1", t_on=100, t_from=400, t_hor=700, strength=np.where(t >= 400, 0.5, 0.0)
+    )
+    assert out["indices"]["r_fd"] == pytest.approx(100 / 300)
+    assert out["declared_r_fd"] == pytest.approx(60 / 300)

@@ -20,6 +20,7 @@ import xarray as xr
 
 from bayes_fdi.benchmark.collection import confident_wrong, faulty_states
 from bayes_fdi.benchmark.report import DETECTABLE_DEFLECTION
+from bayes_fdi.diagnosis.online.stream import MISMATCH
 from bayes_fdi.scoring.decision_signals import decision_high, decision_signals, rising_edges
 from bayes_fdi.scoring.picalc import picalc
 
@@ -68,7 +69,9 @@ def score_case(
     -------
     dict
         ``indices`` (PICalc's, group level: PID = the true fault's group is indicated; a fault
-        the diagnoser declares undetectable has PID = not DD), ``faulty_seconds``,
+        the diagnoser declares undetectable has PID = not DD), ``declared_r_fd`` (the share of
+        the fault-free part with DD on and the answer not "mismatch": the false detections the
+        diagnoser declares faults), ``faulty_seconds``,
         ``confident_wrong_seconds`` (faulty seconds answered with a group other than the true
         fault's at a probability above `~bayes_fdi.benchmark.collection.CONFIDENT`; for a
         fault in no group every confident answer is wrong),
@@ -101,8 +104,11 @@ def score_case(
     )
     states = faulty_states(one["state"].values, sig.dd, faulty)
     answers, wrong = confident_wrong(one, sig.true_group)
+    fault_free = (t >= t_on) & (t < t_from)
+    declared = sig.dd & (np.asarray(one["state"].values).astype(str) != MISMATCH)
     return {
         "indices": indices,
+        "declared_r_fd": float(declared[fault_free].mean()) if fault_free.any() else 0.0,
         "faulty_seconds": int(faulty.sum()),
         "confident_wrong_seconds": int((answers & faulty).sum()),
         "confident_wrong_probabilities_seconds": int((wrong & faulty).sum()),

@@ -115,8 +115,11 @@ def _model_sentence(model: str, rows: Sequence[Mapping[str, Any]]) -> str:
     big = big_abrupt_by_plant(rows)
     r_fd = median_or_none([r["indices"]["r_fd"] for r in rows])
     det = [len(e["detected"]) for e in big.values()]
+    declared = median_or_none([r["declared_r_fd"] for r in rows if "declared_r_fd" in r])
+    faults = "" if declared is None else f"; declared faults, not mismatch: {percent(declared)}"
     text = (
-        f"the {model} model had the alarm on {percent(r_fd)} of the fault-free time (median), "
+        f"the {model} model had the alarm on {percent(r_fd)} of the fault-free time (median"
+        f"{faults}), "
         f"detected {min(det, default=0)}-{max(det, default=0)} of the "
         f"{max((e['scenarios'] for e in big.values()), default=0)} big abrupt faults per plant "
         f"and was confidently wrong {percent(confident_wrong_share(rows)['share'])} of the "
