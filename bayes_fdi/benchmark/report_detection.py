@@ -1,4 +1,5 @@
-"""The first detection of each fault and whether DD stayed on, for ``benchmark.md``.
+"""What DD did, for ``benchmark.md``: each fault's first detection, whether DD stayed on, and
+the false detections the diagnoser declares faults.
 
 PICalc times a detection to the *last* rising edge of DD (a detection counts once it is
 permanent), so one dropped second late in a fault moves ``t_dt`` far from the moment the fault
