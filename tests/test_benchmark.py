@@ -368,3 +368,34 @@ def test_declared_false_detections_leave_out_the_model_mismatch_answers(double):
         pytest.approx((want + 1.0) / 2)
     )
     assert declared_r_fd_median({"scenarios": [{"indices": row["indices"]}]}) is None
+
+
+def test_the_calibration_over_the_seconds_not_answered_mismatch(double):
+    """``calibration["answered"]``: the ECE over the sampled seconds whose answer is not
+    "mismatch", the same figure as the whole sample's computed on those seconds alone."""
+    from bayes_fdi.benchmark.collection import RunCollector, group_calibration
+    from bayes_fdi.calibration import expected_calibration_error
+
+    s = BY_NAME["f1 abrupt big"]
+    one = double.run(simulate_scenario(s, [10_000])[["CV", "P1", "P2", "T1", "X", "F"]])
+    one = one.isel(run=0)
+    t = one.time.values
+    col = RunCollector(seed=0)
+    col.add(s, 10_000, one)
+    assert "answered" not in group_calibration(col, 0, 0, None)  # no "mismatch" answer
+    state = one.state.values.astype(str).copy()
+    early = (t >= s.t_from) & (t < s.t_from + 100)
+    state[early] = "mismatch"
+    marked = RunCollector(seed=0)
+    marked.add(s, 10_000, one.assign(state=("time", state.astype(object))))
+    cal = group_calibration(marked, 0, 0, None)
+    proba, true = marked.proba[0], marked.true[0]
+    kept = marked.answered[0]
+    assert 0 < kept.sum() < kept.size  # the sample holds seconds of both kinds
+    labels = np.asarray(marked.labels)
+    want = expected_calibration_error(
+        labels[true[kept]], proba[kept], classes=labels, n_bins=15
+    ).value
+    assert cal["answered"]["n_seconds"] == int(kept.sum())
+    assert cal["answered"]["ece"] == pytest.approx(want, abs=1e-12)
+    assert cal["ece"] == pytest.approx(group_calibration(col, 0, 0, None)["ece"], abs=1e-12)

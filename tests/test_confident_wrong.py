@@ -13,8 +13,11 @@ import xarray as xr
 
 from bayes_fdi.benchmark.collection import CONFIDENT, confident_wrong
 from bayes_fdi.benchmark.commissioning_summary import confident_wrong_share
-from bayes_fdi.benchmark.report import _calibration_lines
-from bayes_fdi.benchmark.report_wrong import WRONG_SCENARIOS_SHOWN, wrong_by_scenario
+from bayes_fdi.benchmark.report_wrong import (
+    WRONG_SCENARIOS_SHOWN,
+    calibration_lines,
+    wrong_by_scenario,
+)
 from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis.online.stream import decide
 
@@ -136,18 +139,18 @@ def test_the_reports_give_the_probabilities_count_only_where_it_differs():
         "n_bootstrap": 20,
     }
     differs = " ".join(
-        _calibration_lines({"calibration": cal, "confident_wrong": share, "scenarios": []})
+        calibration_lines({"calibration": cal, "confident_wrong": share, "scenarios": []})
     )
     assert "wrong group: 10.00 % of all faulty seconds; counting" in differs
     assert "unknown or mismatch by their most probable group, 30.00 %." in differs
     same = {**share, "probabilities_seconds": 1, "probabilities_share": 0.1}
     text = " ".join(
-        _calibration_lines({"calibration": cal, "confident_wrong": same, "scenarios": []})
+        calibration_lines({"calibration": cal, "confident_wrong": same, "scenarios": []})
     )
     assert "wrong group: 10.00 % of all faulty seconds." in text and "counting" not in text
     old = {k: share[k] for k in ("seconds", "faulty_seconds", "share")}  # an older results file
     text = " ".join(
-        _calibration_lines({"calibration": cal, "confident_wrong": old, "scenarios": []})
+        calibration_lines({"calibration": cal, "confident_wrong": old, "scenarios": []})
     )
     assert "wrong group: 10.00 % of all faulty seconds." in text
 

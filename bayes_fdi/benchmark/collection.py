@@ -117,7 +117,8 @@ class RunCollector:
     is fitted on out-of-fold training residuals, so it lies well above 1 where the normal models
     do not fit the inputs) and the calibration
     sample (``proba``, ``true``, ``cluster``: at most `CALIBRATION_SECONDS_PER_RUN` detected
-    faulty seconds per run) with the stream's group ``labels`` and ``attrs``.
+    faulty seconds per run; ``answered``: those whose answer is not "mismatch") with the
+    stream's group ``labels`` and ``attrs``.
     """
 
     def __init__(self, seed: int) -> None:
@@ -125,6 +126,7 @@ class RunCollector:
         self.proba: list[np.ndarray] = []
         self.true: list[np.ndarray] = []
         self.cluster: list[np.ndarray] = []
+        self.answered: list[np.ndarray] = []
         self.labels: list[str] | None = None
         self.attrs: dict[str, Any] = {}
         self.faulty_seconds = 0
@@ -198,27 +200,23 @@ class RunCollector:
                 pos = np.linspace(0, keep.size - 1, CALIBRATION_SECONDS_PER_RUN)
                 keep = keep[np.round(pos).astype(np.int64)]
             self.proba.append(proba[keep])
+            self.answered.append(state[keep] != MISMATCH)
             self.true.append(np.full(keep.size, sig.true_group))
             self.cluster.append(np.full(keep.size, len(self.rows) - 1))
         return row
 
 
-def group_calibration(
-    col: RunCollector, n_bootstrap: int, seed: int, figure: Path | None
-) -> dict[str, Any]:
-    """Top-label ECE of the group probabilities with a run-level (cluster) bootstrap interval.
+def _ece_interval(
+    y: np.ndarray,
+    proba: np.ndarray,
+    labels: np.ndarray,
+    cluster: np.ndarray,
+    n_bootstrap: int,
+    seed: int,
+) -> Any:
+    """Top-label ECE (15 bins) with a basic bootstrap interval over whole runs (``cluster``)."""
+    from bayes_fdi.calibration import expected_calibration_error
 
-    Draws the reliability diagram into ``figure`` (a path, or None for no figure); returns the
-    ``calibration`` entry of ``benchmark.json``.
-    """
-    from bayes_fdi.calibration import expected_calibration_error, reliability_diagram
-
-    if not col.proba:
-        return {"n_seconds": 0, "note": "no detected faulty second of an isolable fault"}
-    proba = np.concatenate(col.proba)
-    labels = np.asarray(col.labels)
-    y = labels[np.concatenate(col.true)]
-    cluster = np.concatenate(col.cluster)
     res = expected_calibration_error(y, proba, classes=labels, n_bins=15)
     # seconds of one run are strongly correlated: resample whole runs, not seconds
     runs = np.unique(cluster)
@@ -232,7 +230,30 @@ def group_calibration(
     if n_bootstrap:
         q_lo, q_hi = np.quantile(boots, [0.025, 0.975])
         lo, hi = max(0.0, 2 * res.value - q_hi), max(0.0, 2 * res.value - q_lo)  # basic interval
-    res = res._replace(ci_low=float(lo), ci_high=float(hi))
+    return res._replace(ci_low=float(lo), ci_high=float(hi))
+
+
+def group_calibration(
+    col: RunCollector, n_bootstrap: int, seed: int, figure: Path | None
+) -> dict[str, Any]:
+    """Top-label ECE of the group probabilities with a run-level (cluster) bootstrap interval.
+
+    Draws the reliability diagram into ``figure`` (a path, or None for no figure); returns the
+    ``calibration`` entry of ``benchmark.json``. Where some of the seconds were answered
+    "mismatch" (the probabilities stand behind a model-mismatch answer, not a diagnosis),
+    ``"answered"`` gives the same figures over the other seconds.
+    """
+    from bayes_fdi.calibration import reliability_diagram
+
+    if not col.proba:
+        return {"n_seconds": 0, "note": "no detected faulty second of an isolable fault"}
+    proba = np.concatenate(col.proba)
+    labels = np.asarray(col.labels)
+    y = labels[np.concatenate(col.true)]
+    cluster = np.concatenate(col.cluster)
+    runs = np.unique(cluster)
+    res = _ece_interval(y, proba, labels, cluster, n_bootstrap, seed)
+    lo, hi = res.ci_low, res.ci_high
     if figure is not None:
         import matplotlib.pyplot as plt
 
@@ -246,7 +267,7 @@ def group_calibration(
             f"[{lo:.3f}, {hi:.3f}] (runs resampled)\n{len(y)} s of {runs.size} runs",
         )
         save_figure(fig, figure, dpi=110)
-    return {
+    out = {
         "n_seconds": len(y),
         "n_runs": int(runs.size),
         "ece": res.value,
@@ -264,3 +285,17 @@ def group_calibration(
         },
         "n_bootstrap": int(n_bootstrap),
     }
+    answered = np.concatenate(col.answered) if col.answered else np.ones(len(y), dtype=bool)
+    if answered.any() and not answered.all():
+        sub = _ece_interval(
+            y[answered], proba[answered], labels, cluster[answered], n_bootstrap, seed
+        )
+        out["answered"] = {
+            "n_seconds": int(answered.sum()),
+            "ece": sub.value,
+            "ci_low": sub.ci_low,
+            "ci_high": sub.ci_high,
+            "accuracy": float(np.mean(labels[np.argmax(proba[answered], axis=1)] == y[answered])),
+            "mean_confidence": float(np.mean(np.max(proba[answered], axis=1))),
+        }
+    return out

@@ -39,7 +39,7 @@ from bayes_fdi.benchmark.report_detection import (
     permanence_target,
 )
 from bayes_fdi.benchmark.report_summary import GLOSSARY, in_short_section
-from bayes_fdi.benchmark.report_wrong import published_wrong, wrong_by_scenario
+from bayes_fdi.benchmark.report_wrong import calibration_lines, published_wrong
 from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import format_number, markdown_table, to_jsonable
 from bayes_fdi.scoring.picalc import PICALC_KEYS
@@ -436,7 +436,7 @@ def render_report(results: Mapping[str, Any]) -> str:
         *_undetectable_text(results),
         "",
     ]
-    lines += _calibration_lines(results)
+    lines += calibration_lines(results)
     ff, real = results["fault_free"], results.get("real_hour")
     lines += [
         "## False alarms",
@@ -488,25 +488,3 @@ def _innovation_text(rms: Mapping[str, Any] | None) -> str:
         "on out-of-fold residuals of the training data, so an RMS well above 1 says that the "
         "normal models fit these inputs worse than their training data."
     )
-
-
-def _calibration_lines(results: Mapping[str, Any]) -> list[str]:
-    cal = results["calibration"]
-    cw = results["confident_wrong"]
-    lines = ["## Calibration of the per-second isolation probabilities (group level)", ""]
-    if not cal.get("n_seconds"):
-        return [*lines, f"No sample: {cal.get('note', '')}.", ""]
-    return [
-        *lines,
-        f"Top-label ECE of the group probabilities over {cal['n_seconds']} detected faulty "
-        f"seconds of {cal['n_runs']} runs (at most 600 evenly spaced seconds per run): "
-        f"**{_num(cal['ece'])}**, 95 % interval [{_num(cal['ci_low'])}, {_num(cal['ci_high'])}] "
-        f"(basic bootstrap over runs, {cal['n_bootstrap']} resamples: the seconds of a run are "
-        f"not independent); noise floor {_num(cal['noise_floor'])}, MCE {_num(cal['mce'])}; "
-        f"accuracy {_num(cal['accuracy'])} at mean confidence {_num(cal['mean_confidence'])}. "
-        f"Confident (p > 0.9) wrong group: {100 * cw['share']:.2f} % of all faulty seconds"
-        f"{published_wrong(cw)}.{wrong_by_scenario(results['scenarios'])}",
-        "",
-        "![reliability diagram](reliability.png)",
-        "",
-    ]

@@ -1,4 +1,8 @@
-"""How the benchmark report words its confident wrong seconds.
+"""How the benchmark report words the isolation's probabilities: their calibration and its
+confident wrong seconds.
+
+`calibration_lines` is the report's calibration section (the top-label ECE with its interval,
+and over the seconds not answered "mismatch" where some were).
 
 A *confident wrong* second is a faulty second answered with a group other than the fault's at a
 probability above 0.9 (`bayes_fdi.benchmark.collection.confident_wrong`). `published_wrong`
@@ -13,8 +17,13 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from bayes_fdi.benchmark.report_detection import scenario_name
+from bayes_fdi.reporting import format_number
 
-__all__ = ["WRONG_SCENARIOS_SHOWN", "published_wrong", "wrong_by_scenario"]
+__all__ = ["WRONG_SCENARIOS_SHOWN", "calibration_lines", "published_wrong", "wrong_by_scenario"]
+
+
+def _num(v: Any, fmt: str = ".3f") -> str:
+    return format_number(v, fmt)
 
 
 def published_wrong(cw: Mapping[str, Any]) -> str:
@@ -61,3 +70,39 @@ def wrong_by_scenario(rows: Sequence[Mapping[str, Any]]) -> str:
             + ")"
         )
     return f" Where they lie, most first: {'; '.join(parts)}."
+
+
+def _answered_clause(a: Mapping[str, Any] | None) -> str:
+    """The calibration over the seconds not answered "mismatch", where some were."""
+    if a is None:
+        return ""
+    return (
+        f'; over the {a["n_seconds"]} seconds not answered "mismatch": ECE {_num(a["ece"])} '
+        f"[{_num(a['ci_low'])}, {_num(a['ci_high'])}], accuracy {_num(a['accuracy'])} at "
+        f"{_num(a['mean_confidence'])}"
+    )
+
+
+def calibration_lines(results: Mapping[str, Any]) -> list[str]:
+    """The report's section on the calibration of the per-second group probabilities (with
+    the confident wrong seconds and the reliability diagram)."""
+    cal = results["calibration"]
+    cw = results["confident_wrong"]
+    lines = ["## Calibration of the per-second isolation probabilities (group level)", ""]
+    if not cal.get("n_seconds"):
+        return [*lines, f"No sample: {cal.get('note', '')}.", ""]
+    return [
+        *lines,
+        f"Top-label ECE of the group probabilities over {cal['n_seconds']} detected faulty "
+        f"seconds of {cal['n_runs']} runs (at most 600 evenly spaced seconds per run): "
+        f"**{_num(cal['ece'])}**, 95 % interval [{_num(cal['ci_low'])}, {_num(cal['ci_high'])}] "
+        f"(basic bootstrap over runs, {cal['n_bootstrap']} resamples: the seconds of a run are "
+        f"not independent); noise floor {_num(cal['noise_floor'])}, MCE {_num(cal['mce'])}; "
+        f"accuracy {_num(cal['accuracy'])} at mean confidence {_num(cal['mean_confidence'])}"
+        f"{_answered_clause(cal.get('answered'))}. Confident (p > 0.9) wrong group: "
+        f"{100 * cw['share']:.2f} % of all faulty seconds"
+        f"{published_wrong(cw)}.{wrong_by_scenario(results['scenarios'])}",
+        "",
+        "![reliability diagram](reliability.png)",
+        "",
+    ]

@@ -53,7 +53,8 @@ def family_figures(results: Mapping[str, Any]) -> dict[str, Any]:
     if its alarm was off at the fault's start, `judged_at_onset`); ``t_dt_median``,
     ``t_dt_worst``: median and largest of those scenarios' median t_dt (s); ``r_ti_median``,
     ``r_ti_ok``: their median r_ti and how many reach 0.9; ``ece`` (with ``ece_low``,
-    ``ece_high``), ``confident_wrong``: the calibration of the group probabilities;
+    ``ece_high``; ``ece_answered`` over the seconds not answered "mismatch", None where none
+    was), ``confident_wrong``: the calibration of the group probabilities;
     ``innovation_rms_X``, ``innovation_rms_F``: the whitened innovations' RMS on the scenarios'
     fault-free parts, how well the normal models fit the family's inputs (None in results
     without it).
@@ -82,6 +83,7 @@ def family_figures(results: Mapping[str, Any]) -> dict[str, Any]:
         "ece": cal.get("ece"),
         "ece_low": cal.get("ci_low"),
         "ece_high": cal.get("ci_high"),
+        "ece_answered": (cal.get("answered") or {}).get("ece"),
         "confident_wrong": float(results["confident_wrong"]["share"]),
         **{f"innovation_rms_{c}": (results.get("innovation_rms") or {}).get(c) for c in "XF"},
     }
@@ -112,7 +114,12 @@ def _overall_table(families: Sequence[Mapping[str, Any]]) -> str:
             f"{format_number(g['t_dt_median'], '.0f')} / {format_number(g['t_dt_worst'], '.0f')}",
             f"{format_number(g['r_ti_median'], '.3f')} ({g['r_ti_ok']} of {g['big_detected']})",
             f"{format_number(g['ece'], '.3f')} [{format_number(g['ece_low'], '.3f')}, "
-            f"{format_number(g['ece_high'], '.3f')}]",
+            f"{format_number(g['ece_high'], '.3f')}]"
+            + (
+                ""
+                if g.get("ece_answered") is None
+                else f' ({format_number(g["ece_answered"], ".3f")} not answered "mismatch")'
+            ),
             f"{100 * g['confident_wrong']:.2f} %",
             f"{format_number(g.get('innovation_rms_X'), '.2f')} / "
             f"{format_number(g.get('innovation_rms_F'), '.2f')}",
