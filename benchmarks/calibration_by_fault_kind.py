@@ -25,6 +25,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 #: Noise seeds of the selection runs: neither training (< 1000) nor evaluation (>= 10 000).
 SELECTION_SEEDS = (5000, 5001)
+#: Where the results are written.
+OUT = ROOT / "benchmarks" / "out" / "calibration_by_fault_kind.json"
 
 
 def _summary(col, n_bootstrap: int) -> dict:
@@ -42,14 +44,12 @@ def collect(diagnoser, scenarios, seeds) -> tuple[dict, list[dict]]:
     seconds (its scenario, seed, true group, the group it names most often, accuracy and mean
     confidence of its seconds)."""
     from bayes_fdi.benchmark.collection import RunCollector
-    from bayes_fdi.benchmark.scenarios import simulate_scenario
+    from bayes_fdi.benchmark.scenarios import simulate_scenario, strip_truth
 
     collectors = {k: RunCollector(seed=0) for k in ("abrupt", "incipient", "all")}
     per_run = []
     for scenario in scenarios:
-        runs = simulate_scenario(scenario, seeds)
-        truth = [c for c in ("state", "strength", "onset", "profile", "ramp") if c in runs.coords]
-        stream = diagnoser.run(runs.drop_vars(truth))
+        stream = diagnoser.run(strip_truth(simulate_scenario(scenario, seeds)))
         kind = collectors["abrupt" if scenario.mode == "abrupt" else "incipient"]
         for i, seed in enumerate(seeds):
             one = stream.isel(run=i)
@@ -79,6 +79,7 @@ def main() -> None:
     parser.add_argument("--seeds", default=",".join(str(s) for s in SELECTION_SEEDS))
     parser.add_argument("--bootstrap", type=int, default=200)
     args = parser.parse_args()
+    from bayes_fdi.atomic import write_text
     from bayes_fdi.benchmark.scenarios import SCENARIOS
     from bayes_fdi.deployment.fitting import default_model, load_online_model
 
@@ -110,9 +111,8 @@ def main() -> None:
             f"{row['named']}; right in {row['accuracy']:.0%} at confidence {row['confidence']:.2f}"
         )
     print(f"\n{result['cpu_seconds']:.0f} CPU s")
-    out = ROOT / "benchmarks" / "out"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "calibration_by_fault_kind.json").write_text(json.dumps(result, indent=1))
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    write_text(OUT, json.dumps(result, indent=1))
 
 
 if __name__ == "__main__":

@@ -36,6 +36,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 #: Effect levels (in measurement-noise standard deviations) whose quiet stretches are counted.
 LEVELS = (1.0, 3.0)
+#: Where the results are written.
+OUT = ROOT / "benchmarks" / "out" / "detection_drops.json"
 
 
 def quiet_before(effect: np.ndarray, end: int, level: float) -> int:
@@ -94,23 +96,17 @@ def shift_inputs(family: str, seeds):
     return ShiftInputs(fam, seeds, round(max(s.t_hor for s in SCENARIOS)))
 
 
-def _runs(family: str, scenarios, seeds):
-    """``(scenario, noisy runs, inputs)`` for each scenario under ``family``."""
-    from bayes_fdi.actuator import benchmark_inputs
-    from bayes_fdi.benchmark.scenarios import simulate_scenario
+def _runs(scenarios, seeds, shift):
+    """``(scenario, noisy runs, inputs)`` for each scenario: under DGen's sines (``shift``
+    None; one run of inputs, the same for every seed) or a shift family's `ShiftInputs`."""
+    from bayes_fdi.benchmark.scenarios import scenario_inputs, simulate_scenario
 
-    if family == "nominal":
-        for s in scenarios:
-            runs = simulate_scenario(s, seeds)
-            drive = benchmark_inputs(1, round(s.t_hor), vary=False, campaign="damadics-step1")
-            drive = drive.isel(run=[0] * len(seeds)).assign_coords(run=list(seeds))
-            yield s, runs, drive
-        return
-    shift = shift_inputs(family, seeds)
     for s in scenarios:
-        runs = shift.simulate(s, seeds)
-        drive = shift.inputs.sel(run=list(seeds)).isel(time=slice(0, round(s.t_hor)))
-        yield s, runs, drive
+        if shift is None:
+            yield s, simulate_scenario(s, seeds), scenario_inputs(s)
+        else:
+            drive = shift.inputs.sel(run=list(seeds)).isel(time=slice(0, round(s.t_hor)))
+            yield s, shift.simulate(s, seeds), drive
 
 
 def residual_signature(diagnoser, clean, faulty) -> np.ndarray:
@@ -133,14 +129,14 @@ def residual_signature(diagnoser, clean, faulty) -> np.ndarray:
     return np.nan_to_num(np.max(np.abs(z[1] - z[0]), axis=0))
 
 
-def above_noise(family: str, scenarios, seeds) -> dict[str, bool]:
+def above_noise(scenarios, shift) -> dict[str, bool]:
     """Whether each scenario's fault moves X or F by more than the noise (RMS > 1 sigma over
-    the faulty part, `bayes_fdi.benchmark.effects.fault_effects` under the family's first
-    seed's inputs): the faults the benchmark's detection targets count, as its report does."""
+    the faulty part, `bayes_fdi.benchmark.effects.fault_effects` under the first seed's inputs
+    of ``shift``, or DGen's sines for None): the faults the benchmark's detection targets
+    count, as its report does."""
     from bayes_fdi.benchmark.effects import fault_effects
 
-    inputs = None if family == "nominal" else shift_inputs(family, seeds).effects_inputs
-    effects = fault_effects(scenarios, inputs)
+    effects = fault_effects(scenarios, None if shift is None else shift.effects_inputs)
     return {e["scenario"]: max(e["rms"]["X"], e["rms"]["F"]) > 1.0 for e in effects}
 
 
@@ -149,15 +145,17 @@ def measure(diagnoser, family: str, scenarios, seeds) -> list[dict]:
     the fault's signature in the standardised residuals (`residual_signature`) and, under
     ``"physical"``, on its effect on X and F in measurement-noise standard deviations."""
     from bayes_fdi.actuator import NOISE_STD, simulate
+    from bayes_fdi.benchmark.scenarios import strip_truth
+    from bayes_fdi.scoring.decision_signals import decision_high
 
     hold = int(diagnoser.decision_.hold)
-    above = above_noise(family, scenarios, seeds)
+    shift = None if family == "nominal" else shift_inputs(family, seeds)
+    above = above_noise(scenarios, shift)
     rows = []
-    for s, runs, drive in _runs(family, scenarios, seeds):
-        truth = [c for c in ("state", "strength", "onset", "profile", "ramp") if c in runs.coords]
-        stream = diagnoser.run(runs.drop_vars(truth))
-        n = len(seeds)
+    for s, runs, drive in _runs(scenarios, seeds, shift):
+        stream = diagnoser.run(strip_truth(runs))
         inputs = drive[["CV", "P1", "P2", "T1"]]
+        n = inputs.sizes["run"]  # one run of inputs under DGen's sines, one per seed otherwise
         clean = simulate(inputs, [None] * n, noise=False)
         faulty = simulate(inputs, [s.fault_spec()] * n, noise=False)
         signature = residual_signature(diagnoser, clean, faulty)
@@ -165,10 +163,10 @@ def measure(diagnoser, family: str, scenarios, seeds) -> list[dict]:
             [np.abs(faulty[c].values - clean[c].values) / NOISE_STD for c in ("X", "F")], axis=0
         )
         for i, seed in enumerate(seeds):
-            dd = np.nan_to_num(np.asarray(stream["DD"].isel(run=i).values, dtype=float)) != 0
-            res = analyse_run(dd, signature[i], int(s.t_from), hold)
+            dd = decision_high(stream["DD"].isel(run=i).values)
+            res = analyse_run(dd, signature[i % n], int(s.t_from), hold)
             if res is not None:
-                phys = analyse_run(dd, physical[i], int(s.t_from), hold)
+                phys = analyse_run(dd, physical[i % n], int(s.t_from), hold)
                 counted = above[s.name] and not dd[int(s.t_from) - 1]
                 rows.append(
                     {"scenario": s.name, "seed": int(seed), "counted": bool(counted), **res,
@@ -185,6 +183,7 @@ def main() -> None:
     )
     parser.add_argument("--seeds", type=int, default=10)
     args = parser.parse_args()
+    from bayes_fdi.atomic import write_text
     from bayes_fdi.benchmark.scenarios import SCENARIOS, benchmark_seeds
     from bayes_fdi.deployment.fitting import default_model, load_online_model
 
@@ -224,9 +223,8 @@ def main() -> None:
                 f"> 3 sigma in {f['effect_above_3sigma_after']:.0%} of the seconds after"
             )
     print(f"{time.process_time() - t0:.0f} CPU s")
-    out = ROOT / "benchmarks" / "out"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "detection_drops.json").write_text(json.dumps(result, indent=1))
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    write_text(OUT, json.dumps(result, indent=1))
 
 
 if __name__ == "__main__":

@@ -42,8 +42,8 @@ from bayes_fdi.benchmark.scenarios import (
     benchmark_seeds,
     fault_free_hours,
     simulate_scenario,
+    strip_truth,
 )
-from bayes_fdi.datasets import CHANNELS
 from bayes_fdi.diagnosis.online.timeline import plot_timeline
 from bayes_fdi.scoring.decision_signals import decision_high, rising_edges
 
@@ -54,12 +54,6 @@ __all__ = [
 
 #: Samples per call of ``diagnoser.run`` (runs of equal horizon are batched up to this).
 MAX_BATCH_SAMPLES = 300_000
-_TRUTH_COORDS = ("state", "strength", "onset", "profile", "ramp")
-
-
-def _strip_truth(ds: xr.Dataset) -> xr.Dataset:
-    """The six channels only: the diagnoser must not see the labels."""
-    return ds[list(CHANNELS)].drop_vars([c for c in _TRUTH_COORDS if c in ds.coords])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -110,7 +104,7 @@ class _Simulations:
 
 def _fault_free(diagnoser: Any, hours: float, simulate_hours: Callable) -> dict[str, Any]:
     ds = simulate_hours(hours)
-    stream = diagnoser.run(_strip_truth(ds)).isel(run=0)
+    stream = diagnoser.run(strip_truth(ds)).isel(run=0)
     counted = stream["time"].values >= ds.attrs["warmup"]
     dd = decision_high(stream["DD"].values)[counted]
     status = np.asarray(stream["status"].values).astype(str)[counted]
@@ -135,7 +129,7 @@ def _real_hour(diagnoser: Any) -> dict[str, Any]:
     hour = load_lublin_example()
     half = hour.sizes["time"] // 2
     fresh = clone(diagnoser).fit(hour.isel(time=slice(0, half)))
-    stream = fresh.run(_strip_truth(hour.isel(time=slice(half, None)))).isel(run=0)
+    stream = fresh.run(strip_truth(hour.isel(time=slice(half, None)))).isel(run=0)
     dd = decision_high(stream["DD"].values)
     status = np.asarray(stream["status"].values).astype(str)
     return {
@@ -314,7 +308,7 @@ def _run_scenarios(
             n_runs = recording.sizes["run"]
             recording = recording.assign_coords(run=np.arange(n_runs))
             c1 = time.process_time()
-            stream = diagnoser.run(_strip_truth(recording))
+            stream = diagnoser.run(strip_truth(recording))
             c2 = time.process_time()
             sim_cpu += c1 - c0
             run_cpu += c2 - c1

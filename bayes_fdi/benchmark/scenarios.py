@@ -38,12 +38,14 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate_replicas
+from bayes_fdi.datasets import CHANNELS
 
 __all__ = [
     "BENCHMARK_SEED",
     "FAULT_FREE_SEED",
     "SCENARIOS",
     "SIZES",
+    "TRUTH_COORDS",
     "T_FROM",
     "T_ON",
     "T_OV",
@@ -51,7 +53,9 @@ __all__ = [
     "benchmark_seeds",
     "fault_free_hours",
     "iter_scenarios",
+    "scenario_inputs",
     "simulate_scenario",
+    "strip_truth",
 ]
 
 #: Start of the benchmark zone (s): [0, T_ON) is the set-up zone.
@@ -68,6 +72,8 @@ BENCHMARK_SEED = 10_000
 FAULT_FREE_SEED = 20_000
 #: Largest number of benchmark seeds (keeps them below FAULT_FREE_SEED).
 MAX_SEEDS = FAULT_FREE_SEED - BENCHMARK_SEED
+#: Coordinates of simulated runs that hold the truth (`strip_truth` removes them).
+TRUTH_COORDS = ("state", "strength", "onset", "profile", "ramp")
 
 _NEGATIVE = frozenset({"f12", "f14", "f19"})
 _ABRUPT_SMB = ("f1", "f7", "f8", "f10", "f12", "f13", "f14", "f16", "f18", "f19")
@@ -165,6 +171,18 @@ def benchmark_seeds(n_seeds: int) -> tuple[int, ...]:
     return tuple(BENCHMARK_SEED + k for k in range(int(n_seeds)))
 
 
+def scenario_inputs(scenario: BenchmarkScenario) -> xr.Dataset:
+    """The one run of inputs (CV, P1, P2, T1: DGen's sines without variation) a scenario is
+    simulated under, up to its ``t_hor``."""
+    duration = round(scenario.t_hor)
+    return benchmark_inputs(n_runs=1, duration=duration, vary=False, campaign="damadics-step1")
+
+
+def strip_truth(ds: xr.Dataset) -> xr.Dataset:
+    """The six channels of simulated runs only: the diagnoser must not see the labels."""
+    return ds[list(CHANNELS)].drop_vars([c for c in TRUTH_COORDS if c in ds.coords])
+
+
 def simulate_scenario(
     scenario: BenchmarkScenario,
     seeds: Sequence[int],
@@ -195,9 +213,7 @@ def simulate_scenario(
             raise ValueError("simulate_scenario: the scenario is not in SCENARIOS; give position")
         position = _POSITION[scenario.name]
     seeds = [int(s) for s in seeds]
-    duration = round(scenario.t_hor)
-    inputs = benchmark_inputs(n_runs=1, duration=duration, vary=False, campaign="damadics-step1")
-    inputs = inputs.assign_coords(run=[int(position)])
+    inputs = scenario_inputs(scenario).assign_coords(run=[int(position)])
     runs = simulate_replicas(inputs, [scenario.fault_spec()], seeds=seeds)
     ds = xr.concat(runs, dim="run", combine_attrs="drop_conflicts")
     ds = ds.assign_coords(run=np.asarray(seeds, dtype=np.int64))
