@@ -70,7 +70,9 @@ def test_the_isolator_finds_its_groups_by_its_rule(rng):
     order = list(iso.faults_)
     assert [list(g) for g in iso.groups_] == isolability_groups(order, expected, threshold=0.15)
     assert ("f3",) in iso.groups_
-    with pytest.raises(ValueError, match="group_rule must be 'pairwise' or 'naming'"):
+    with pytest.raises(
+        ValueError, match="group_rule must be one of pairwise, naming, got 'single'"
+    ):
         FaultIsolator(group_rule="single").fit(X, y)
 
 

@@ -18,9 +18,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from bayes_fdi.benchmark.collection import confident_wrong, faulty_states
+from bayes_fdi.benchmark.collection import confident_wrong, declared_share, faulty_states
 from bayes_fdi.benchmark.report import DETECTABLE_DEFLECTION
-from bayes_fdi.diagnosis.online.stream import MISMATCH
 from bayes_fdi.scoring.decision_signals import decision_high, decision_signals, rising_edges
 from bayes_fdi.scoring.picalc import picalc
 
@@ -104,11 +103,9 @@ def score_case(
     )
     states = faulty_states(one["state"].values, sig.dd, faulty)
     answers, wrong = confident_wrong(one, sig.true_group)
-    fault_free = (t >= t_on) & (t < t_from)
-    declared = sig.dd & (np.asarray(one["state"].values).astype(str) != MISMATCH)
     return {
         "indices": indices,
-        "declared_r_fd": float(declared[fault_free].mean()) if fault_free.any() else 0.0,
+        "declared_r_fd": declared_share(sig.dd, one["state"].values, (t >= t_on) & (t < t_from)),
         "faulty_seconds": int(faulty.sum()),
         "confident_wrong_seconds": int((answers & faulty).sum()),
         "confident_wrong_probabilities_seconds": int((wrong & faulty).sum()),

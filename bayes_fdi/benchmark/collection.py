@@ -28,6 +28,7 @@ __all__ = [
     "NOT_DETECTED",
     "RunCollector",
     "confident_wrong",
+    "declared_share",
     "faulty_states",
     "group_calibration",
 ]
@@ -56,6 +57,16 @@ def faulty_states(state: np.ndarray, detected: np.ndarray, faulty: np.ndarray) -
     counts = _seconds_per_state(np.asarray(state).astype(str)[faulty & detected])
     counts[NOT_DETECTED] = int((faulty & ~detected).sum())
     return counts
+
+
+def declared_share(dd: np.ndarray, state: Any, part: np.ndarray) -> float:
+    """The share of the seconds ``part`` (bool) with DD on and the answer ``state`` other than
+    "mismatch": over a fault-free part, the false detections the diagnoser declares faults (0.0
+    for an empty part)."""
+    if not part.any():
+        return 0.0
+    declared = np.asarray(dd, dtype=bool) & (np.asarray(state).astype(str) != MISMATCH)
+    return float(declared[part].mean())
 
 
 def confident_wrong(one: xr.Dataset, true_group: int | None) -> tuple[np.ndarray, np.ndarray]:
@@ -159,7 +170,6 @@ class RunCollector:
         fault_free = (t >= scenario.t_on) & (t < scenario.t_from)
         answers, wrong = confident_wrong(one, sig.true_group)
         state = np.asarray(one["state"].values).astype(str)
-        declared = sig.dd & (state != MISMATCH)
         row = {
             "fault": scenario.fault,
             "mode": scenario.mode,
@@ -168,7 +178,7 @@ class RunCollector:
             "indices": indices,
             "first_detection": first,
             "alarm_at_onset": alarm_at_onset(t, sig.dd, t_from=scenario.t_from),
-            "declared_r_fd": float(declared[fault_free].mean()) if fault_free.any() else 0.0,
+            "declared_r_fd": declared_share(sig.dd, state, fault_free),
             "faulty_seconds": int(faulty.sum()),
             "confident_wrong_seconds": int((answers & faulty).sum()),
             "confident_wrong_named": _seconds_per_state(state[answers & faulty]),
@@ -285,7 +295,7 @@ def group_calibration(
         },
         "n_bootstrap": int(n_bootstrap),
     }
-    answered = np.concatenate(col.answered) if col.answered else np.ones(len(y), dtype=bool)
+    answered = np.concatenate(col.answered)  # appended with every proba
     if answered.any() and not answered.all():
         sub = _ece_interval(
             y[answered], proba[answered], labels, cluster[answered], n_bootstrap, seed

@@ -234,7 +234,9 @@ class FaultIsolator:
         (`~bayes_fdi.calibration.AgeTemperatureScaler`) needs ``calibration=(rows, labels,
         ages)``, the ages being the seconds each row's signature has grown."""
         if self.group_rule not in GROUP_RULES:
-            raise ValueError(f"group_rule must be 'pairwise' or 'naming', got {self.group_rule!r}")
+            raise ValueError(
+                f"group_rule must be one of {', '.join(GROUP_RULES)}, got {self.group_rule!r}"
+            )
         X = np.asarray(X, dtype=np.float64)
         y = np.asarray(y).astype(str)
         if np.unique(y).size < 2:
