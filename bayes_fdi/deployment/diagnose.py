@@ -414,5 +414,12 @@ def run_from_cli(args: argparse.Namespace) -> int:
     for r in results:
         counts = ", ".join(f"{k} {v} s" for k, v in sorted(r.status_counts.items()))
         print(f"{r.name}: {r.seconds} s, {r.alarms} alarm(s); {counts} -> {r.folder}")
+        if r.seconds_outside_range:
+            print(
+                f"  {r.seconds_outside_range} s with inputs outside the range the model was "
+                "fitted or commissioned on (DAZZLED when quiet; alarms.csv counts them per "
+                "alarm): there its normal models extrapolate; commission on data that cover "
+                "this operating range"
+            )
     print(f"diagnosed {len(results)} recording(s) in {time.perf_counter() - t0:.1f} s")
     return 0

@@ -47,6 +47,7 @@ from bayes_fdi.deployment.stream_files import (
     StreamCSVWriter,
     StreamNetCDFWriter,
     check_stream,
+    outside_range,
     write_alarms,
 )
 
@@ -73,6 +74,8 @@ class RecordingResult(NamedTuple):
     alarms: int
     status_counts: dict
     files: tuple
+    #: seconds whose inputs lay outside the model's input envelope (its normal models extrapolate)
+    seconds_outside_range: int = 0
 
 
 def supports_chunks(diagnoser: Any) -> bool:
@@ -160,7 +163,7 @@ def diagnose_recording(
     with atomic_folder(destination) as folder:
         for file_name, write in (attachments or {}).items():
             write(folder / file_name)
-        counts, found, files = _write_outputs(
+        counts, found, files, outside = _write_outputs(
             diagnoser,
             recording,
             folder,
@@ -175,8 +178,9 @@ def diagnose_recording(
             tuple(attachments or {}),
         )
     return RecordingResult(
-        name, os.fspath(destination), int(n_t), int(n_runs), len(found), counts, tuple(files)
-    )
+        name, os.fspath(destination), int(n_t), int(n_runs), len(found), counts, tuple(files),
+        outside,
+    )  # fmt: skip
 
 
 def isolation_summary(diagnoser: Any) -> dict[str, Any]:
@@ -219,8 +223,9 @@ def _write_outputs(
     progress: bool,
     model_info: Mapping[str, Any] | None,
     attached: tuple[str, ...],
-) -> tuple[dict[str, int], list, list[str]]:
-    """Diagnose ``recording`` chunk by chunk into the files of ``folder``."""
+) -> tuple[dict[str, int], list, list[str], int]:
+    """Diagnose ``recording`` chunk by chunk into the files of ``folder``; the seconds per
+    status, the alarms, the files written and the seconds outside the input envelope."""
     n_runs, n_t = recording.sizes["run"], recording.sizes["time"]
     isolation = isolation_summary(diagnoser)
     detection_only = isolation["detection_only"]
@@ -230,6 +235,7 @@ def _write_outputs(
     nc = StreamNetCDFWriter(folder / "seva.nc", attrs={"recording": name})
     alarms = AlarmCollector(detection_only=detection_only)
     counts: dict[str, int] = {}
+    outside = 0
     bar = None
     if progress:
         from bayes_fdi.progress import progress_bar
@@ -254,6 +260,7 @@ def _write_outputs(
             )
             for s, k in zip(status, n, strict=True):
                 counts[str(s)] = counts.get(str(s), 0) + int(k)
+            outside += int(np.count_nonzero(outside_range(stream)))
             if bar is not None:
                 bar.update(part.sizes["time"])
     except BaseException:
@@ -282,6 +289,8 @@ def _write_outputs(
         "status_counts": counts,
         "alarms": len(found),
         "alarm_seconds": float(sum(al.duration for al in found)),
+        "seconds_outside_range": outside,
+        "alarm_seconds_outside_range": int(sum(al.seconds_outside_range for al in found)),
         "model": dict(model_info or {}),
         "isolation": isolation,
         "recording_attrs": {k: _json_value(v) for k, v in attrs.items()},
@@ -295,7 +304,7 @@ def _write_outputs(
     files += [*attached, "summary.json"]
     summary["files"] = files
     _write_json(summary, folder / "summary.json")
-    return counts, found, files
+    return counts, found, files, outside
 
 
 def _json_value(value: Any) -> Any:

@@ -45,6 +45,7 @@ __all__ = [
     "StreamCSVWriter",
     "StreamNetCDFWriter",
     "check_stream",
+    "outside_range",
     "write_alarms",
 ]
 
@@ -320,6 +321,17 @@ class Alarm(NamedTuple):
     seconds_in_state: int
     first_isolated: float  #: first second naming a fault or group (NaN if never)
     ongoing: bool  #: DD still high at the end of the recording
+    #: seconds of it with the inputs outside the model's envelope (the ranges it was fitted or
+    #: commissioned on), where its normal models extrapolate
+    seconds_outside_range: int = 0
+
+
+def outside_range(stream: xr.Dataset) -> np.ndarray:
+    """``(run, time)`` whether each second's inputs lay outside the model's input envelope
+    (the stream's ``novel_inputs``; all False for a stream without it)."""
+    if "novel_inputs" not in stream:
+        return np.zeros((stream.sizes["run"], stream.sizes["time"]), dtype=bool)
+    return np.asarray(stream["novel_inputs"].transpose("run", "time").values, dtype=bool)
 
 
 class AlarmCollector:
@@ -341,6 +353,7 @@ class AlarmCollector:
             evidence_all = np.asarray(stream["evidence"].transpose("run", "time").values)
         else:
             evidence_all = np.full(dd_all.shape, "", dtype=object)
+        outside_all = outside_range(stream)
         for i, run in enumerate(int(r) for r in stream["run"].values):
             dd = dd_all[i]
             current = self._open.pop(run, None)
@@ -351,7 +364,9 @@ class AlarmCollector:
             starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
             for a, b in zip(starts, stops, strict=True):
                 if current is None:
-                    current = {"start": times[a], "states": {}, "first": math.nan, "evidence": {}}
+                    current = {"start": times[a], "states": {}, "first": math.nan, "evidence": {},
+                               "outside": 0}  # fmt: skip
+                current["outside"] += int(np.count_nonzero(outside_all[i, a:b]))
                 said, n_said = np.unique(evidence_all[i, a:b].astype(str), return_counts=True)
                 for words, k in zip(said, n_said, strict=True):
                     if words:
@@ -396,6 +411,7 @@ class AlarmCollector:
                 seconds_in_state=int(count),
                 first_isolated=float(current["first"]),
                 ongoing=ongoing,
+                seconds_outside_range=int(current["outside"]),
             )
         )
 
