@@ -7,13 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import xarray as xr
+from small_online_models import small_normal_models, small_normal_runs
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.diagnosis import OnlineDiagnoser
 from bayes_fdi.diagnosis.component_state import stack_states
 from bayes_fdi.diagnosis.detection import GLR
 from bayes_fdi.diagnosis.isolation.signatures import SignatureInputs
-from bayes_fdi.diagnosis.normal_models.dynamic import DynamicNormalModels
 from bayes_fdi.diagnosis.online.records import stream_reasons
 
 CHANNELS = ("CV", "P1", "P2", "T1", "X", "F")
@@ -24,11 +24,8 @@ RUNS, WARM, SECONDS = 4, 9, 6
 def fitted():
     from bayes_fdi.calibration import TemperatureScaler
 
-    models = DynamicNormalModels(
-        x_widths=(8.0,), f_widths=(0.1,), evidence_max_samples=200, max_train_samples=300,
-        calibration_folds=2, random_state=0,
-    )  # fmt: skip
-    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+    models = small_normal_models()
+    normal = small_normal_runs()
     specs = [Fault(f, s, 100.0) for f in ("f1", "f7", "f18") for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
     faults = simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
     diag = OnlineDiagnoser(models, calibrator=TemperatureScaler(), max_signatures_per_fault=20)

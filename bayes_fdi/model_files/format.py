@@ -109,6 +109,8 @@ __all__ = [
 ]
 
 FORMAT_NAME = "bayes_fdi.model"
+#: 17: the online diagnoser's input envelope also judges a detection by the command during it
+#: (``command_check``; older files load without that check, the stream they gave);
 #: 16: the online diagnoser records how its isolability groups are found (``group_rule``; older
 #: files load with their isolator's rule, the pairwise one unless commissioned; the default
 #: model's groups now come from how its validation runs' seconds are named);
@@ -140,7 +142,7 @@ FORMAT_NAME = "bayes_fdi.model"
 #: 4: the detection decision's hold (``hold``, the state's ``quiet`` count); 3: the online
 #: diagnoser's components own their states; 2: classes named by their stable registered names;
 #: 1 (bayes_fdi 0.1.0): classes named by ``module:QualName``.
-FORMAT_VERSION = 16
+FORMAT_VERSION = 17
 #: Largest uncompressed size (bytes) of all members together that `load` accepts by default.
 DEFAULT_MAX_BYTES = 4 * 2**30
 #: Largest uncompressed size of the JSON metadata member.

@@ -25,7 +25,11 @@ average before the detection's first second (model files saved before the change
 used). A detection from the stream's first second, before any second without one, is judged on
 the inputs of its first second. The rates are judged as they stood before the detection's first
 second (they are averaged over every second: CV is the command and P1 the supply pressure, which
-no fault of the benchmark moves).
+no fault of the benchmark moves). With ``command_check`` a detection is also held as begun
+outside the envelope from a second of it, within ``change_lookback`` s of its estimated change
+point, whose command lies outside: the normal models' residuals grow as the command nears the
+end of its training range, so a detector raised by that growth fires while the average before
+its change point still lay inside.
 
 Written by hand: a training range, a compiled exponential average and a ring of its past values.
 """
@@ -163,10 +167,11 @@ def _remember_average(state):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def _onset_kernel(
-    dd, ages, inputs, low, high, alpha, columns, rate_high, beta, state, out, fast
+    dd, ages, inputs, low, high, alpha, columns, rate_high, beta, command, state, out, fast
 ):  # pragma: no cover - compiled
-    """Whether each second's detection began outside the envelope (``out``) and whether the
-    rates stand above ``rate_high`` after each second (``fast``); ``state`` in place."""
+    """Whether each second's detection began outside the envelope, or (``command``) saw the
+    command leave it (``out``), and whether the rates stand above ``rate_high`` after each
+    second (``fast``); ``state`` in place."""
     average = state.average
     for t in range(dd.size):
         fast_before = _rates_kernel(inputs, columns, rate_high, beta, state, t)
@@ -194,6 +199,9 @@ def _onset_kernel(
         if not state.detected[0]:  # a new detection: were the inputs before its change inside?
             outside = _reference_outside(inputs, low, high, ages[t], state, t)
             state.novel_at_onset[0] = fast_before or outside
+        near = ages[t] <= state.history.shape[0]  # within change_lookback s of the change
+        if command and near and (inputs[t, 0] < low[0] or inputs[t, 0] > high[0]):
+            state.novel_at_onset[0] = True  # held until DD falls
         state.detected[0] = True
         out[t] = state.novel_at_onset[0]
         _remember_average(state)
@@ -201,7 +209,7 @@ def _onset_kernel(
 
 @njit(cache=True, error_model="numpy")
 def _onset_runs(
-    dd, ages, inputs, low, high, alpha, columns, rate_high, beta, state, out, fast
+    dd, ages, inputs, low, high, alpha, columns, rate_high, beta, command, state, out, fast
 ):  # pragma: no cover - compiled
     """`_onset_kernel` over each run (row) of ``dd``; ``state`` stacks the runs' states."""
     for r in range(dd.shape[0]):
@@ -211,8 +219,8 @@ def _onset_runs(
             state.excursion[r],
         )  # fmt: skip
         _onset_kernel(
-            dd[r], ages[r], inputs[r], low, high, alpha, columns, rate_high, beta, run_state,
-            out[r], fast[r],
+            dd[r], ages[r], inputs[r], low, high, alpha, columns, rate_high, beta, command,
+            run_state, out[r], fast[r],
         )  # fmt: skip
 
 
@@ -237,6 +245,15 @@ class InputEnvelope:
     change_lookback
         Seconds of input averages kept to judge a detection by the inputs before its estimated
         change point (default `CHANGE_LOOKBACK`; 0: by the inputs before its first second).
+    command_check
+        Also judge a detection by the command during it (default True): from a second of a
+        detection within ``change_lookback`` s of its estimated change point whose CV lies
+        outside the envelope, the detection is held as begun outside it until DD falls. The
+        normal models extrapolate there, and their residuals grow as the command nears the end
+        of its training range, so a detector raised by that growth fires while the average
+        before its change point still lay inside. The command is the one input a fault moves
+        only through a control loop, after its own effect; a command that leaves the envelope
+        later than that leaves the detection as it was judged.
 
     Attributes
     ----------
@@ -255,6 +272,7 @@ class InputEnvelope:
         rate_margin: float = 0.25,
         rate_seconds: float = RATE_SECONDS,
         change_lookback: int = CHANGE_LOOKBACK,
+        command_check: bool = True,
     ) -> None:
         self.margin = margin
         self.margin_floor = margin_floor
@@ -262,14 +280,17 @@ class InputEnvelope:
         self.rate_margin = rate_margin
         self.rate_seconds = rate_seconds
         self.change_lookback = change_lookback
+        self.command_check = command_check
 
     @classmethod
     def upgrade_model_file(cls, data: dict, format_version: int) -> dict:
         """An envelope saved before it had rates (model-file format <= 4): no rate check;
         before it looked up the change point (format <= 7): ``change_lookback = 0``, the onset
-        check it was saved with."""
+        check it was saved with; before it judged the command during a detection (format <= 16):
+        ``command_check = False``."""
         data = dict(data)
         data.setdefault("change_lookback", 0)
+        data.setdefault("command_check", False)
         data.setdefault("rate_margin", 0.25)
         data.setdefault("rate_seconds", RATE_SECONDS)
         if "low_" in data:
@@ -286,6 +307,8 @@ class InputEnvelope:
         if not (self.rate_seconds >= 1 and math.isfinite(self.rate_seconds)):
             raise ValueError(f"rate_seconds must be finite and >= 1, got {self.rate_seconds!r}")
         self._check_lookback()
+        if not isinstance(self.command_check, bool | np.bool_):
+            raise ValueError(f"command_check must be True or False, got {self.command_check!r}")
         lows, highs = [], []
         for c in ENVELOPE_CHANNELS:
             v = np.asarray(normal_runs[c].values, dtype=np.float64)
@@ -374,7 +397,7 @@ class InputEnvelope:
         low, high = np.ascontiguousarray(self.low_), np.ascontiguousarray(self.high_)
         rate_high = np.ascontiguousarray(self.rate_high_, dtype=np.float64)
         return (low, high, 1.0 / self.reference_seconds, _RATE_COLUMNS, rate_high,
-                1.0 / self.rate_seconds)  # fmt: skip
+                1.0 / self.rate_seconds, bool(self.command_check))  # fmt: skip
 
     def run_flags(
         self,
@@ -384,8 +407,9 @@ class InputEnvelope:
         change_age: Any = None,
     ) -> tuple[np.ndarray, np.ndarray, EnvelopeState]:
         """Per second: whether the current detection's estimated change began while the inputs
-        were outside the envelope (False while DD is off), and whether the rates of CV or P1
-        stand above their bounds.
+        were outside the envelope, or (``command_check``) the command has left it since, within
+        ``change_lookback`` s of the change (False while DD is off), and whether the rates of CV
+        or P1 stand above their bounds.
 
         Parameters
         ----------

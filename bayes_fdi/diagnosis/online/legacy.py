@@ -40,7 +40,9 @@ def upgrade_diagnoser(data: dict[str, Any]) -> dict[str, Any]:
     if "input_low_" in data:
         low, high = data.pop("input_low_"), data.pop("input_high_")
         margin = data.get("input_margin", 0.1)
-        data["envelope_"] = InputEnvelope.from_bounds(low, high, margin=margin, change_lookback=0)
+        data["envelope_"] = InputEnvelope.from_bounds(
+            low, high, margin=margin, change_lookback=0, command_check=False
+        )
     if "threshold_" in data and "decision_" not in data:
         data["decision_"] = DetectionDecision(data["threshold_"], data["clear_level_"], 2, hold=0)
     if "normal_models_" in data and "signature_" not in data:

@@ -52,8 +52,8 @@ def status_reasons(
     if dec["novel_onset"][i]:
         return (
             f"model mismatch: commission this valve (a detection{raised} whose change began while "
-            "the inputs lay outside what the normal models were fitted on; it is not read as a "
-            "fault)",
+            "the inputs lay outside what the normal models were fitted on, or whose command has "
+            "left that range since; it is not read as a fault)",
         )
     if dec["unproven_onset"][i]:
         return (

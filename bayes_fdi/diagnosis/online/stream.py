@@ -103,8 +103,9 @@ def decide(
     out
         The per-second quantities: ``DD``, ``group_proba`` ``(n, n_groups)``, ``novelty``,
         ``novel_inputs`` (inputs outside the envelope now), ``novel_onset`` (the detection's
-        estimated change began outside it) and ``unproven_onset`` (it began before the fit
-        proof, `bayes_fdi.diagnosis.online.fit_proof.FitProof`).
+        estimated change began outside it, or its command has left it since) and
+        ``unproven_onset`` (it began before the fit proof,
+        `bayes_fdi.diagnosis.online.fit_proof.FitProof`).
     group_labels
         The isolability groups' labels, columns of ``group_proba``.
     threshold
@@ -121,8 +122,8 @@ def decide(
         (arrays of ``n``) and ``z`` (the normal quantile of ``coverage``).
 
     A detection is named ``"mismatch"`` when its estimated change began while the inputs lay
-    outside the normal models' envelope, or before the stream had seen the normal models fit
-    the valve (the model does not fit this valve: commission it),
+    outside the normal models' envelope (or its command has left it since), or before the stream
+    had seen the normal models fit the valve (the model does not fit this valve: commission it),
     ``"unknown"`` when no isolator is fitted or the signature is unlike every known fault, else
     by the most probable isolability group.
     """
