@@ -89,6 +89,14 @@ def test_commissioning_gives_a_diagnoser_of_this_valve_with_its_report(commissio
         "text": "fitted on 400 of 1500 healthy samples (a fixed subset)",
     }
     assert "The normal models of X and F were fitted on 400 of 1500" in render_report(report)
+    # the input envelope: the healthy data's range, widened by the sensors' noise alone
+    levels = report["envelope"]["levels"]
+    cv = healthy["CV"].values
+    assert levels["CV"] == pytest.approx([np.nanmin(cv) - 0.02, np.nanmax(cv) + 0.02], rel=1e-12)
+    np.testing.assert_array_equal(diag.envelope_.high_, [hi for _, hi in levels.values()])
+    assert f"CV {levels['CV'][0]:.3f}-{levels['CV'][1]:.3f}" in render_report(report)
+    older = {k: v for k, v in report.items() if k != "envelope"}
+    assert "The input envelope" not in render_report(older)
 
 
 def test_the_commissioning_report_travels_with_the_model_file(commissioned, tmp_path):

@@ -27,6 +27,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping, Sequence
 from types import MappingProxyType
@@ -116,6 +117,18 @@ def _split_for_twin(runs: xr.Dataset) -> tuple[xr.Dataset, xr.Dataset | None]:
     cut = round(TWIN_FIT_SHARE * n)
     rest = runs.isel(time=slice(cut, None))
     return runs.isel(time=slice(0, cut)), (rest if n - cut >= 300 else None)
+
+
+def _envelope_report(envelope: Any) -> dict[str, Any]:
+    """The input envelope: per input its ``[low, high]``, and the largest mean absolute
+    one-second change of CV and P1 (full scale per second)."""
+    from bayes_fdi.diagnosis.online.envelope import ENVELOPE_CHANNELS, RATE_CHANNELS
+
+    low, high, rate = envelope.low_, envelope.high_, envelope.rate_high_
+    return {
+        "levels": {c: [float(low[i]), float(high[i])] for i, c in enumerate(ENVELOPE_CHANNELS)},
+        "rates": {c: float(rate[i]) for i, c in enumerate(RATE_CHANNELS) if math.isfinite(rate[i])},
+    }
 
 
 def _twin_report(twin: Any, check: Any) -> dict[str, Any]:
@@ -306,6 +319,7 @@ def commission(
     seconds["total"] = time.perf_counter() - t_start
     report = {
         "healthy": operating_range(runs),
+        "envelope": _envelope_report(diagnoser.envelope_),
         "twin": _twin_report(twin, check),
         "library": {
             "faults": list(faults),

@@ -188,6 +188,26 @@ def _normal_models_lines(report: Mapping[str, Any]) -> list[str]:
     return [*lines, ""] if lines else []  # the table before them ends with its own newline
 
 
+def _envelope_lines(envelope: Mapping[str, Any] | None) -> list[str]:
+    """The input envelope, in words (nothing for a report written before it was recorded)."""
+    if not envelope:
+        return []
+    levels = ", ".join(
+        f"{c} {format_number(lo, '.3f')}-{format_number(hi, '.3f')}"
+        for c, (lo, hi) in envelope["levels"].items()
+    )
+    rates = ", ".join(f"{c} {format_number(r, '.3g')}" for c, r in envelope["rates"].items())
+    rates = f", and a mean absolute one-second change of at most {rates}" if rates else ""
+    return [  # the table before it ends with its own newline
+        f"The input envelope: {levels} (the healthy data's range, widened only by the sensors' "
+        f"noise){rates}. Outside it the "
+        "normal models extrapolate: a quiet second there is DAZZLED, and an alarm raised as the "
+        "command leaves it is a model mismatch, not a fault. Commission again on data that "
+        "cover a new operating range.",
+        "",
+    ]
+
+
 def render_report(report: Mapping[str, Any]) -> str:
     """The Markdown commissioning report."""
     healthy = report["healthy"]
@@ -211,6 +231,7 @@ def render_report(report: Mapping[str, Any]) -> str:
         "units; 1st, 50th and 99th percentiles):",
         "",
         markdown_table(["channel", "1 %", "50 %", "99 %"], range_rows),
+        *_envelope_lines(report.get("envelope")),
         *_normal_models_lines(report),
         *_twin_section(report["twin"]),
         "## Isolability groups",
