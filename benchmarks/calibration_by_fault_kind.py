@@ -16,7 +16,6 @@ Results go to stdout and ``benchmarks/out/calibration_by_fault_kind.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -79,9 +78,9 @@ def main() -> None:
     parser.add_argument("--seeds", default=",".join(str(s) for s in SELECTION_SEEDS))
     parser.add_argument("--bootstrap", type=int, default=200)
     args = parser.parse_args()
-    from bayes_fdi.atomic import write_text
     from bayes_fdi.benchmark.scenarios import SCENARIOS
     from bayes_fdi.deployment.fitting import default_model, load_online_model
+    from bayes_fdi.reporting import write_json
 
     seeds = [int(s) for s in args.seeds.split(",")]
     if min(seeds) < 1000 or max(seeds) >= 10_000:
@@ -112,7 +111,7 @@ def main() -> None:
         )
     print(f"\n{result['cpu_seconds']:.0f} CPU s")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    write_text(OUT, json.dumps(result, indent=1))
+    write_json(result, OUT)
 
 
 if __name__ == "__main__":

@@ -44,7 +44,7 @@ def _run(plant, seconds: int, seed: int):
     return simulate(inputs.drop_vars("level"), [None], seed=seed, parameters=plant.parameters)
 
 
-def _distance(run, low, high) -> np.ndarray:
+def distance_beyond_range(run, low, high) -> np.ndarray:
     """Per second, the largest share of a channel's span its input lies beyond its range."""
     out = np.zeros(run.sizes["time"])
     for c in ENVELOPE:
@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
                 / one[f"{c}_hat_std"].values
                 for c in ("X", "F")
             }
-            d = _distance(run, low, high)
+            d = distance_beyond_range(run, low, high)
             cv = np.asarray(run["CV"].values).ravel()
             dd = np.asarray(one["DD"].values, dtype=bool)
             alarms = int(np.sum(np.diff(np.concatenate(([0], dd.astype(int)))) == 1))

@@ -27,7 +27,6 @@ under 1 for longer than the hold is a fault that stopped showing: a rule that cl
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -183,9 +182,9 @@ def main() -> None:
     )
     parser.add_argument("--seeds", type=int, default=10)
     args = parser.parse_args()
-    from bayes_fdi.atomic import write_text
     from bayes_fdi.benchmark.scenarios import SCENARIOS, benchmark_seeds
     from bayes_fdi.deployment.fitting import default_model, load_online_model
+    from bayes_fdi.reporting import write_json
 
     diagnoser = load_online_model(args.model) if args.model else default_model(progress=True)
     seeds = benchmark_seeds(args.seeds)
@@ -224,7 +223,7 @@ def main() -> None:
             )
     print(f"{time.process_time() - t0:.0f} CPU s")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    write_text(OUT, json.dumps(result, indent=1))
+    write_json(result, OUT)
 
 
 if __name__ == "__main__":

@@ -62,7 +62,9 @@ def _residuals(twin: ActuatorTwin, data):
     return w, w.observed - out, ratio, slope
 
 
-def _gain(r, slope, mask):
+def stem_gain(r, slope, mask):
+    """Least-squares gain (through the origin) of the F residual ``r[..., 1]`` on the valve
+    law's slope times the X residual, ``slope * r[..., 0]``, over the ``mask`` samples."""
     g = (slope * r[..., 0])[mask]
     return float(np.sum(g * r[..., 1][mask]) / np.sum(g * g))
 
@@ -73,7 +75,7 @@ def main(argv: list[str]) -> int:
         fit, held = _data(which)
         twin = ActuatorTwin(random_state=0).fit(fit)
         w, r, ratio, slope = _residuals(twin, fit)
-        lam = _gain(r, slope, w.mask)
+        lam = stem_gain(r, slope, w.mask)
         left = r.copy()
         left[..., 1] -= lam * slope * r[..., 0]
         z = noise_estimate(left, w.mask, ratio)
@@ -94,7 +96,8 @@ def main(argv: list[str]) -> int:
         corr = float(np.corrcoef(r[..., 0][m], r[..., 1][m])[0, 1])
         print(
             f"{which}: corr(e_X, e_F) {corr:+.2f}; gain fitted {lam:.2f}, held-out "
-            f"{_gain(r, slope, m):.2f}; coverage X, F: F given X {cover[0]:.3f}, {cover[1]:.3f}; "
+            f"{stem_gain(r, slope, m):.2f}; coverage X, F: F given X {cover[0]:.3f}, "
+            f"{cover[1]:.3f}; "
             f"shipped {shipped['X']:.3f}, {shipped['F']:.3f}",
             flush=True,
         )

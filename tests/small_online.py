@@ -28,11 +28,20 @@ def small_normal_models() -> DynamicNormalModels:
     )  # fmt: skip
 
 
+def small_normal_runs() -> xr.Dataset:
+    """`SmallRuns.normal` alone (seed 1), for a test that needs no fault runs."""
+    return simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
+
+
+def small_fault_runs() -> xr.Dataset:
+    """`SmallRuns.faults` alone (seed 2)."""
+    specs = [Fault(f, s, 100.0) for f in KINDS for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
+    return simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
+
+
 def small_runs() -> SmallRuns:
     """The seeded runs (seeds 1, 2, 4, 5)."""
-    normal = simulate(benchmark_inputs(4, 400, seed=1, vary=True), seed=1)
-    specs = [Fault(f, s, 100.0) for f in KINDS for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
-    faults = simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
+    normal, faults = small_normal_runs(), small_fault_runs()
     held = [Fault(f, s, 80.0) for f in KINDS for s in (0.5, 0.9)]
     validation = simulate(benchmark_inputs(len(held), 300, seed=4, vary=True), held, seed=4)
     calibration = simulate(benchmark_inputs(len(held), 300, seed=5, vary=True), held, seed=5)

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import xarray as xr
-from small_online_models import small_normal_models, small_normal_runs
+from small_online import small_normal_models, small_normal_runs
 
 from bayes_fdi.actuator import benchmark_inputs, simulate
 from bayes_fdi.deployment.recording import diagnose_recording

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import xarray as xr
-from small_online_models import small_normal_models, small_normal_runs
+from small_online import small_fault_runs, small_normal_models, small_normal_runs
 
 from bayes_fdi.actuator import Fault, benchmark_inputs, simulate
 from bayes_fdi.diagnosis import OnlineDiagnoser
@@ -24,12 +24,10 @@ RUNS, WARM, SECONDS = 4, 9, 6
 def fitted():
     from bayes_fdi.calibration import TemperatureScaler
 
-    models = small_normal_models()
-    normal = small_normal_runs()
-    specs = [Fault(f, s, 100.0) for f in ("f1", "f7", "f18") for s in (0.4, 0.6, 0.8, 1.0, 0.5)]
-    faults = simulate(benchmark_inputs(len(specs), 300, seed=2, vary=True), specs, seed=2)
-    diag = OnlineDiagnoser(models, calibrator=TemperatureScaler(), max_signatures_per_fault=20)
-    return diag.fit(normal, faults)
+    diag = OnlineDiagnoser(
+        small_normal_models(), calibrator=TemperatureScaler(), max_signatures_per_fault=20
+    )
+    return diag.fit(small_normal_runs(), small_fault_runs())
 
 
 def _leaves(state, prefix="state"):

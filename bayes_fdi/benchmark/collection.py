@@ -243,6 +243,15 @@ def _ece_interval(
     return res._replace(ci_low=float(lo), ci_high=float(hi))
 
 
+def _accuracy_confidence(y: np.ndarray, proba: np.ndarray, labels: np.ndarray) -> dict:
+    """The share of seconds whose most probable group is the true one, and the mean of that
+    probability."""
+    return {
+        "accuracy": float(np.mean(labels[np.argmax(proba, axis=1)] == y)),
+        "mean_confidence": float(np.mean(np.max(proba, axis=1))),
+    }
+
+
 def group_calibration(
     col: RunCollector, n_bootstrap: int, seed: int, figure: Path | None
 ) -> dict[str, Any]:
@@ -285,8 +294,7 @@ def group_calibration(
         "ci_high": res.ci_high,
         "noise_floor": res.noise_floor,
         "mce": res.mce,
-        "accuracy": float(np.mean(labels[np.argmax(proba, axis=1)] == y)),
-        "mean_confidence": float(np.mean(np.max(proba, axis=1))),
+        **_accuracy_confidence(y, proba, labels),
         "bins": {
             "edges": res.bin_edges,
             "counts": res.bin_counts,
@@ -305,7 +313,6 @@ def group_calibration(
             "ece": sub.value,
             "ci_low": sub.ci_low,
             "ci_high": sub.ci_high,
-            "accuracy": float(np.mean(labels[np.argmax(proba[answered], axis=1)] == y[answered])),
-            "mean_confidence": float(np.mean(np.max(proba[answered], axis=1))),
+            **_accuracy_confidence(y[answered], proba[answered], labels),
         }
     return out

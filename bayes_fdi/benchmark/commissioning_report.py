@@ -31,6 +31,7 @@ from bayes_fdi.benchmark.commissioning_summary import (
     per_case,
 )
 from bayes_fdi.benchmark.report import DETECTABLE_DEFLECTION
+from bayes_fdi.benchmark.report_detection import declared_r_fd_median
 from bayes_fdi.benchmark.report_summary import DECISION_TERMS
 from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import markdown_table, to_jsonable
@@ -115,7 +116,7 @@ def _model_sentence(model: str, rows: Sequence[Mapping[str, Any]]) -> str:
     big = big_abrupt_by_plant(rows)
     r_fd = median_or_none([r["indices"]["r_fd"] for r in rows])
     det = [len(e["detected"]) for e in big.values()]
-    declared = median_or_none([r["declared_r_fd"] for r in rows if "declared_r_fd" in r])
+    declared = declared_r_fd_median(rows)
     faults = "" if declared is None else f"; declared faults, not mismatch: {percent(declared)}"
     text = (
         f"the {model} model had the alarm on {percent(r_fd)} of the fault-free time (median"

@@ -46,10 +46,12 @@ PERMANENT_SHARE = 0.95
 DECLARED = 'counting only the alarms the diagnoser declares faults (its answer not "mismatch")'
 
 
-def declared_r_fd_median(results: Mapping[str, Any]) -> float | None:
-    """Median over the runs of ``declared_r_fd`` (the share of the fault-free part with DD on
-    and the diagnoser's answer other than "mismatch"), or None in results without it."""
-    values = [r["declared_r_fd"] for r in results["scenarios"] if "declared_r_fd" in r]
+def declared_r_fd_median(results: Mapping[str, Any] | Sequence[Mapping[str, Any]]) -> float | None:
+    """Median over the runs (``results["scenarios"]``, or a sequence of run rows) of
+    ``declared_r_fd`` (the share of the fault-free part with DD on and the diagnoser's answer
+    other than "mismatch"), or None in results without it."""
+    rows = results["scenarios"] if isinstance(results, Mapping) else results
+    values = [r["declared_r_fd"] for r in rows if "declared_r_fd" in r]
     return float(np.median(values)) if values else None
 
 

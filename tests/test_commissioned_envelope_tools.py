@@ -1,0 +1,45 @@
+"""``benchmarks/commissioned_envelope.py`` and ``benchmarks/twin_flow_given_stem.py``: how far
+the inputs lie beyond a range, and the least-squares gain of one residual on another, against
+hand-computed values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+from benchmark_scripts import load_benchmark
+
+envelope_tool = load_benchmark("commissioned_envelope")
+stem_tool = load_benchmark("twin_flow_given_stem")
+
+
+def test_the_distance_is_the_largest_share_of_a_span_beyond_the_range():
+    low = {"CV": 0.2, "P1": 0.5, "P2": 0.4, "T1": 0.1}
+    high = {"CV": 0.6, "P1": 0.7, "P2": 0.5, "T1": 0.3}
+    values = {
+        "CV": [0.4, 0.7, 0.1, 0.4],  # inside; 0.1 above (a quarter of 0.4); 0.1 below
+        "P1": [0.6, 0.6, 0.6, 0.8],  # inside, inside, inside, 0.1 above (half of 0.2)
+        "P2": [0.45, 0.45, 0.45, 0.45],
+        "T1": [0.2, 0.2, 0.2, 0.2],
+    }
+    run = xr.Dataset(
+        {c: (("run", "time"), np.array(v)[None]) for c, v in values.items()},
+        coords={"run": [0], "time": np.arange(4.0)},
+    )
+    got = envelope_tool.distance_beyond_range(run, low, high)
+    np.testing.assert_allclose(got, [0, 0.25, 0.25, 0.5])
+
+
+def test_the_gain_is_the_least_squares_slope_through_the_origin_on_the_masked_samples():
+    rng = np.random.default_rng(0)
+    e_x = rng.standard_normal((2, 50))
+    slope = rng.uniform(-3, -1, (2, 50))
+    r = np.stack([e_x, 1.5 * slope * e_x + 0.01 * rng.standard_normal((2, 50))], axis=-1)
+    mask = np.ones((2, 50), dtype=bool)
+    mask[1, 40:] = False
+    r[1, 40:, 1] = 1e6  # masked samples do not count
+    g = (slope * e_x)[mask]
+    want = np.linalg.lstsq(g[:, None], r[..., 1][mask], rcond=None)[0][0]  # a second solver
+    # both solve the same 1-parameter least squares: they agree to rounding (~1e-15 relative)
+    assert stem_tool.stem_gain(r, slope, mask) == pytest.approx(want, rel=1e-12)
+    assert abs(want - 1.5) < 0.01  # the noise is 1 % of the signal
