@@ -57,7 +57,10 @@ def fast_bernoulli(
     data are (nearly) separable some ``alpha`` head to zero and the actions can cycle with
     the Laplace evidence going up and down.  Beyond SparseBayes, the solver therefore stops
     when the evidence has not improved by 1e-4 for 50 iterations and returns the best model
-    seen (its trace then ends with that model's evidence).
+    seen (its trace then ends with that model's evidence). Where the basis separates the
+    classes so completely that an action's precision underflows to 0 (seen with wide RBF
+    kernels: every training target predicted to within rounding), it stops there too, at the
+    best model seen, instead of adding a column whose weight would be unbounded.
 
     Parameters
     ----------
@@ -82,6 +85,12 @@ def fast_bernoulli(
             run.S, run.Q, act_t, run.alpha, addable, exact, optimistic=run.x_opt
         )
         if not choice.gain > 0:
+            converged = True
+            break
+        if choice.kind != 2 and not 0.0 < choice.new_alpha < math.inf:
+            # A precision of 0 (underflow): the basis separates the classes, every weight
+            # y (1 - y) has underflowed and the mode would run off to infinity. Stop at the
+            # best model seen.
             converged = True
             break
         if choice.kind == 1 and (
