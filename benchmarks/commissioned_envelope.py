@@ -19,6 +19,16 @@ seconds with the alarm (DD) on, and the share the envelope flags (``novel_inputs
 
 Run: ``OMP_NUM_THREADS=1 PYTHONPATH=. python benchmarks/commissioned_envelope.py [--plants 5,6]
 [--runs 8]`` (about 3 CPU min per plant).
+
+``--scenarios`` asks instead how often the commissioning benchmark's own runs leave their plant's
+commissioning range, without commissioning anything: for each big abrupt Step-I scenario and
+benchmark seed (``--seeds``, default 2) of each plant, the fault-free version of the run (the
+same inputs: the loop is open at the fault) is compared with the range of the plant's healthy
+hour widened by the envelope's 0.02 floor (`onset_outside`): whether the command leaves it
+within ``CHANGE_LOOKBACK`` s after the onset or an input's mean over the minute before the onset
+lies outside it (a proxy of the onset check, which would answer a detection there
+``mismatch``), and the share of the faulty seconds with an input outside. About 10 CPU s per
+plant.
 """
 
 from __future__ import annotations
@@ -54,12 +64,63 @@ def distance_beyond_range(run, low, high) -> np.ndarray:
     return out
 
 
+def onset_outside(run, low, high, onset: int, lookback: int, floor: float):
+    """Whether the command lies outside ``[low - floor, high + floor]`` in a second of
+    ``[onset, onset + lookback]`` or an input's mean over the 60 s before ``onset`` does, and
+    the share of the seconds from ``onset`` on with an input outside."""
+    values = {c: np.asarray(run[c].values, dtype=np.float64).ravel() for c in ENVELOPE}
+    lo = {c: low[c] - floor for c in ENVELOPE}
+    hi = {c: high[c] + floor for c in ENVELOPE}
+    cv = values["CV"][onset : onset + lookback + 1]
+    near = bool(np.any((cv < lo["CV"]) | (cv > hi["CV"])))
+    before = any(
+        not lo[c] <= float(values[c][max(onset - 60, 0) : onset].mean()) <= hi[c] for c in ENVELOPE
+    )
+    after = np.zeros(values["CV"].size - onset, dtype=bool)
+    for c in ENVELOPE:
+        after |= (values[c][onset:] < lo[c]) | (values[c][onset:] > hi[c])
+    return near or before, float(after.mean())
+
+
+def scenario_ranges(plants, seeds: int) -> None:
+    """Print, per plant, how many big abrupt runs leave the commissioning range at their onset
+    (`onset_outside`) and the mean share of faulty seconds with an input outside it."""
+    from bayes_fdi.benchmark.plant_runs import POSITION
+    from bayes_fdi.benchmark.plants import draw_plant, healthy_run, scenario_run
+    from bayes_fdi.benchmark.scenarios import SCENARIOS
+    from bayes_fdi.diagnosis.online.envelope import CHANGE_LOOKBACK, INPUT_MARGIN_FLOOR
+
+    big = [s for s in SCENARIOS if s.mode == "abrupt" and s.size == "big"]
+    for p in plants:
+        plant = draw_plant(p)
+        healthy = healthy_run(plant, 3600)
+        low = {c: float(healthy[c].min()) for c in ENVELOPE}
+        high = {c: float(healthy[c].max()) for c in ENVELOPE}
+        flags, shares = [], []
+        for k in range(seeds):
+            for scenario in big:
+                run = scenario_run(plant, scenario, k, POSITION[scenario.name], faulty=False)
+                flag, share = onset_outside(
+                    run, low, high, round(scenario.t_from), CHANGE_LOOKBACK, INPUT_MARGIN_FLOOR
+                )
+                flags.append(flag)
+                shares.append(share)
+        print(f"plant {p}: {sum(flags)} of {len(flags)} big abrupt runs leave the commissioning "
+              f"range at their onset; faulty seconds with an input outside it: "
+              f"{100 * np.mean(shares):.1f} %", flush=True)  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--plants", default="5,6")
     ap.add_argument("--runs", type=int, default=8)
     ap.add_argument("--seconds", type=int, default=1800)
+    ap.add_argument("--scenarios", action="store_true", help="the benchmark's runs' ranges")
+    ap.add_argument("--seeds", type=int, default=2, help="benchmark seeds (--scenarios)")
     args = ap.parse_args(argv)
+    if args.scenarios:
+        scenario_ranges([int(v) for v in args.plants.split(",")], args.seeds)
+        return 0
     from bayes_fdi.benchmark.plants import draw_plant, healthy_run
     from bayes_fdi.commissioning import commission
     from bayes_fdi.datasets import CHANNELS

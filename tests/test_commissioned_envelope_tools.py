@@ -43,3 +43,32 @@ def test_the_gain_is_the_least_squares_slope_through_the_origin_on_the_masked_sa
     # both solve the same 1-parameter least squares: they agree to rounding (~1e-15 relative)
     assert stem_tool.stem_gain(r, slope, mask) == pytest.approx(want, rel=1e-12)
     assert abs(want - 1.5) < 0.01  # the noise is 1 % of the signal
+
+
+def _run_of(values: dict) -> xr.Dataset:
+    return xr.Dataset(
+        {c: (("run", "time"), np.asarray(v, dtype=np.float64)[None]) for c, v in values.items()},
+        coords={"run": [0], "time": np.arange(float(len(values["CV"])))},
+    )
+
+
+def test_a_run_leaves_the_range_at_its_onset_by_the_command_after_it_or_the_inputs_before():
+    low = {"CV": 0.2, "P1": 0.5, "P2": 0.4, "T1": 0.1}
+    high = {"CV": 0.6, "P1": 0.7, "P2": 0.5, "T1": 0.3}
+    inside = {"CV": np.full(200, 0.4), "P1": np.full(200, 0.6), "P2": np.full(200, 0.45),
+              "T1": np.full(200, 0.2)}  # fmt: skip
+    args = (low, high, 100, 10, 0.02)  # onset at 100 s, 10 s looked at, the 0.02 floor
+    assert envelope_tool.onset_outside(_run_of(inside), *args) == (False, 0.0)
+    late = {**inside, "CV": inside["CV"].copy()}
+    late["CV"][111:131] = 0.65  # outside the widened range (0.62), but 11 s after the onset
+    flag, share = envelope_tool.onset_outside(_run_of(late), *args)
+    assert not flag and share == pytest.approx(20 / 100)
+    near = {**inside, "CV": inside["CV"].copy()}
+    near["CV"][110] = 0.65  # 10 s after the onset: within the lookback
+    assert envelope_tool.onset_outside(_run_of(near), *args) == (True, pytest.approx(0.01))
+    within_floor = {**inside, "CV": inside["CV"].copy()}
+    within_floor["CV"][100:] = 0.61  # beyond the range but inside its 0.02 floor
+    assert envelope_tool.onset_outside(_run_of(within_floor), *args) == (False, 0.0)
+    before = {**inside, "T1": inside["T1"].copy()}
+    before["T1"][40:100] = 0.35  # the minute before the onset outside, back inside at it
+    assert envelope_tool.onset_outside(_run_of(before), *args) == (True, 0.0)
