@@ -24,7 +24,8 @@ Run: ``OMP_NUM_THREADS=1 PYTHONPATH=. python benchmarks/commissioned_envelope.py
 commissioning range, without commissioning anything: for each big abrupt Step-I scenario and
 benchmark seed (``--seeds``, default 2) of each plant, the fault-free version of the run (the
 same inputs: the loop is open at the fault) is compared with the range of the plant's healthy
-hour widened by the envelope's 0.02 floor (`onset_outside`): whether the command leaves it
+hour as a commissioned diagnoser's input envelope is fitted on it (`INPUT_MARGIN`, the 0.02
+floor; `onset_outside`): whether the command leaves it
 within ``CHANGE_LOOKBACK`` s after the onset or an input's mean over the minute before the onset
 lies outside it (a proxy of the onset check, which would answer a detection there
 ``mismatch``), and the share of the faulty seconds with an input outside. About 10 CPU s per
@@ -64,45 +65,42 @@ def distance_beyond_range(run, low, high) -> np.ndarray:
     return out
 
 
-def onset_outside(run, low, high, onset: int, lookback: int, floor: float):
-    """Whether the command lies outside ``[low - floor, high + floor]`` in a second of
-    ``[onset, onset + lookback]`` or an input's mean over the 60 s before ``onset`` does, and
-    the share of the seconds from ``onset`` on with an input outside."""
-    values = {c: np.asarray(run[c].values, dtype=np.float64).ravel() for c in ENVELOPE}
-    lo = {c: low[c] - floor for c in ENVELOPE}
-    hi = {c: high[c] + floor for c in ENVELOPE}
-    cv = values["CV"][onset : onset + lookback + 1]
-    near = bool(np.any((cv < lo["CV"]) | (cv > hi["CV"])))
-    before = any(
-        not lo[c] <= float(values[c][max(onset - 60, 0) : onset].mean()) <= hi[c] for c in ENVELOPE
-    )
-    after = np.zeros(values["CV"].size - onset, dtype=bool)
-    for c in ENVELOPE:
-        after |= (values[c][onset:] < lo[c]) | (values[c][onset:] > hi[c])
-    return near or before, float(after.mean())
+def healthy_range(healthy) -> tuple[dict[str, float], dict[str, float]]:
+    """The lowest and highest value of each input over the healthy recording."""
+    return ({c: float(healthy[c].min()) for c in ENVELOPE},
+            {c: float(healthy[c].max()) for c in ENVELOPE})  # fmt: skip
+
+
+def onset_outside(run, envelope, onset: int, lookback: int) -> tuple[bool, float]:
+    """Whether the command lies outside ``envelope`` (a fitted `InputEnvelope`) in a second of
+    ``[onset, onset + lookback]`` or the inputs' mean over the 60 s before ``onset`` does, and
+    the share of the seconds from ``onset`` on with an input outside (its levels only)."""
+    x = np.column_stack([np.asarray(run[c].values, dtype=np.float64).ravel() for c in ENVELOPE])
+    cv = x[onset : onset + lookback + 1, 0]
+    near = bool(np.any((cv < envelope.low_[0]) | (cv > envelope.high_[0])))
+    before = bool(envelope.outside(x[max(onset - 60, 0) : onset].mean(axis=0, keepdims=True))[0])
+    return near or before, float(envelope.outside(x[onset:]).mean())
 
 
 def scenario_ranges(plants, seeds: int) -> None:
-    """Print, per plant, how many big abrupt runs leave the commissioning range at their onset
-    (`onset_outside`) and the mean share of faulty seconds with an input outside it."""
+    """Print, per plant, how many big abrupt runs leave the commissioning envelope at their
+    onset (`onset_outside`) and the mean share of faulty seconds with an input outside it."""
     from bayes_fdi.benchmark.plant_runs import POSITION
     from bayes_fdi.benchmark.plants import draw_plant, healthy_run, scenario_run
     from bayes_fdi.benchmark.scenarios import SCENARIOS
-    from bayes_fdi.diagnosis.online.envelope import CHANGE_LOOKBACK, INPUT_MARGIN_FLOOR
+    from bayes_fdi.commissioning import INPUT_MARGIN
+    from bayes_fdi.diagnosis.online import InputEnvelope
+    from bayes_fdi.diagnosis.online.envelope import CHANGE_LOOKBACK
 
     big = [s for s in SCENARIOS if s.mode == "abrupt" and s.size == "big"]
     for p in plants:
         plant = draw_plant(p)
-        healthy = healthy_run(plant, 3600)
-        low = {c: float(healthy[c].min()) for c in ENVELOPE}
-        high = {c: float(healthy[c].max()) for c in ENVELOPE}
+        envelope = InputEnvelope(margin=INPUT_MARGIN).fit(healthy_run(plant, 3600))
         flags, shares = [], []
         for k in range(seeds):
             for scenario in big:
                 run = scenario_run(plant, scenario, k, POSITION[scenario.name], faulty=False)
-                flag, share = onset_outside(
-                    run, low, high, round(scenario.t_from), CHANGE_LOOKBACK, INPUT_MARGIN_FLOOR
-                )
+                flag, share = onset_outside(run, envelope, round(scenario.t_from), CHANGE_LOOKBACK)
                 flags.append(flag)
                 shares.append(share)
         print(f"plant {p}: {sum(flags)} of {len(flags)} big abrupt runs leave the commissioning "
@@ -129,8 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     for p in (int(v) for v in args.plants.split(",")):
         plant = draw_plant(p)
         healthy = healthy_run(plant, 3600)
-        low = {c: float(healthy[c].min()) for c in ENVELOPE}
-        high = {c: float(healthy[c].max()) for c in ENVELOPE}
+        low, high = healthy_range(healthy)
         diagnoser = commission(healthy, seed=0, progress=False).diagnoser
         print(f"plant {p}: commissioned on CV {low['CV']:.3f}-{high['CV']:.3f}", flush=True)
         for j in range(args.runs):

@@ -19,12 +19,12 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from bayes_fdi.diagnosis.online.stream import UNNAMED_STATES
+
 #: Noise seeds of the scenarios: apart from the training campaigns (< 1000), the DAMADICS
 #: benchmark (10 000 +), its fault-free hours (20 000 +), the plants (30 000 - 59 999) and the
 #: commissioned envelope's runs (90 000 +).
 SEEDS = (70_000, 70_001)
-#: States that name no group.
-UNNAMED = ("fn", "unknown", "mismatch")
 
 
 def tally(
@@ -36,7 +36,7 @@ def tally(
     out: dict[str, list[int]] = {}
     for name, true, states, probability in rows:
         states = np.asarray(states).astype(str)
-        named = ~np.isin(states, UNNAMED) & (np.nan_to_num(probability) >= threshold)
+        named = ~np.isin(states, UNNAMED_STATES) & (np.nan_to_num(probability) >= threshold)
         entry = out.setdefault(name, [0, 0, 0])
         entry[0] += int(np.sum(named & (states == true)))
         entry[1] += int(np.sum(named & (states != true)))

@@ -9,6 +9,8 @@ import pytest
 import xarray as xr
 from benchmark_scripts import load_benchmark
 
+from bayes_fdi.diagnosis.online import InputEnvelope
+
 envelope_tool = load_benchmark("commissioned_envelope")
 stem_tool = load_benchmark("twin_flow_given_stem")
 
@@ -53,11 +55,11 @@ def _run_of(values: dict) -> xr.Dataset:
 
 
 def test_a_run_leaves_the_range_at_its_onset_by_the_command_after_it_or_the_inputs_before():
-    low = {"CV": 0.2, "P1": 0.5, "P2": 0.4, "T1": 0.1}
-    high = {"CV": 0.6, "P1": 0.7, "P2": 0.5, "T1": 0.3}
+    # the range CV 0.2-0.6, P1 0.5-0.7, P2 0.4-0.5, T1 0.1-0.3 widened by the 0.02 floor
+    envelope = InputEnvelope.from_bounds([0.18, 0.48, 0.38, 0.08], [0.62, 0.72, 0.52, 0.32])
     inside = {"CV": np.full(200, 0.4), "P1": np.full(200, 0.6), "P2": np.full(200, 0.45),
               "T1": np.full(200, 0.2)}  # fmt: skip
-    args = (low, high, 100, 10, 0.02)  # onset at 100 s, 10 s looked at, the 0.02 floor
+    args = (envelope, 100, 10)  # onset at 100 s, 10 s looked at
     assert envelope_tool.onset_outside(_run_of(inside), *args) == (False, 0.0)
     late = {**inside, "CV": inside["CV"].copy()}
     late["CV"][111:131] = 0.65  # outside the widened range (0.62), but 11 s after the onset
@@ -72,3 +74,11 @@ def test_a_run_leaves_the_range_at_its_onset_by_the_command_after_it_or_the_inpu
     before = {**inside, "T1": inside["T1"].copy()}
     before["T1"][40:100] = 0.35  # the minute before the onset outside, back inside at it
     assert envelope_tool.onset_outside(_run_of(before), *args) == (True, 0.0)
+
+
+def test_the_healthy_range_is_each_inputs_lowest_and_highest_value():
+    run = _run_of({"CV": [0.3, 0.1, 0.5], "P1": [0.6, 0.7, 0.65], "P2": [0.4, 0.4, 0.4],
+                   "T1": [0.2, 0.25, 0.1]})  # fmt: skip
+    low, high = envelope_tool.healthy_range(run)
+    assert low == {"CV": 0.1, "P1": 0.6, "P2": 0.4, "T1": 0.1}
+    assert high == {"CV": 0.5, "P1": 0.7, "P2": 0.4, "T1": 0.25}

@@ -15,6 +15,7 @@ benchmark build on it.
 
 from bayes_fdi.commissioning.commission import (
     DETECT_RATE,
+    INPUT_MARGIN,
     LIBRARY_FAULTS,
     Commissioning,
     commission,
@@ -23,6 +24,7 @@ from bayes_fdi.commissioning.healthy import check_healthy, operating_range
 
 __all__ = [
     "DETECT_RATE",
+    "INPUT_MARGIN",
     "LIBRARY_FAULTS",
     "Commissioning",
     "check_healthy",

@@ -34,6 +34,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.atomic import atomic_path
+from bayes_fdi.diagnosis.online.stream import UNNAMED_STATES
 
 __all__ = [
     "CSV_COLUMNS",
@@ -380,7 +381,7 @@ class AlarmCollector:
                     last = max(last, float(times[a + np.flatnonzero(where == k)[-1]]))
                     current["states"][name] = (count + mine.size, n_ok + ok.size,
                                                total + float(ok.sum()), last)  # fmt: skip
-                named = np.flatnonzero(~np.isin(state_all[i, a:b], ("unknown", "mismatch", "fn")))
+                named = np.flatnonzero(~np.isin(state_all[i, a:b], UNNAMED_STATES))
                 if math.isnan(current["first"]) and named.size:
                     current["first"] = times[a + named[0]]
                 current["end"] = times[b - 1]

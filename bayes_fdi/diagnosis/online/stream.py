@@ -28,6 +28,9 @@ __all__ = [
     "MISMATCH",
     "MODEL_OUTPUTS",
     "NOVELTY_FLAGS",
+    "NO_FAULT",
+    "UNKNOWN",
+    "UNNAMED_STATES",
     "assemble_stream",
     "coverage_quantile",
     "decide",
@@ -39,6 +42,13 @@ FAULTS: tuple[str, ...] = tuple(f"f{i}" for i in range(1, 20))
 #: The state of a detection whose estimated change began while the inputs lay outside the normal
 #: models' envelope: the model does not fit this valve or operating point, which is not a fault.
 MISMATCH = "mismatch"
+#: The state of a detection the diagnoser cannot name: it has no fault library, or the
+#: signature is unlike every fault it knows.
+UNKNOWN = "unknown"
+#: The state of a second without detection.
+NO_FAULT = "fn"
+#: The states that name no isolability group (in this order after the groups in `decide`).
+UNNAMED_STATES = (MISMATCH, UNKNOWN, NO_FAULT)
 #: A statistic at or above this share of the threshold counts as raising the detection.
 RAISED_SHARE = 0.5
 #: The normal models' outputs in the stream.
@@ -133,7 +143,7 @@ def decide(
         blind |= ~np.isfinite(channels[c])
     novel_in = out["novel_inputs"]
     dd = out["DD"]
-    labels = np.asarray((*group_labels, MISMATCH, "unknown", "fn"), dtype=object)
+    labels = np.asarray((*group_labels, *UNNAMED_STATES), dtype=object)
     gq = out["group_proba"]
     isolated = np.isfinite(gq).all(axis=1) & (gq.shape[1] > 0) & dd
     if gq.shape[1]:
