@@ -34,7 +34,6 @@ import numpy as np
 import xarray as xr
 
 from bayes_fdi.atomic import atomic_path
-from bayes_fdi.diagnosis.online.stream import UNNAMED_STATES
 
 __all__ = [
     "CSV_COLUMNS",
@@ -346,6 +345,10 @@ class AlarmCollector:
 
     def append(self, stream: xr.Dataset) -> None:
         """Add one chunk (dims ``run``, ``time``)."""
+        # imported here: the diagnosis package loads torch and numba, which the CLI's help and
+        # the file writers' import must not
+        from bayes_fdi.diagnosis.online.stream import UNNAMED_STATES
+
         times = np.asarray(stream["time"].values, dtype=np.float64)
         dd_all = np.asarray(stream["DD"].transpose("run", "time").values, dtype=bool)
         state_all = np.asarray(stream["state"].transpose("run", "time").values).astype(str)
