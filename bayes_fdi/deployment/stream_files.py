@@ -345,9 +345,7 @@ class AlarmCollector:
 
     def append(self, stream: xr.Dataset) -> None:
         """Add one chunk (dims ``run``, ``time``)."""
-        # imported here: the diagnosis package loads torch and numba, which the CLI's help and
-        # the file writers' import must not
-        from bayes_fdi.diagnosis.online.stream import UNNAMED_STATES
+        from bayes_fdi.diagnosis.online.stream import UNNAMED_STATES  # lazy: pulls torch, numba
 
         times = np.asarray(stream["time"].values, dtype=np.float64)
         dd_all = np.asarray(stream["DD"].transpose("run", "time").values, dtype=bool)
