@@ -109,7 +109,16 @@ class Process:
         """Send ``sig`` (if still running) and wait; returns the exit status."""
         if self.proc.poll() is None:
             self.proc.send_signal(sig)
-        rc = self.proc.wait(timeout)
+        try:
+            rc = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(10)
+            self._reader.join(5)
+            raise AssertionError(
+                f"still running {timeout:.0f} s after signal {sig}; output:\n"
+                + "\n".join(self.lines[-60:])
+            ) from None
         self._reader.join(5)
         return rc
 

@@ -44,6 +44,9 @@ __all__ = ["Service", "configure_parser", "run_from_cli"]
 
 _log = logging.getLogger("bayes_fdi.serve")
 
+STOP_SECONDS = 10.0
+"""Seconds `Service.stop` gives the running tasks, and then the OPC UA endpoint, to end."""
+
 
 def model_fingerprint(path: str) -> str:
     """The first 16 hex digits of the model file's SHA-256."""
@@ -263,19 +266,37 @@ class Service:
         await loop.run_in_executor(self.writer, write)
 
     async def stop(self) -> None:
-        """Stop reading, commit what is left, flush the journal, close the endpoint."""
+        """Stop reading, commit what is left, flush the journal, close the endpoint.
+
+        The tasks and the endpoint get `STOP_SECONDS` each: one still running then is logged as
+        a warning with where it waits, and left behind. The commit and the flush are not
+        bounded, so that no record is lost.
+        """
         self.stopped.set()
         for task in self.tasks:
             if not task.done() and task.get_name() != "page":
                 task.cancel()
-        for task in self.tasks:
-            with contextlib.suppress(BaseException):
-                await task
+        if self.tasks:
+            done, pending = await asyncio.wait(self.tasks, timeout=STOP_SECONDS)
+            for task in done:  # retrieved, as awaiting them would (a reader's error is kept)
+                if not task.cancelled():
+                    task.exception()
+            for task in pending:
+                where = "".join(f"\n  {frame}" for frame in task.get_stack(limit=5))
+                _log.warning(
+                    "stop: task %r still running after %.0f s; left behind. It waits in:%s",
+                    task.get_name(),
+                    STOP_SECONDS,
+                    where,
+                )
         await self.commit()
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(self.writer, self.log.flush)
         self.writer.shutdown()
-        await self.publisher.stop()
+        try:
+            await asyncio.wait_for(self.publisher.stop(), STOP_SECONDS)
+        except TimeoutError:
+            _log.warning("stop: the OPC UA endpoint did not close within %.0f s", STOP_SECONDS)
 
     def status(self) -> Mapping[str, Any]:
         """Counts for the log line: records, and per valve the aligner's event counts."""
