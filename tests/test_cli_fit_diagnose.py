@@ -469,3 +469,30 @@ def test_seva_nc_takes_a_mismatch_that_first_appears_in_a_later_chunk(model, tmp
     writer.close()
     back = xr.load_dataset(tmp_path / "seva.nc")
     np.testing.assert_array_equal(back["state"].values.astype(str), state.astype(str))
+
+
+def test_the_cached_default_model_is_named_by_its_training_campaigns(tmp_path, monkeypatch):
+    """A changed training campaign file changes the cache's name, so that the model cached from
+    the old training is not loaded; the other campaign files do not."""
+    import hashlib
+    import shutil
+
+    from bayes_fdi.campaigns import shipped
+
+    folder = tmp_path / "campaigns"
+    shutil.copytree(shipped.campaign_folder(), folder)
+    monkeypatch.setattr(shipped, "campaign_folder", lambda: folder)
+    monkeypatch.setenv("BAYES_FDI_CACHE", str(tmp_path / "cache"))
+    before = model_fitting.default_model_path(small=False)
+    # the digest is the SHA-256 of the online-*.toml files' names and contents, in name order
+    digest = hashlib.sha256()
+    for path in sorted(folder.glob("online-*.toml")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    assert before.name.endswith(f"-{digest.hexdigest()[:8]}.npz")
+    (folder / "shift-chirp.toml").write_text("# not a training campaign\n")
+    assert model_fitting.default_model_path(small=False) == before
+    sine_sum = folder / "online-normal-sine-sum.toml"
+    sine_sum.write_text(sine_sum.read_text() + "\n# changed\n")
+    after = model_fitting.default_model_path(small=False)
+    assert after != before and after.parent == before.parent
+    assert model_fitting.default_model_path(small=True).name == after.name[:-4] + "-small.npz"

@@ -21,6 +21,7 @@ folder (or pass ``refit=True``, ``bayes-fdi fit --default --out PATH``) to fit a
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import sys
 import time
@@ -49,6 +50,7 @@ __all__ = [
     "new_online_diagnoser",
     "recordings_as_runs",
     "run_from_cli",
+    "training_fingerprint",
 ]
 
 #: The trainings of ``bayes-fdi fit --default --training``, the default first (those of
@@ -74,13 +76,32 @@ def _small() -> bool:
     return os.environ.get(SMALL_ENV, "") not in ("", "0")
 
 
+def training_fingerprint() -> str:
+    """The first 8 hex digits of the SHA-256 of the shipped training campaigns (the
+    ``online-*.toml`` files: their names and contents), so that a changed training is never
+    answered by a model cached from the old one."""
+    from bayes_fdi.campaigns.shipped import campaign_folder
+
+    digest = hashlib.sha256()
+    for path in sorted(campaign_folder().glob("online-*.toml")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:8]
+
+
 def default_model_path(*, small: bool | None = None) -> Path:
-    """Where the default model is cached (``small``: the quick settings of the notebooks)."""
+    """Where the default model is cached (``small``: the quick settings of the notebooks).
+
+    The name holds the package version, the model file format, the training and the
+    `training_fingerprint`.
+    """
     from bayes_fdi import __version__
 
     small = _small() if small is None else small
     training, suffix = DEFAULT_TRAININGS[0], "-small" if small else ""
-    name = f"online-diagnoser-{__version__}-f{model_files.FORMAT_VERSION}-{training}{suffix}.npz"
+    name = (
+        f"online-diagnoser-{__version__}-f{model_files.FORMAT_VERSION}-{training}-"
+        f"{training_fingerprint()}{suffix}.npz"
+    )
     return cache_dir() / name
 
 
