@@ -11,23 +11,19 @@ A model file (`bayes_fdi.model_files.format`) is what ``bayes-fdi diagnose --mod
   STATE@ONSET=FILE`` recordings of known faults), read by `bayes_fdi.datasets.readers`.
 
 `default_model` is the model ``bayes-fdi diagnose`` uses without ``--model``: fitted from the
-default campaigns on first use and cached in :func:`cache_dir` (``$BAYES_FDI_CACHE`` if set,
-else the platform's user cache folder, ``$XDG_CACHE_HOME/bayes_fdi`` or ``~/.cache/bayes_fdi`` on
-Linux), written atomically; later calls load it. Its file name holds the package version, the
-file-format version and the default training's name, so an upgrade fits a new one; delete the
-folder (or pass ``refit=True``, ``bayes-fdi fit --default --out PATH``) to fit again.
+default campaigns on first use and cached (`bayes_fdi.deployment.model_cache` says where, and
+under which name), written atomically; later calls load it. Delete the cache folder (or pass
+``refit=True``, ``bayes-fdi fit --default --out PATH``) to fit again.
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import os
 import sys
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,10 +32,20 @@ import xarray as xr
 from bayes_fdi import model_files
 from bayes_fdi.cli_arguments import UsageError, input_file, output_file
 from bayes_fdi.datasets import CHANNELS, STATES, make_dataset
+from bayes_fdi.deployment.model_cache import (
+    CACHE_ENV,
+    DEFAULT_TRAININGS,
+    SMALL_ENV,
+    cache_dir,
+    default_model_path,
+    small_settings,
+    training_fingerprint,
+)
 
 __all__ = [
     "CACHE_ENV",
     "DEFAULT_TRAININGS",
+    "SMALL_ENV",
     "cache_dir",
     "configure_parser",
     "default_model",
@@ -52,57 +58,6 @@ __all__ = [
     "run_from_cli",
     "training_fingerprint",
 ]
-
-#: The trainings of ``bayes-fdi fit --default --training``, the default first (those of
-#: `bayes_fdi.default_diagnoser`, named here so that the command line starts without it).
-DEFAULT_TRAININGS = ("excitation-mix", "dgen")
-#: Environment variable naming the cache folder of the default model.
-CACHE_ENV = "BAYES_FDI_CACHE"
-#: Environment variable asking for the small (quick) settings, as the notebooks use.
-SMALL_ENV = "BAYES_FDI_SMALL"
-
-
-def cache_dir() -> Path:
-    """The folder of the cached default model (created when the model is first written)."""
-    folder = os.environ.get(CACHE_ENV)
-    if folder:
-        return Path(folder)
-    from platformdirs import user_cache_dir
-
-    return Path(user_cache_dir("bayes_fdi", appauthor=False))
-
-
-def _small() -> bool:
-    return os.environ.get(SMALL_ENV, "") not in ("", "0")
-
-
-def training_fingerprint() -> str:
-    """The first 8 hex digits of the SHA-256 of the shipped training campaigns (the
-    ``online-*.toml`` files: their names and contents), so that a changed training is never
-    answered by a model cached from the old one."""
-    from bayes_fdi.campaigns.shipped import campaign_folder
-
-    digest = hashlib.sha256()
-    for path in sorted(campaign_folder().glob("online-*.toml")):
-        digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
-    return digest.hexdigest()[:8]
-
-
-def default_model_path(*, small: bool | None = None) -> Path:
-    """Where the default model is cached (``small``: the quick settings of the notebooks).
-
-    The name holds the package version, the model file format, the training and the
-    `training_fingerprint`.
-    """
-    from bayes_fdi import __version__
-
-    small = _small() if small is None else small
-    training, suffix = DEFAULT_TRAININGS[0], "-small" if small else ""
-    name = (
-        f"online-diagnoser-{__version__}-f{model_files.FORMAT_VERSION}-{training}-"
-        f"{training_fingerprint()}{suffix}.npz"
-    )
-    return cache_dir() / name
 
 
 def _default_fitter() -> Callable[..., Any]:
@@ -152,7 +107,7 @@ def default_model(
     seed
         Seed of the default campaigns (a model of another seed is not cached).
     """
-    small = _small() if small is None else small
+    small = small_settings() if small is None else small
     path = default_model_path(small=small)
     if seed == 0 and path.exists() and not refit:
         try:
