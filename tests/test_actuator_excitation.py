@@ -74,6 +74,37 @@ def test_sine_sum_puts_its_power_at_the_drawn_frequencies():
         assert np.var(cv) == pytest.approx(0.005, rel=0.02)
 
 
+def test_sine_sum_p1_oscillates_with_the_drawn_sines_and_keeps_the_rest_of_the_run():
+    """P1's oscillation is added to the run without it: CV, P2, T1 unchanged where the drop
+    allows, the added part a sine of the drawn amplitude at a frequency in the band, P1 and the
+    drop kept in their limits."""
+    op = OperatingRange(
+        p1=(3.0e6, 3.0e6), dp=(0.3e6, 0.3e6), p1_drift=0.0, p2_drift=0.0, p1_noise=0.0,
+        p2_noise=0.0,
+    )  # fmt: skip
+    kw = dict(n_sines=1, frequencies=(0.01, 0.04), operating=op)
+    still = sine_sum_inputs(4, 4000, seed=6, **kw)
+    moving = sine_sum_inputs(4, 4000, seed=6, p1_amplitude=(0.2e6, 0.2e6), **kw)
+    for ch in ("CV", "P2", "T1"):
+        np.testing.assert_array_equal(moving[ch].values, still[ch].values)
+    added = (moving["P1"].values - still["P1"].values) * 4e6
+    for wave in added:
+        spectrum = np.abs(np.fft.rfft(wave)) ** 2
+        peak = np.fft.rfftfreq(wave.size)[np.argmax(spectrum)]
+        assert 0.01 - 1 / 4000 <= peak <= 0.04 + 1 / 4000
+        # one sine of amplitude 0.2 MPa (P1 at 3 MPa stays far from its limits): its variance
+        # is 0.2^2 / 2 MPa^2, up to the leakage of a non-integer number of periods
+        assert np.var(wave) == pytest.approx(0.02e12, rel=0.02)
+    assert moving.attrs["excitation_p1_high"] == 0.2e6 and "excitation_p1_high" not in still.attrs
+    # the drop of 0.3 MPa swings by 0.2 MPa and stays above its 0.05 MPa floor; P1 in range
+    drop = (moving["P1"].values - moving["P2"].values) * 4e6
+    # (sampled at 1 Hz over tens of periods, some second falls within 2 % of the trough)
+    assert drop.min() == pytest.approx(0.1e6, rel=0.02) and drop.max() <= 0.5e6 + 1.0
+    low = sine_sum_inputs(2, 2000, seed=7, p1_amplitude=(0.9e6, 0.9e6), operating=op)
+    p1, p2 = low["P1"].values * 4e6, low["P2"].values * 4e6
+    assert (p1 - p2).min() >= 0.05e6 - 1e-3 and p1.min() >= 0.2e6 and p1.max() <= 3.98e6
+
+
 def test_step_ramp_holds_levels_for_at_least_the_shortest_hold():
     ds = step_ramp_inputs(3, 3000, seed=3, hold_seconds=(50, 100), ramp_share=0.0)
     for cv in ds["CV"].values:
@@ -118,6 +149,7 @@ def test_the_actuator_model_runs_on_every_family():
     [
         (lambda: sine_sum_inputs(0, 10), "n_runs"),
         (lambda: sine_sum_inputs(1, 10, frequencies=(0.1, 0.01)), "frequencies"),
+        (lambda: sine_sum_inputs(1, 10, p1_amplitude=(-1.0, 1.0)), "p1_amplitude"),
         (lambda: step_ramp_inputs(1, 10, ramp_share=2.0), "ramp_share"),
         (lambda: level_loop_inputs(1, 10, loop=LevelLoop(kp=(-1.0, 1.0))), "loop.kp"),
         (lambda: level_loop_inputs(1, 10, loop=LevelLoop(kv_ratio=0.0)), "loop.kv_ratio"),

@@ -112,6 +112,10 @@ def _ou(rng: np.random.Generator, n: int, std: float, tau: float) -> np.ndarray:
     return x
 
 
+_P1_LIMITS = (0.05 * P_RANGE, 0.995 * P_RANGE)  #: P1 stays inside these [Pa]
+_MIN_DROP = 0.05e6  #: P2 at least this far below P1 [Pa]
+
+
 def _operating_point(rng: np.random.Generator, n: int, op: OperatingRange) -> dict[str, np.ndarray]:
     """P1, P2 [Pa] and T1 [°C] of one run: drawn levels, slow drift and fast fluctuation."""
     p1 = rng.uniform(*op.p1)
@@ -121,8 +125,8 @@ def _operating_point(rng: np.random.Generator, n: int, op: OperatingRange) -> di
     p1_t = p1 + _ou(rng, n, op.p1_drift, tau) + rng.standard_normal(n) * op.p1_noise
     p2_t = (p1 - dp) + _ou(rng, n, op.p2_drift, tau) + rng.standard_normal(n) * op.p2_noise
     t1_t = t1 + _ou(rng, n, op.t1_drift, tau) + rng.standard_normal(n) * op.t1_noise
-    p1_t = np.clip(p1_t, 0.05 * P_RANGE, 0.995 * P_RANGE)
-    p2_t = np.clip(np.minimum(p2_t, p1_t - 0.05e6), 0.01 * P_RANGE, None)
+    p1_t = np.clip(p1_t, *_P1_LIMITS)
+    p2_t = np.clip(np.minimum(p2_t, p1_t - _MIN_DROP), 0.01 * P_RANGE, None)
     t1_t = np.clip(t1_t, 1.0, 0.99 * T_RANGE)
     return {"P1": p1_t, "P2": p2_t, "T1": t1_t}
 
@@ -164,6 +168,7 @@ def sine_sum_inputs(
     frequencies: tuple[float, float] = (0.002, 0.05),
     cv_mean: tuple[float, float] = (0.45, 0.75),
     cv_amplitude: tuple[float, float] = (0.05, 0.2),
+    p1_amplitude: tuple[float, float] = (0.0, 0.0),
     operating: OperatingRange = DEFAULT_OPERATING,
 ) -> xr.Dataset:
     """CV a sum of ``n_sines`` sines; the operating point drawn from ``operating``.
@@ -171,6 +176,13 @@ def sine_sum_inputs(
     Each run draws its mean in ``cv_mean``, each sine its frequency log-uniformly in
     ``frequencies`` (Hz, at most 0.5), its phase uniformly, and its amplitude so that the
     amplitudes sum to a total drawn in ``cv_amplitude``. CV is clipped to [0.02, 0.98].
+
+    With ``p1_amplitude`` above zero (Pa), P1 also oscillates around its drifting level: a sum
+    of ``n_sines`` sines drawn in the same way, their amplitudes summing to a total drawn in
+    ``p1_amplitude``, while P2 keeps its own level, so that the pressure drop swings with P1
+    (as DGen's 0.1 Hz sine of P1 makes it swing, but at every operating point and frequency).
+    P1 stays in [0.05, 0.995] of full scale and P2 at least 0.05 MPa below it. The default,
+    no oscillation, draws nothing more.
     """
     who = "sine_sum_inputs"
     n_runs, duration = check_run_shape(n_runs, duration, who)
@@ -180,18 +192,29 @@ def sine_sum_inputs(
         raise ValueError(f"{who}: frequencies must be positive")
     m_lo, m_hi = check_band(cv_mean, "cv_mean", who, 0.0, 1.0)
     a_lo, a_hi = check_band(cv_amplitude, "cv_amplitude", who, 0.0, 1.0)
+    p_lo, p_hi = check_band(p1_amplitude, "p1_amplitude", who, 0.0, 1e6)
     t = np.arange(duration, dtype=np.float64)
     cv = np.empty((n_runs, duration))
     points = []
+
+    def sines(rng: np.random.Generator, total: tuple[float, float]) -> np.ndarray:
+        f = np.exp(rng.uniform(math.log(f_lo), math.log(f_hi), n_sines))
+        share = rng.dirichlet(np.ones(n_sines)) * rng.uniform(*total)
+        phase = rng.uniform(0.0, 2.0 * np.pi, n_sines)
+        return (share[:, None] * np.sin(2 * np.pi * f[:, None] * t + phase[:, None])).sum(axis=0)
+
     for r in range(n_runs):
         rng = np.random.default_rng([int(seed), FAMILIES["sine-sum"], r])
-        f = np.exp(rng.uniform(math.log(f_lo), math.log(f_hi), n_sines))
-        share = rng.dirichlet(np.ones(n_sines)) * rng.uniform(a_lo, a_hi)
-        phase = rng.uniform(0.0, 2.0 * np.pi, n_sines)
-        wave = (share[:, None] * np.sin(2 * np.pi * f[:, None] * t + phase[:, None])).sum(axis=0)
+        wave = sines(rng, (a_lo, a_hi))
         cv[r] = np.clip(rng.uniform(m_lo, m_hi) + wave, 0.02, 0.98)
-        points.append(_operating_point(rng, duration, operating))
+        point = _operating_point(rng, duration, operating)
+        if p_hi > 0.0:
+            point["P1"] = np.clip(point["P1"] + sines(rng, (p_lo, p_hi)), *_P1_LIMITS)
+            point["P2"] = np.minimum(point["P2"], point["P1"] - _MIN_DROP)
+        points.append(point)
     attrs = {"n_sines": n_sines, "f_low": f_lo, "f_high": f_hi}
+    if p_hi > 0.0:
+        attrs["p1_low"], attrs["p1_high"] = p_lo, p_hi
     return excitation_dataset(cv, points, "sine-sum", int(seed), attrs)
 
 
