@@ -8,10 +8,11 @@ declared in ``sim/``, in one of two trainings (`TRAININGS`):
   and input envelope; ``online-faults-abrupt.toml`` and ``online-faults-incipient.toml``: every
   fault at magnitudes from 0.1 to 1.0, abrupt and ramping), with fewer runs, plus their sister
   files ``online-*-sine-sum.toml``, ``-step-ramp.toml`` and ``-level-loop.toml``: the excitation
-  families of `bayes_fdi.actuator.excitation` (sums of sines, steps and ramps, a PI level loop)
-  over the DABLib operating ranges of P1, P2, T1; normal models whose std factors are fitted by
-  coverage (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels`
-  ``std_coverage=0.9``) so that the heavy tail after command steps does not widen them all, one
+  families of `bayes_fdi.actuator.excitation` (sums of sines, in which P1 oscillates too, steps
+  and ramps, a PI level loop) over the DABLib operating ranges of P1, P2, T1; normal models
+  whose std factors are fitted by coverage
+  (`~bayes_fdi.diagnosis.normal_models.dynamic.DynamicNormalModels` ``std_coverage=0.9``) so
+  that the heavy tail after command steps does not widen them all, one
   factor per bin of the command's novelty (``std_bins="command-novelty"``: how far the command's
   level, increments and lag lie from the training runs', so that a command unlike any training
   run widens the intervals), and that take the command through the actuator's lag as an input
