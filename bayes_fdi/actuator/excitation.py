@@ -112,8 +112,11 @@ def _ou(rng: np.random.Generator, n: int, std: float, tau: float) -> np.ndarray:
     return x
 
 
-_P1_LIMITS = (0.05 * P_RANGE, 0.995 * P_RANGE)  #: P1 stays inside these [Pa]
-_MIN_DROP = 0.05e6  #: P2 at least this far below P1 [Pa]
+def _pressures_in_range(p1: np.ndarray, p2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """P1 within [0.05, 0.995] of full scale, P2 at least 0.05 MPa below it and above 0.01 of
+    full scale [Pa]."""
+    p1 = np.clip(p1, 0.05 * P_RANGE, 0.995 * P_RANGE)
+    return p1, np.clip(np.minimum(p2, p1 - 0.05e6), 0.01 * P_RANGE, None)
 
 
 def _operating_point(rng: np.random.Generator, n: int, op: OperatingRange) -> dict[str, np.ndarray]:
@@ -125,8 +128,7 @@ def _operating_point(rng: np.random.Generator, n: int, op: OperatingRange) -> di
     p1_t = p1 + _ou(rng, n, op.p1_drift, tau) + rng.standard_normal(n) * op.p1_noise
     p2_t = (p1 - dp) + _ou(rng, n, op.p2_drift, tau) + rng.standard_normal(n) * op.p2_noise
     t1_t = t1 + _ou(rng, n, op.t1_drift, tau) + rng.standard_normal(n) * op.t1_noise
-    p1_t = np.clip(p1_t, *_P1_LIMITS)
-    p2_t = np.clip(np.minimum(p2_t, p1_t - _MIN_DROP), 0.01 * P_RANGE, None)
+    p1_t, p2_t = _pressures_in_range(p1_t, p2_t)
     t1_t = np.clip(t1_t, 1.0, 0.99 * T_RANGE)
     return {"P1": p1_t, "P2": p2_t, "T1": t1_t}
 
@@ -209,8 +211,8 @@ def sine_sum_inputs(
         cv[r] = np.clip(rng.uniform(m_lo, m_hi) + wave, 0.02, 0.98)
         point = _operating_point(rng, duration, operating)
         if p_hi > 0.0:
-            point["P1"] = np.clip(point["P1"] + sines(rng, (p_lo, p_hi)), *_P1_LIMITS)
-            point["P2"] = np.minimum(point["P2"], point["P1"] - _MIN_DROP)
+            wave = sines(rng, (p_lo, p_hi))
+            point["P1"], point["P2"] = _pressures_in_range(point["P1"] + wave, point["P2"])
         points.append(point)
     attrs = {"n_sines": n_sines, "f_low": f_lo, "f_high": f_hi}
     if p_hi > 0.0:
