@@ -40,10 +40,11 @@ P1_OSCILLATING = (0.0, 200e3)
 def stream_figures(r_x: np.ndarray, r_f: np.ndarray, dd: np.ndarray) -> dict[str, float]:
     """Figures of ``(runs, time)`` arrays of one case, its start-up already left out: the median
     over the runs of each run's innovation RMS (NaN seconds left out), the share of seconds with
-    DD on, and the alarms (DD's rising edges; a run whose DD is on at its first second counts
-    one)."""
-    dd = np.asarray(dd, dtype=bool)
-    starts = dd[:, 0].sum() + (dd[:, 1:] & ~dd[:, :-1]).sum()
+    DD on, and the alarms (DD's rising edges, `rising_edges` of each run; NaN DD is off, as
+    PICalc reads it)."""
+    from bayes_fdi.scoring.decision_signals import decision_high, rising_edges
+
+    dd = decision_high(dd)
 
     def rms(r: np.ndarray) -> float:
         return float(np.median(np.sqrt(np.nanmean(np.asarray(r, dtype=np.float64) ** 2, axis=1))))
@@ -52,7 +53,7 @@ def stream_figures(r_x: np.ndarray, r_f: np.ndarray, dd: np.ndarray) -> dict[str
         "rms_X": rms(r_x),
         "rms_F": rms(r_f),
         "dd_share": float(dd.mean()),
-        "alarms": int(starts),
+        "alarms": sum(rising_edges(run) for run in dd),
     }
 
 
@@ -102,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"detector threshold {model.threshold_:.2f}; {args.runs} runs x {args.duration} s per case"
     )
-    print(f"| case | innovations' RMS X / F | DD on | alarms in {hours:g} h |")
+    print(f"| case | innovations' RMS X / F | DD on | alarms in {hours:.1f} h |")
     print("|---|---|---|---|")
     for name, inputs in cases(args.runs, args.duration, args.seed).items():
         out = model.run(simulate(inputs(), seed=args.seed)).isel(time=slice(START_UP, None))

@@ -18,6 +18,9 @@ def test_figures_are_the_median_rms_the_dd_share_and_the_rising_edges():
     assert f["rms_X"] == pytest.approx((np.sqrt(12.5) + 1.0) / 2)
     assert f["rms_F"] == pytest.approx(1.0)
     assert f["dd_share"] == pytest.approx(4 / 6) and f["alarms"] == 3
+    # a second without a decision (NaN, e.g. BLIND) counts as off, as PICalc reads it
+    g = tool.stream_figures(r_x[:1], r_f[:1], np.array([[np.nan, 1.0, 1.0]]))
+    assert g["dd_share"] == pytest.approx(2 / 3) and g["alarms"] == 1
 
 
 def test_each_case_changes_only_the_input_it_names():
