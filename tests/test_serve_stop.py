@@ -53,7 +53,12 @@ def test_stop_leaves_behind_a_task_that_ignores_its_cancellation_and_still_close
         await service.start()
         open_before = _accepts(seva_port)
         flush = service.log.flush
-        service.log.flush = lambda: (flushed.append(True), flush())[1]
+
+        def counted_flush() -> None:
+            flushed.append(True)
+            flush()
+
+        service.log.flush = counted_flush
         task = asyncio.create_task(stubborn(), name="stubborn")
         service.tasks.append(task)
         await running.wait()
