@@ -8,8 +8,9 @@ The benchmark's group-level ECE pools the detected faulty seconds of every scena
 neither the training (below 1000) nor the benchmark's evaluation (10 000 and up) uses (default
 5000 and 5001), with the benchmark's own collector (`bayes_fdi.benchmark.collection`), and
 reports the top-label ECE, accuracy and mean confidence of the abrupt scenarios' seconds, of the
-incipient scenarios' and of both together, then the scenarios whose named group is most often
-wrong. ``--model``: a model file (default: the default model, fitted and cached on first use).
+incipient scenarios' and of both together, the scenarios whose named group is most often
+wrong, and the faulty seconds answered with a wrong group at p > 0.9 (confident wrong), by
+scenario. ``--model``: a model file (default: the default model, fitted and cached on first use).
 Results go to stdout and ``benchmarks/out/calibration_by_fault_kind.json``.
 """
 
@@ -72,6 +73,26 @@ def collect(diagnoser, scenarios, seeds) -> tuple[dict, list[dict]]:
     return collectors, per_run
 
 
+def confident_wrong_summary(collector) -> dict:
+    """The faulty seconds answered with a wrong group at p > 0.9 (the benchmark's confident
+    wrong count) over every run of ``collector``: ``seconds``, ``faulty_seconds``, ``share``,
+    and ``scenarios`` (scenario name -> its seconds, most first; those with any)."""
+    from bayes_fdi.benchmark.report_detection import scenario_name
+
+    per: dict[str, int] = {}
+    for row in collector.rows:
+        if row["confident_wrong_seconds"]:
+            name = scenario_name(row)
+            per[name] = per.get(name, 0) + row["confident_wrong_seconds"]
+    total = collector.faulty_seconds
+    return {
+        "seconds": collector.confident_wrong,
+        "faulty_seconds": total,
+        "share": collector.confident_wrong / total if total else float("nan"),
+        "scenarios": dict(sorted(per.items(), key=lambda kv: -kv[1])),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", default=None, help="a model file (default: the default model)")
@@ -93,6 +114,7 @@ def main() -> None:
         "model": args.model or "default",
         "cpu_seconds": time.process_time() - t0,
         **{k: _summary(c, args.bootstrap) for k, c in collectors.items()},
+        "confident_wrong": confident_wrong_summary(collectors["all"]),
         "runs": per_run,
     }
     print("| scenarios | seconds | runs | ECE [95 % interval] | accuracy | mean confidence |")
@@ -109,6 +131,13 @@ def main() -> None:
             f"  {row['scenario']} (seed {row['seed']}): true {row['true_group']}, named "
             f"{row['named']}; right in {row['accuracy']:.0%} at confidence {row['confidence']:.2f}"
         )
+    cw = result["confident_wrong"]
+    print(
+        f"\nconfident (p > 0.9) wrong group: {cw['seconds']} of {cw['faulty_seconds']} faulty "
+        f"seconds ({100 * cw['share']:.3f} %)"
+    )
+    for name, seconds in cw["scenarios"].items():
+        print(f"  {name}: {seconds} s")
     print(f"\n{result['cpu_seconds']:.0f} CPU s")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     write_json(result, OUT)

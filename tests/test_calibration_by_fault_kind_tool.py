@@ -34,7 +34,8 @@ def test_the_pooled_sample_is_the_benchmarks_own(case, tmp_path):
         diag, tmp_path, n_seeds=1, scenarios=scenarios, hours=0.05, real_hour=False,
         figures=False, n_bootstrap=0, progress=False,
     )  # fmt: skip
-    want = json.loads((tmp_path / "benchmark.json").read_text())["calibration"]
+    results = json.loads((tmp_path / "benchmark.json").read_text())
+    want = results["calibration"]
     got = tool._summary(collectors["all"], 0)
     assert got["n_seconds"] == want["n_seconds"] > 0
     assert got["ece"] == pytest.approx(want["ece"], abs=1e-12)
@@ -51,3 +52,10 @@ def test_the_pooled_sample_is_the_benchmarks_own(case, tmp_path):
     ):
         assert row["seconds"] == proba.shape[0]
         assert row["accuracy"] == pytest.approx(np.mean(proba.argmax(axis=1) == true))
+    # the confident wrong count is the benchmark's, and its scenarios add up to it
+    cw = tool.confident_wrong_summary(collectors["all"])
+    assert cw["seconds"] == results["confident_wrong"]["seconds"]
+    assert cw["faulty_seconds"] == results["confident_wrong"]["faulty_seconds"] > 0
+    assert sum(cw["scenarios"].values()) == cw["seconds"]
+    by_hand = sum(r["confident_wrong_seconds"] for r in collectors["all"].rows)
+    assert cw["seconds"] == by_hand
