@@ -95,7 +95,10 @@ def main() -> None:
         raise SystemExit("--seeds: use seeds in [1000, 10000), apart from training and evaluation")
     diagnoser = load_online_model(args.model) if args.model else default_model(progress=False)
     name = f"{args.fault} abrupt {args.size}"
-    scenario = next(s for s in SCENARIOS if s.name == name)
+    by_name = {s.name: s for s in SCENARIOS}
+    if name not in by_name:
+        raise SystemExit(f"--fault/--size: no Step-I scenario {name!r}")
+    scenario = by_name[name]
     result: dict[str, Any] = {"scenario": name, "seeds": seeds, "window": args.window}
     for family in shift_families():
         runs = []
