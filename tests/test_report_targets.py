@@ -36,7 +36,7 @@ def _results(wrong: int, ece: float | None, *, shifted: bool) -> dict:
         "fault_free": {"hours": 1.0, "alarms": 0, "alarms_per_8h": 0.0, "r_fd": 0.0},
         "effects": [{"scenario": "f1 abrupt big", "rms": {"X": 5.0, "F": 3.0}, "deflection": 50}],
         "confident_wrong": {"share": wrong / 100_000, "seconds": wrong, "faulty_seconds": 100_000},
-        "calibration": {"ece": ece, "ci_low": 0.01, "ci_high": 0.09},
+        "calibration": {"ece": ece, "ci_low": 0.01, "ci_high": 0.09, "n_bootstrap": 200},
         "timing": {"wall_s": 1.0},
         "settings": settings,
     }
@@ -75,3 +75,12 @@ def test_the_ece_row_shows_the_interval_and_the_verdict(ece, met):
 def test_no_ece_row_without_calibrated_seconds():
     rows = target_rows(_results(0, None, shifted=False))
     assert not any(r[0].startswith("group-level ECE") for r in rows)
+
+
+def test_the_ece_row_without_a_bootstrap_has_no_interval():
+    results = _results(0, 0.04, shifted=False)
+    results["calibration"] = {"ece": 0.04, "ci_low": None, "ci_high": None, "n_bootstrap": 0}
+    assert _row(target_rows(results), "group-level ECE") == ["0.040", "yes"]
+    # an interval read back from JSON as null (a bootstrap that gave none) prints as a dash
+    results["calibration"] = {"ece": 0.04, "ci_low": None, "ci_high": 0.05, "n_bootstrap": 10}
+    assert _row(target_rows(results), "group-level ECE") == ["0.040 [–, 0.050]", "yes"]

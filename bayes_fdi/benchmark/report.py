@@ -234,7 +234,13 @@ def target_rows(results: Mapping[str, Any]) -> list[list[str]]:
     if cal.get("ece") is not None:
         add(
             f"group-level ECE of the per-second probabilities <= {MAX_ECE}",
-            f"{cal['ece']:.3f} [{cal['ci_low']:.3f}, {cal['ci_high']:.3f}]",
+            f"{cal['ece']:.3f}"
+            + (
+                f" [{format_number(cal.get('ci_low'), '.3f')}, "
+                f"{format_number(cal.get('ci_high'), '.3f')}]"
+                if cal.get("n_bootstrap")
+                else ""
+            ),
             cal["ece"] <= MAX_ECE,
         )
     cw = results["confident_wrong"]
