@@ -8,12 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayes_fdi.benchmark.report import (
+from bayes_fdi.benchmark.report import target_rows
+from bayes_fdi.benchmark.report_wrong import (
     MAX_CONFIDENT_WRONG_NOMINAL,
     MAX_CONFIDENT_WRONG_SHIFT,
     MAX_ECE,
     confident_wrong_bound,
-    target_rows,
 )
 from bayes_fdi.scoring.picalc import first_detection, picalc
 

@@ -39,14 +39,13 @@ from bayes_fdi.benchmark.report_detection import (
     permanence_target,
 )
 from bayes_fdi.benchmark.report_summary import GLOSSARY, in_short_section
-from bayes_fdi.benchmark.report_wrong import calibration_lines, published_wrong
+from bayes_fdi.benchmark.report_wrong import calibration_lines, calibration_target_rows
 from bayes_fdi.diagnosis.seva import describe_state
 from bayes_fdi.reporting import format_number, markdown_table, to_jsonable
 from bayes_fdi.scoring.picalc import PICALC_KEYS
 
-__all__ = ["DETECTABLE_DEFLECTION", "MAX_CONFIDENT_WRONG_NOMINAL", "MAX_CONFIDENT_WRONG_SHIFT",
-           "MAX_ECE", "PUBLISHED", "confident_wrong_bound", "render_report", "summarise",
-           "target_rows", "write_report"]  # fmt: skip
+__all__ = ["DETECTABLE_DEFLECTION", "PUBLISHED", "render_report",
+           "summarise", "target_rows", "write_report"]  # fmt: skip
 
 #: Matched-filter separation (in noise standard deviations) below which no method can detect a
 #: fault: an ideal detector that knows the exact noise-free signals with and without the fault
@@ -150,22 +149,6 @@ def _median_r_fd(results: Mapping[str, Any]) -> float:
     return float(np.median([r["indices"]["r_fd"] for r in results["scenarios"]]))
 
 
-#: The group-level ECE target of the per-second probabilities, nominal and under shift.
-MAX_ECE = 0.05
-#: Confident (p > 0.9) wrong groups allowed, as a share of the faulty seconds: nominal inputs.
-MAX_CONFIDENT_WRONG_NOMINAL = 0.001
-#: The same under an excitation shift (a family of `bayes_fdi.benchmark.shift`).
-MAX_CONFIDENT_WRONG_SHIFT = 0.02
-
-
-def confident_wrong_bound(results: Mapping[str, Any]) -> float:
-    """The confident-wrong target of a benchmark's results: `MAX_CONFIDENT_WRONG_SHIFT` for
-    one run under an excitation family (its settings name one), else
-    `MAX_CONFIDENT_WRONG_NOMINAL`."""
-    shifted = (results.get("settings") or {}).get("excitation") is not None
-    return MAX_CONFIDENT_WRONG_SHIFT if shifted else MAX_CONFIDENT_WRONG_NOMINAL
-
-
 def target_rows(results: Mapping[str, Any]) -> list[list[str]]:
     """The targets table: rows (target, measured, met: "yes", "**no**" or "–" not judged);
     detections judged by `ONSET_RULE` (`judged_at_onset`)."""
@@ -230,28 +213,7 @@ def target_rows(results: Mapping[str, Any]) -> list[list[str]]:
         f"{len(r_ti) - len(low)} of {len(r_ti)}" + (f"; below: {', '.join(low)}" if low else ""),
         not low if r_ti else None,
     )
-    cal = results.get("calibration") or {}
-    if cal.get("ece") is not None:
-        add(
-            f"group-level ECE of the per-second probabilities <= {MAX_ECE}",
-            f"{cal['ece']:.3f}"
-            + (
-                f" [{format_number(cal.get('ci_low'), '.3f')}, "
-                f"{format_number(cal.get('ci_high'), '.3f')}]"
-                if cal.get("n_bootstrap")
-                else ""
-            ),
-            cal["ece"] <= MAX_ECE,
-        )
-    cw = results["confident_wrong"]
-    bound = confident_wrong_bound(results)
-    add(
-        f"confident (p > 0.9) wrong group in <= {100 * bound:g} % of the faulty seconds"
-        + (" (under shift)" if bound == MAX_CONFIDENT_WRONG_SHIFT else " (nominal)"),
-        f"{100 * cw['share']:.2f} % ({cw['seconds']} of {cw['faulty_seconds']} s)"
-        + published_wrong(cw),
-        cw["share"] <= bound,
-    )
+    rows += calibration_target_rows(results)
     timing = results["timing"]
     rate = timing.get("run_samples_per_cpu_s")
     if rate:
