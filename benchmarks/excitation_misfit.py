@@ -9,8 +9,9 @@ benchmark's, which draws its families' inputs with the seeds of `sim/shift-*.tom
 - the shift benchmark's chirp generator with its defaults, then with P1 held still, with P1's
   sine at DGen's 0.1 Hz instead of 0.05 Hz, and at pressure drops of 0.3-0.5, 0.5-0.8 and
   0.8-1.2 MPa;
-- the training's sums of sines (the settings of `sim/online-normal-sine-sum.toml`) with P1
-  still, and with P1 oscillating by 0-200 kPa at every drop and at drops of 0.3-0.5 MPa;
+- the training's sums of sines (the settings of `sim/online-normal-sine-sum.toml`, read from
+  the file) with P1 still, and as trained, P1 oscillating by 0-200 kPa, at every drop and at
+  drops of 0.3-0.5 MPa;
 - the DGen sines with run-to-run variation.
 
 Per case, after each run's first ``START_UP`` seconds (`stream_figures`): the median over the
@@ -32,9 +33,17 @@ import numpy as np
 
 START_UP = 120  #: seconds of each run left out (the streams' start-up)
 
-#: The training's sums of sines (sim/online-normal-sine-sum.toml), P1 still.
-SINE_SUM = {"frequencies": (0.002, 0.1), "cv_mean": (0.35, 0.75), "cv_amplitude": (0.05, 0.3)}
-P1_OSCILLATING = (0.0, 200e3)
+#: The training's fault-free sums of sines, whose excitation settings the cases take.
+SINE_SUM_CAMPAIGN = "online-normal-sine-sum"
+
+
+def training_sine_sum() -> dict[str, object]:
+    """The ``[excitation]`` settings of the training's sums of sines (`SINE_SUM_CAMPAIGN`), as
+    `~bayes_fdi.actuator.excitation.sine_sum_inputs` takes them (P1's oscillation included)."""
+    from bayes_fdi.campaigns.cache import campaign_file
+    from bayes_fdi.campaigns.parsing import load_campaign
+
+    return dict(load_campaign(campaign_file(SINE_SUM_CAMPAIGN)).excitation["parameters"])
 
 
 def stream_figures(r_x: np.ndarray, r_f: np.ndarray, dd: np.ndarray) -> dict[str, float]:
@@ -69,8 +78,10 @@ def cases(n: int, duration: int, seed: int) -> dict[str, Callable[[], object]]:
     def chirp(**kw):
         return lambda: chirp_inputs(n, duration, seed=seed, **kw)
 
+    settings = training_sine_sum()
+
     def sines(**kw):
-        return lambda: sine_sum_inputs(n, duration, seed=seed, **SINE_SUM, **kw)
+        return lambda: sine_sum_inputs(n, duration, seed=seed, **{**settings, **kw})
 
     return {
         "chirp": chirp(),
@@ -79,11 +90,9 @@ def cases(n: int, duration: int, seed: int) -> dict[str, Callable[[], object]]:
         "chirp, drop 0.3-0.5 MPa": chirp(operating=drop(0.3, 0.5)),
         "chirp, drop 0.5-0.8 MPa": chirp(operating=drop(0.5, 0.8)),
         "chirp, drop 0.8-1.2 MPa": chirp(operating=drop(0.8, 1.2)),
-        "sums of sines, P1 still": sines(),
-        "sums of sines, P1 0-200 kPa": sines(p1_amplitude=P1_OSCILLATING),
-        "sums of sines, P1 0-200 kPa, drop 0.3-0.5 MPa": sines(
-            p1_amplitude=P1_OSCILLATING, operating=drop(0.3, 0.5)
-        ),
+        "sums of sines, P1 still": sines(p1_amplitude=(0.0, 0.0)),
+        "sums of sines, P1 0-200 kPa": sines(),
+        "sums of sines, P1 0-200 kPa, drop 0.3-0.5 MPa": sines(operating=drop(0.3, 0.5)),
         "DGen sines": lambda: benchmark_inputs(n, duration, seed=seed, vary=True),
     }
 

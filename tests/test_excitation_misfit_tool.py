@@ -36,3 +36,11 @@ def test_each_case_changes_only_the_input_it_names():
         made["sums of sines, P1 still"]["CV"].values,
         made["sums of sines, P1 0-200 kPa"]["CV"].values,
     )
+
+
+def test_the_sums_of_sines_are_the_training_files():
+    """The sums-of-sines cases take the training campaign's own settings; "P1 still" only
+    switches its P1 oscillation off."""
+    settings = tool.training_sine_sum()
+    assert settings["p1_amplitude"] == (0.0, 200e3)  # as sim/online-normal-sine-sum.toml says
+    assert settings["frequencies"] == (0.002, 0.1) and settings["n_sines"] == 3
