@@ -75,16 +75,19 @@ def main() -> None:
     parser.add_argument("--training", default="excitation-mix")
     parser.add_argument("--above", type=float, default=15.0)
     args = parser.parse_args()
-    from bayes_fdi.default_diagnoser import simulate_online_campaigns
+    from bayes_fdi.campaigns.simulation import simulate_campaign
+    from bayes_fdi.default_diagnoser import simulation_plan
     from bayes_fdi.deployment.fitting import default_model, load_online_model
     from bayes_fdi.reporting import write_json
 
     diagnoser = load_online_model(args.model) if args.model else default_model(progress=False)
     oof = np.asarray(diagnoser.normal_models_.oof_z_, dtype=np.float64)
-    data = simulate_online_campaigns(
-        seed=args.seed, small=False, progress=False, training=args.training
-    )
-    runs = [(d.attrs.get("campaign", "?"), d.isel(run=r)) for d in data["normal"]
+    normal = [
+        simulate_campaign(campaign, seed=run_seed, progress=False)
+        for part, campaign, run_seed in simulation_plan(seed=args.seed, training=args.training)
+        if part == "normal"
+    ]  # the fault-free runs only, as the fit simulates them
+    runs = [(d.attrs.get("campaign", "?"), d.isel(run=r)) for d in normal
             for r in range(d.sizes["run"])]  # fmt: skip
     if len(runs) != oof.shape[0] or any(d.sizes["time"] != oof.shape[1] for _, d in runs):
         raise SystemExit(
