@@ -46,27 +46,32 @@ def window_figures(
     faulty: Any, healthy: Any, *, t_from: float, t_hor: float, window: int, noise: dict
 ) -> list[dict[str, float]]:
     """Per window of ``window`` s from ``t_from`` to ``t_hor``: ``start`` (s after ``t_from``),
-    ``separation``, ``rms_faulty`` and ``rms_healthy`` (``{"X": ..., "F": ...}``) and ``dd``,
-    from two streams (one run each) of the same run with and without the fault."""
+    ``separation`` (`~bayes_fdi.benchmark.cases.innovation_effect`'s deflection over the
+    window), ``rms_faulty`` and ``rms_healthy`` (the innovations' RMS, ``{"X": ..., "F": ...}``)
+    and ``dd`` (the share of the window with DD on, NaN read as off), from two streams (one run
+    each) of the same run with and without the fault."""
+    from bayes_fdi.benchmark.cases import innovation_effect
+    from bayes_fdi.scoring.decision_signals import decision_high
+
     t = np.asarray(faulty["time"].values, dtype=np.float64)
-    dd = np.asarray(faulty["DD"].values, dtype=np.float64) > 0.5
+    dd = decision_high(np.asarray(faulty["DD"].values, dtype=np.float64))
+
+    def rms(stream: Any, c: str, keep: np.ndarray) -> float:
+        values = np.nan_to_num(np.asarray(stream[c].values, dtype=np.float64)[keep])
+        return float(np.sqrt(np.mean(values**2)))
+
     rows = []
     for start in np.arange(t_from, t_hor, window):
         keep = (t >= start) & (t < min(start + window, t_hor))
-        sum_sq = 0.0
-        rms_f, rms_h = {}, {}
-        for c in INNOVATIONS:
-            a = np.nan_to_num(np.asarray(faulty[c].values, dtype=np.float64)[keep])
-            b = np.nan_to_num(np.asarray(healthy[c].values, dtype=np.float64)[keep])
-            sum_sq += float(np.sum(((a - b) / noise[c]) ** 2))
-            rms_f[c[-1]] = float(np.sqrt(np.mean(a**2)))
-            rms_h[c[-1]] = float(np.sqrt(np.mean(b**2)))
+        effect = innovation_effect(
+            faulty.isel(time=keep), healthy.isel(time=keep), t_from=float(start), noise=noise
+        )
         rows.append(
             {
                 "start": float(start - t_from),
-                "separation": float(np.sqrt(sum_sq)),
-                "rms_faulty": rms_f,
-                "rms_healthy": rms_h,
+                "separation": effect["deflection"],
+                "rms_faulty": {c[-1]: rms(faulty, c, keep) for c in INNOVATIONS},
+                "rms_healthy": {c[-1]: rms(healthy, c, keep) for c in INNOVATIONS},
                 "dd": float(np.mean(dd[keep])),
             }
         )
