@@ -59,3 +59,28 @@ def test_the_pooled_sample_is_the_benchmarks_own(case, tmp_path):
     assert sum(cw["scenarios"].values()) == cw["seconds"]
     by_hand = sum(r["confident_wrong_seconds"] for r in collectors["all"].rows)
     assert cw["seconds"] == by_hand
+
+
+def test_confident_wrong_seconds_are_summed_per_scenario_by_hand():
+    """The scenarios' counts add the runs of one scenario, most first, scenarios without any
+    left out; the totals are the collector's."""
+    from types import SimpleNamespace
+
+    def row(fault, mode, size, seconds):
+        return {"fault": fault, "mode": mode, "size": size, "confident_wrong_seconds": seconds}
+
+    collector = SimpleNamespace(
+        rows=[
+            row("f4", "incipient", None, 30),
+            row("f13", "abrupt", "small", 40),
+            row("f4", "incipient", None, 25),
+            row("f1", "abrupt", "big", 0),
+        ],
+        confident_wrong=95,
+        faulty_seconds=2000,
+    )
+    cw = tool.confident_wrong_summary(collector)
+    assert cw["scenarios"] == {"f4 incipient": 55, "f13 abrupt small": 40}
+    assert list(cw["scenarios"]) == ["f4 incipient", "f13 abrupt small"]
+    assert (cw["seconds"], cw["faulty_seconds"]) == (95, 2000)
+    assert cw["share"] == pytest.approx(95 / 2000)
