@@ -119,6 +119,50 @@ def test_per_fault_overrides_and_directions():
     assert (spec.onset[f2] == 5).all() and (spec.onset[~f2] == 0).all()
 
 
+def test_stratified_strengths_take_one_magnitude_in_each_slice_of_the_range():
+    """With ``draw = "stratified"`` the n runs of a fault fall one in each of n equal slices of
+    its range (counted here independently of the draw), and the pooled magnitudes over many
+    seeds are uniform on the range (a Kolmogorov-Smirnov test; a stratified draw has exactly the
+    uniform marginal, so only a broken draw is rejected at this level)."""
+    from scipy import stats
+
+    table = _minimal(states=["f1", "f19", "f4"], runs_per_state=5)
+    table["faults"] = {"strength": [0.2, 0.9], "draw": "stratified"}
+    table["faults"]["f4"] = {"strength": [0.4, 0.4]}
+    pooled = []
+    for seed in range(400):
+        spec = parse_campaign(table).run_specs(seed)
+        for fault in ("f1", "f19"):
+            m = np.abs(spec.strength[spec.state == fault])
+            assert m.min() >= 0.2 and m.max() <= 0.9
+            slices = np.floor((m - 0.2) / 0.7 * 5).astype(int)
+            assert sorted(slices) == [0, 1, 2, 3, 4]
+            pooled.append(m)
+        assert (spec.strength[spec.state == "f4"] == 0.4).all()  # one value: that value
+        assert (spec.strength[spec.state == "f19"] < 0).all()  # direction kept
+    p = stats.kstest(np.concatenate(pooled), stats.uniform(0.2, 0.7).cdf).pvalue
+    assert p > 1e-3
+    # the slices are taken in a random order: not always the weakest run first
+    firsts = [parse_campaign(table).run_specs(s).strength[0] for s in range(20)]
+    assert np.ptp(firsts) > 0.35
+
+
+def test_uniform_strengths_are_the_default_and_a_fault_may_override_the_draw():
+    table = _minimal(states=["f1", "f2"], runs_per_state=4)
+    default = parse_campaign(table)
+    assert {s.draw for s in default.faults.values()} == {"uniform"}
+    explicit = _minimal(states=["f1", "f2"], runs_per_state=4)
+    explicit["faults"]["draw"] = "uniform"
+    np.testing.assert_array_equal(
+        parse_campaign(explicit).run_specs().strength, default.run_specs().strength
+    )
+    table["faults"]["f2"] = {"draw": "stratified"}
+    c = parse_campaign(table)
+    assert c.faults["f1"].draw == "uniform" and c.faults["f2"].draw == "stratified"
+    f2 = c.run_specs(11).strength[c.run_specs(11).state == "f2"]
+    assert sorted(np.floor((f2 - 0.5) / 0.5 * 4).astype(int)) == [0, 1, 2, 3]
+
+
 _DROP = object()
 
 
@@ -154,6 +198,8 @@ BAD_CONFIGS = [
     ("faults.strength", "big", "faults.strength must be a magnitude range"),
     ("faults.f1", {"direction": -1}, "faults.f1.direction: f1 only takes positive"),
     ("faults.f3", {"speed": 1}, "faults.f3.speed: unknown key"),
+    ("faults.draw", "latin", "faults.draw must be one of uniform, stratified, got 'latin'"),
+    ("faults.f3", {"draw": 2}, "faults.f3.draw must be one of uniform, stratified"),
     ("faults.onset", 40.0, r"faults.onset must lie in \[0, campaign.duration=40\)"),
     ("faults.profile", "incipient", "faults.ramp must be > 0 s for an incipient"),
     ("faults.f6", {"ramp": 3.0}, "faults.f6.ramp must be 0 for an abrupt"),

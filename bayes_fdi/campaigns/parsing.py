@@ -30,7 +30,9 @@ family = "step-ramp"           # (bayes_fdi.campaigns.excitation; docs/data.md l
 hold_seconds = [20.0, 300.0]
 
 [faults]                       # defaults for every fault (state mode)
-strength = [0.5, 1.0]          # magnitude range, drawn uniformly per run; 0 < low <= high <= 1
+strength = [0.5, 1.0]          # magnitude range, drawn per run; 0 < low <= high <= 1
+draw = "uniform"               # "uniform" (independent draws) | "stratified" (one draw in each
+                               # of runs_per_state equal slices of the range, in random order)
 onset = 0.0                    # s; 0 = the whole run is faulty (the paper's per-run features)
 profile = "abrupt"             # "abrupt" | "incipient"
 ramp = 0.0                     # s; > 0 for incipient, 0 for abrupt
@@ -72,6 +74,7 @@ from bayes_fdi.campaigns.spec import (
     SIGNED_FAULTS,
     SOURCES,
     STATES,
+    STRENGTH_DRAWS,
     WINDOWS,
     Campaign,
     CampaignError,
@@ -91,7 +94,7 @@ _CAMPAIGN_KEYS = {
     "states",
     "batch_size",
 }
-_FAULT_KEYS = {"strength", "onset", "profile", "ramp", "direction"}
+_FAULT_KEYS = {"strength", "draw", "onset", "profile", "ramp", "direction"}
 _SCENARIO_KEYS = {"state", "strength", "onset", "profile", "ramp", "runs", "direction"}
 _INPUT_KEYS = {
     "benchmark-inputs": {"vary"},
@@ -154,6 +157,12 @@ def _strength_range(value: Any, key: str) -> tuple[float, float]:
             "from direction)",
         )
     return low, high
+
+
+def _strength_draw(value: Any, key: str) -> str:
+    if not isinstance(value, str) or value not in STRENGTH_DRAWS:
+        raise _fail(key, f"must be one of {', '.join(STRENGTH_DRAWS)}, got {value!r}")
+    return value
 
 
 def _direction(value: Any, key: str, fault: str) -> int:
@@ -297,7 +306,9 @@ def _excitation(table: Mapping[str, Any], source: str) -> dict[str, Any]:
 def _faults(value: Any, duration: int) -> dict[str, FaultSpec]:
     """The ``[faults]`` table: every fault's defaults merged with its own ``[faults.fN]``."""
     faults_table = _table(value, "faults")
-    defaults = {"strength": [0.5, 1.0], "onset": 0.0, "profile": "abrupt", "ramp": 0.0}
+    defaults = {
+        "strength": [0.5, 1.0], "draw": "uniform", "onset": 0.0, "profile": "abrupt", "ramp": 0.0
+    }  # fmt: skip
     overrides: dict[str, dict] = {}
     for key, item in faults_table.items():
         if key in _FAULT_KEYS - {"direction"}:
@@ -315,6 +326,7 @@ def _faults(value: Any, duration: int) -> dict[str, FaultSpec]:
                 f"{', '.join(sorted(_FAULT_KEYS - {'direction'}))})",
             )
     _strength_range(defaults["strength"], "faults.strength")
+    _strength_draw(defaults["draw"], "faults.draw")
     _timing(defaults, "faults", duration)
     faults: dict[str, FaultSpec] = {}
     for f in FAULTS:
@@ -328,7 +340,9 @@ def _faults(value: Any, duration: int) -> dict[str, FaultSpec]:
         direction = _direction(
             merged.get("direction", FAULT_DIRECTION[f]), f"faults.{f}.direction", f
         )
-        faults[f] = FaultSpec(strength, direction, onset, profile, ramp)
+        draw = _strength_draw(merged["draw"], f"faults.{f}.draw" if "draw" in overrides.get(
+            f, {}) else "faults.draw")  # fmt: skip
+        faults[f] = FaultSpec(strength, direction, onset, profile, ramp, draw)
     return faults
 
 

@@ -24,6 +24,7 @@ __all__ = [
     "SIGNED_FAULTS",
     "SOURCES",
     "STATES",
+    "STRENGTH_DRAWS",
     "WINDOWS",
     "Campaign",
     "CampaignError",
@@ -36,6 +37,9 @@ STATES: tuple[str, ...] = ("fn", *(f"f{i}" for i in range(1, 20)))
 FAULTS: tuple[str, ...] = STATES[1:]
 SOURCES: tuple[str, ...] = ("benchmark-inputs", "lublin-example", "excitation")
 PROFILES: tuple[str, ...] = ("abrupt", "incipient")
+#: How a fault's strengths are drawn over its runs: independently and uniformly in its range, or
+#: one in each of ``runs_per_state`` equal slices of the range (stratified), in a random order.
+STRENGTH_DRAWS: tuple[str, ...] = ("uniform", "stratified")
 WINDOWS: tuple[str, ...] = ("random", "even")
 #: Faults whose strength may be negative in the benchmark (fault vector in [-1, 1]).
 SIGNED_FAULTS: frozenset[str] = frozenset({"f4", "f12", "f13", "f14", "f17", "f19"})
@@ -54,11 +58,12 @@ class CampaignError(ValueError):
 class FaultSpec(NamedTuple):
     """How the strength and timing of one fault are drawn in state mode."""
 
-    strength: tuple[float, float]  #: magnitude range (uniform)
+    strength: tuple[float, float]  #: magnitude range
     direction: int  #: +1 or -1
     onset: float  #: s
     profile: str  #: "abrupt" | "incipient"
     ramp: float  #: s
+    draw: str = "uniform"  #: how the magnitudes are drawn in the range (`STRENGTH_DRAWS`)
 
 
 class Scenario(NamedTuple):
@@ -80,6 +85,25 @@ class RunSpec(NamedTuple):
     onset: np.ndarray
     profile: np.ndarray
     ramp: np.ndarray
+
+
+def draw_magnitudes(spec: FaultSpec, n: int, rng: np.random.Generator) -> np.ndarray:
+    """The magnitudes of ``n`` runs of one fault, drawn in ``spec.strength`` as ``spec.draw`` says.
+
+    ``"uniform"``: independent uniform draws. ``"stratified"``: the range cut into ``n`` equal
+    slices, one uniform draw in each, in a random order (a Latin hypercube in one dimension), so
+    that a few runs cannot all miss the strong (or the weak) end of the range. A range of one
+    value gives that value ``n`` times, whatever the draw.
+    """
+    low, high = spec.strength
+    if high <= low:
+        return np.full(n, low)
+    if spec.draw == "uniform":
+        return rng.uniform(low, high, n)
+    if spec.draw != "stratified":
+        raise ValueError(f"unknown strength draw {spec.draw!r} (one of {STRENGTH_DRAWS})")
+    slices = rng.permutation(n) + rng.uniform(0.0, 1.0, n)
+    return low + (high - low) * slices / n
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,8 +176,7 @@ class Campaign:
                     rows.extend([("fn", 0.0, 0.0, "abrupt", 0.0)] * n)
                     continue
                 spec = self.faults[state]
-                low, high = spec.strength
-                magnitude = rng.uniform(low, high, n) if high > low else np.full(n, low)
+                magnitude = draw_magnitudes(spec, n, rng)
                 for m in magnitude:
                     rows.append(
                         (state, spec.direction * float(m), spec.onset, spec.profile, spec.ramp)
