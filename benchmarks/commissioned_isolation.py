@@ -19,6 +19,9 @@ PICalc code and summary as ``bayes-fdi benchmark --commissioning``):
   transplants is declared undetectable (``commission``'s ``detect_rate``, 0.5 by default as
   in the simulator-trained diagnoser; 0.25 classifies the faults that only their large sizes
   make detectable).
+- ``--strength-draw stratified``: each fault's library strengths drawn one in each slice of the
+  range per profile and sign instead of independently (`transplant_library`'s
+  ``strength_draw``).
 - ``--hours H``: commissioning on H hours of the plant's healthy data instead of one: the
   libraries are transplanted into windows spread over more varied healthy data (set-points and
   demand drift move the valve over a wider range).
@@ -30,8 +33,8 @@ undetectable). ``--json PATH`` writes every scenario's indices.
 
 Run: ``OMP_NUM_THREADS=1 PYTHONPATH=. python benchmarks/commissioned_isolation.py
 [--plants 0,1,2,3,4] [--seeds 2] [--library twin|true] [--hours 1] [--runs-per-fault 12]
-[--commission-seed 0] [--isolation tree|forest] [--temperature-bounds 1,50]
-[--detect-rate 0.5] [--json PATH]``
+[--commission-seed 0] [--isolation tree|forest] [--strength-draw uniform|stratified]
+[--temperature-bounds 1,50] [--detect-rate 0.5] [--json PATH]``
 (about 2.5 CPU min per plant and hour).
 """
 
@@ -82,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plants", default="0,1,2,3,4", help="plant indices, comma-separated")
     parser.add_argument("--seeds", type=int, default=2, help="benchmark seeds per scenario")
     parser.add_argument("--library", choices=("twin", "true"), default="twin")
+    parser.add_argument("--strength-draw", choices=twin_module.STRENGTH_DRAWS, default="uniform")
     parser.add_argument("--hours", type=float, default=1.0, help="healthy hours commissioned on")
     parser.add_argument("--runs-per-fault", type=int, default=12)
     parser.add_argument("--commission-seed", type=int, default=0)
@@ -114,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     detect_rate = DETECT_RATE if args.detect_rate is None else args.detect_rate
     scenarios = [s for s in SCENARIOS if s.mode == "abrupt" and s.size == "big"]
     print(
-        f"isolation: {args.isolation}; library: {args.library}; {args.hours:g} h healthy; "
+        f"isolation: {args.isolation}; library: {args.library}, strengths "
+        f"{args.strength_draw}; {args.hours:g} h healthy; "
         f"{args.runs_per_fault} runs per fault; temperature bounds {bounds}; "
         f"detect rate {detect_rate:g}; "
         f"commissioning seed {args.commission_seed}; "
@@ -126,12 +131,13 @@ def main(argv: list[str] | None = None) -> int:
     all_rows = []
     for index in (int(p) for p in args.plants.split(",")):
         plant = draw_plant(index)
-        if args.library == "true":
+        true = plant.parameters if args.library == "true" else None
 
-            def with_true_parameters(healthy, twin, _parameters=plant.parameters, **kwargs):
-                return transplant(healthy, _parameters, **kwargs)
+        def library(healthy, twin, _true=true, _draw=args.strength_draw, **kwargs):
+            return transplant(healthy, twin if _true is None else _true, strength_draw=_draw,
+                              **kwargs)  # fmt: skip
 
-            twin_module.transplant_library = with_true_parameters
+        twin_module.transplant_library = library
         c0 = time.process_time()
         healthy = healthy_run(plant, round(3600 * args.hours))
         try:

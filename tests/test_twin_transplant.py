@@ -152,3 +152,54 @@ def test_the_library_spreads_seeded_faults_over_the_recording(hour):
     for c in CHANNELS:
         np.testing.assert_array_equal(lib[c].values, again[c].values)
     assert not np.array_equal(lib.onset.values, other.onset.values)
+
+
+def test_the_library_takes_each_profiles_strengths_from_every_slice_of_the_range(hour):
+    """Stratified strengths: the abrupt and the incipient runs of a fault (of each
+    sign, for a signed fault) fall one in each equal slice of the range, counted here from the
+    strengths alone; the uniform draw is the plain ``uniform(low, high)`` of each run's stream,
+    recomputed here; both share every other draw (windows, onsets, ramps)."""
+    faults = ["f1", "f17", "bias_F"]
+    low, high = 0.1, 1.0
+    kw = {"faults": faults, "runs_per_fault": 12, "duration": 120}
+    for seed in (0, 1):
+        lib = transplant_library(hour, NOMINAL, seed=seed, strength_draw="stratified", **kw)
+        uni = transplant_library(hour, NOMINAL, seed=seed, **kw)  # the default
+        for name in ("onset", "ramp", "profile", "state"):
+            np.testing.assert_array_equal(lib[name].values, uni[name].values)
+        np.testing.assert_array_equal(lib.attrs["source_time"], uni.attrs["source_time"])
+        np.testing.assert_array_equal(np.sign(lib.strength.values), np.sign(uni.strength.values))
+        state, profile = lib.state.values.astype(str), lib.profile.values.astype(str)
+        for i, fault in enumerate(faults):
+            for kind in ("abrupt", "incipient"):
+                for sign in (-1.0, 1.0):
+                    cell = (state == fault) & (profile == kind)
+                    if fault != "f1":  # signed faults: a cell per sign
+                        cell &= np.sign(lib.strength.values) == sign
+                    m = np.abs(lib.strength.values[cell])
+                    n = m.size
+                    assert n == (6 if fault == "f1" else 3)
+                    assert sorted(np.floor((m - low) / (high - low) * n).astype(int)) == list(
+                        range(n)
+                    )
+            for k in range(12):  # the uniform draw: each run's own stream, second number
+                rng = np.random.default_rng([seed, i, k])
+                rng.uniform()  # the window's draw
+                expected = rng.uniform(low, high)
+                assert abs(uni.strength.values[12 * i + k]) == expected
+    with pytest.raises(ValueError, match="strength_draw must be one of"):
+        transplant_library(hour, NOMINAL, strength_draw="latin", **kw)
+
+
+def test_strength_slices_give_each_cell_a_permutation_of_its_slices():
+    from bayes_fdi.twin.transplant import strength_slices
+
+    rng = np.random.default_rng(5)
+    for runs, signed in ((12, True), (12, False), (5, False), (1, True), (6, True)):
+        out = strength_slices(runs, signed, rng)
+        cells = {}
+        for k, (j, n) in enumerate(out):
+            cells.setdefault((k % 2, (1, -1, -1, 1)[k % 4] if signed else 1), []).append((j, n))
+        for members in cells.values():
+            assert sorted(j for j, _ in members) == list(range(len(members)))
+            assert {n for _, n in members} == {len(members)}

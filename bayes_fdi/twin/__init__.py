@@ -14,6 +14,7 @@ from bayes_fdi.twin.inference import ParameterIdentification, identification
 from bayes_fdi.twin.priors import DEFAULT_PRIORS, NOISE_PRIOR, NoisePrior, ParameterPrior
 from bayes_fdi.twin.transplant import (
     MEASUREMENT_BIAS_SCALE,
+    STRENGTH_DRAWS,
     MeasurementFault,
     transplant,
     transplant_library,
@@ -24,6 +25,7 @@ __all__ = [
     "DEFAULT_PRIORS",
     "MEASUREMENT_BIAS_SCALE",
     "NOISE_PRIOR",
+    "STRENGTH_DRAWS",
     "ActuatorTwin",
     "MeasurementFault",
     "NoisePrior",

@@ -39,7 +39,9 @@ from bayes_fdi.twin.twin import ActuatorTwin
 
 __all__ = [
     "MEASUREMENT_BIAS_SCALE",
+    "STRENGTH_DRAWS",
     "MeasurementFault",
+    "strength_slices",
     "transplant",
     "transplant_library",
 ]
@@ -57,6 +59,28 @@ SIGNS = {
 #: abrupt runs (even ``k``) and the incipient ones (odd ``k``) each alternate, so that every
 #: profile meets both signs once a fault has four runs or more.
 SIGN_PATTERN = (1.0, -1.0, -1.0, 1.0)
+#: How a library draws each fault's strengths (`transplant_library`'s ``strength_draw``).
+STRENGTH_DRAWS = ("uniform", "stratified")
+
+
+def strength_slices(
+    runs_per_fault: int, signed: bool, rng: np.random.Generator
+) -> list[tuple[int, int]]:
+    """The strength slice of each run of one fault in a library: ``(j, n)`` for run ``k``, its
+    strength drawn uniformly in the ``j``-th of ``n`` equal slices of the strength range.
+
+    The runs of one profile (abrupt for even ``k``, incipient for odd ``k``) and, for a signed
+    fault, of one sign of `SIGN_PATTERN` form a cell; the ``n`` runs of a cell take the ``n``
+    slices in an order ``rng`` draws (one permutation per cell, cells in order of first run).
+    """
+    cells: dict[tuple[int, float], list[int]] = {}
+    for k in range(runs_per_fault):
+        cells.setdefault((k % 2, SIGN_PATTERN[k % 4] if signed else 1.0), []).append(k)
+    out = [(0, 1)] * runs_per_fault
+    for members in cells.values():
+        for k, j in zip(members, rng.permutation(len(members)), strict=True):
+            out[k] = (int(j), len(members))
+    return out
 
 
 class MeasurementFault(NamedTuple):
@@ -200,15 +224,20 @@ def transplant_library(
     integrator: str = "fast",
     hold: str = "linear",
     warmup: int = 30,
+    strength_draw: str = "uniform",
 ) -> xr.Dataset:
     """A library of fault runs transplanted into windows of a healthy recording.
 
     For fault ``i`` of ``faults`` and its run ``k``, the stream ``default_rng([seed, i, k])``
     draws: the window (``duration`` s, gap-free) uniformly inside the ``k``-th of
     ``runs_per_fault`` equal strata of the recording's possible starts, so each fault's onsets
-    spread over the recording; the strength uniformly in ``strength`` (f4 positive, as the
-    benchmark has it); the profile (abrupt for even ``k``, incipient for odd ``k``, with a ramp
-    uniform in ``ramp`` s); the onset uniformly in ``onset`` (fractions of ``duration``,
+    spread over the recording; the strength in ``strength`` (f4 positive, as the benchmark has
+    it): with ``strength_draw="uniform"`` (default) uniformly, with ``"stratified"`` one draw in
+    each of as many equal slices of the range as the fault has runs of that profile (and sign),
+    in an order drawn per fault (`strength_slices`), so that every profile (and sign) meets both
+    ends of the range (measured on the commissioning benchmark's selection plants, it did not
+    name the faults better: see the commissioning page); the profile (abrupt for even ``k``, incipient for odd ``k``,
+    with a ramp uniform in ``ramp`` s); the onset uniformly in ``onset`` (fractions of ``duration``,
     rounded to whole seconds); and the twin's parameters (one posterior draw; a fixed
     `ActuatorParameters` is used as is).
     The signed faults (f12, f13, f14, f17, f19 and the measurement faults) take the sign
@@ -238,16 +267,23 @@ def transplant_library(
     starts = _valid_starts(healthy, int(duration))
     if len(starts) < runs_per_fault:
         raise ValueError(f"the recording has no {duration}-s gap-free windows to transplant into")
+    if strength_draw not in STRENGTH_DRAWS:
+        raise ValueError(f"strength_draw must be one of {STRENGTH_DRAWS}, got {strength_draw!r}")
     draws, records = [], []
     for i, name in enumerate(names):
         signs = SIGNS.get(name, (1.0,))
-        flip = np.random.default_rng([int(seed), i]).choice(signs)
+        fault_rng = np.random.default_rng([int(seed), i])
+        flip = fault_rng.choice(signs)
+        slices = strength_slices(int(runs_per_fault), len(signs) == 2, fault_rng)
         for k in range(int(runs_per_fault)):
             rng = np.random.default_rng([int(seed), i, k])
             stratum = len(starts) / runs_per_fault
             run, start = starts[int(k * stratum + rng.uniform(0.0, stratum))]
             sign = flip * SIGN_PATTERN[k % 4] if len(signs) == 2 else 1.0
-            value = rng.uniform(*strength) * sign
+            u = rng.uniform(0.0, 1.0)
+            if strength_draw == "stratified":
+                u = (slices[k][0] + u) / slices[k][1]
+            value = (strength[0] + (strength[1] - strength[0]) * u) * sign
             t_on = float(round(rng.uniform(*onset) * duration))
             incipient = k % 2 == 1
             t_ramp = float(rng.uniform(*ramp)) if incipient else 0.0
