@@ -8,8 +8,9 @@ The benchmark's group-level ECE pools the detected faulty seconds of every scena
 neither the training (below 1000) nor the benchmark's evaluation (10 000 and up) uses (default
 5000 and 5001), with the benchmark's own collector (`bayes_fdi.benchmark.collection`), and
 reports the top-label ECE, accuracy and mean confidence of the abrupt scenarios' seconds, of the
-incipient scenarios' and of both together, the scenarios whose named group is most often
-wrong, and the faulty seconds answered with a wrong group at p > 0.9 (confident wrong), by
+incipient scenarios' and of both together, the same by the signature's age (seconds since the
+detection: `AGE_EDGES`), the scenarios whose named group is most often wrong, and the faulty
+seconds answered with a wrong group at p > 0.9 (confident wrong), by
 scenario. ``--model``: a model file (default: the default model, fitted and cached on first use).
 Results go to stdout and ``benchmarks/out/calibration_by_fault_kind.json``.
 """
@@ -17,6 +18,7 @@ Results go to stdout and ``benchmarks/out/calibration_by_fault_kind.json``.
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 from pathlib import Path
 
@@ -25,6 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 #: Noise seeds of the selection runs: neither training (< 1000) nor evaluation (>= 10 000).
 SELECTION_SEEDS = (5000, 5001)
+#: Edges (s since the detection) of the age bins of the accuracy and confidence table.
+AGE_EDGES = (0.0, 10.0, 30.0, 100.0, 300.0, 600.0, 1200.0, float("inf"))
 #: Where the results are written.
 OUT = ROOT / "benchmarks" / "out" / "calibration_by_fault_kind.json"
 
@@ -73,6 +77,27 @@ def collect(diagnoser, scenarios, seeds) -> tuple[dict, list[dict]]:
     return collectors, per_run
 
 
+def by_age(collector, edges=AGE_EDGES) -> list[dict]:
+    """Accuracy and mean confidence of ``collector``'s calibration sample per bin of the
+    signature's age (``[low, high)`` s since the detection), bins without seconds left out:
+    where the probabilities are under- (accuracy above confidence) or over-confident."""
+    if not collector.proba:
+        return []
+    proba = np.concatenate(collector.proba)
+    true = np.concatenate(collector.true)
+    age = np.concatenate(collector.age)
+    right = proba.argmax(axis=1) == true
+    top = proba.max(axis=1)
+    rows = []
+    for low, high in itertools.pairwise(edges):
+        m = (age >= low) & (age < high)
+        if m.any():
+            rows.append({"low": low, "high": high, "seconds": int(m.sum()),
+                         "accuracy": float(right[m].mean()),
+                         "mean_confidence": float(top[m].mean())})  # fmt: skip
+    return rows
+
+
 def confident_wrong_summary(collector) -> dict:
     """The faulty seconds answered with a wrong group at p > 0.9 (the benchmark's confident
     wrong count) over every run of ``collector``: ``seconds``, ``faulty_seconds``, ``share``,
@@ -114,6 +139,7 @@ def main() -> None:
         "model": args.model or "default",
         "cpu_seconds": time.process_time() - t0,
         **{k: _summary(c, args.bootstrap) for k, c in collectors.items()},
+        "by_age": {k: by_age(c) for k, c in collectors.items()},
         "confident_wrong": confident_wrong_summary(collectors["all"]),
         "runs": per_run,
     }
@@ -125,6 +151,14 @@ def main() -> None:
             f"| {name} | {s['n_seconds']} | {s['n_runs']} | {s['ece']:.3f} [{s['ci_low']:.3f}, "
             f"{s['ci_high']:.3f}] | {s['accuracy']:.3f} | {s['mean_confidence']:.3f} |"
         )
+    print("\n| scenarios | seconds since the detection | seconds | accuracy | mean confidence |")
+    print("|---|---|---:|---:|---:|")
+    for name in ("abrupt", "incipient", "all"):
+        for b in result["by_age"][name]:
+            print(
+                f"| {name} | {b['low']:g}-{b['high']:g} | {b['seconds']} | {b['accuracy']:.3f} "
+                f"| {b['mean_confidence']:.3f} |"
+            )
     print("\nruns whose seconds are named wrong most often:")
     for row in sorted(per_run, key=lambda r: r["accuracy"])[:12]:
         print(

@@ -59,6 +59,43 @@ def test_the_pooled_sample_is_the_benchmarks_own(case, tmp_path):
     assert sum(cw["scenarios"].values()) == cw["seconds"]
     by_hand = sum(r["confident_wrong_seconds"] for r in collectors["all"].rows)
     assert cw["seconds"] == by_hand
+    # the age bins partition the sample: their seconds add up, their accuracies average to it
+    bins = tool.by_age(collectors["all"])
+    assert sum(b["seconds"] for b in bins) == got["n_seconds"]
+    pooled = sum(b["seconds"] * b["accuracy"] for b in bins) / got["n_seconds"]
+    assert pooled == pytest.approx(got["accuracy"], abs=1e-12)
+    ages = np.concatenate(collectors["all"].age)
+    assert ages.size == got["n_seconds"] and np.isfinite(ages).all() and ages.min() >= 0
+
+
+def test_the_signature_age_counts_from_the_last_rising_edge_by_hand():
+    from bayes_fdi.benchmark.collection import seconds_since_detection
+
+    t = np.arange(10.0, 20.0)
+    dd = np.array([1, 1, 0, 0, 1, 1, 1, 0, 1, 1], dtype=bool)
+    want = [0, 1, np.nan, np.nan, 0, 1, 2, np.nan, 0, 1]
+    np.testing.assert_array_equal(seconds_since_detection(t, dd), want)
+    assert np.isnan(seconds_since_detection(t, np.zeros(10, bool))).all()
+    # irregular time: the age is in seconds, not samples
+    np.testing.assert_array_equal(
+        seconds_since_detection(np.array([0.0, 2.0, 5.0]), np.ones(3, bool)), [0, 2, 5]
+    )
+
+
+def test_the_age_table_by_hand():
+    """Two bins by hand: ages 5 and 8 (one right, one wrong) and 40 (right)."""
+    from types import SimpleNamespace
+
+    proba = np.array([[0.8, 0.2], [0.6, 0.4], [0.3, 0.7]])
+    collector = SimpleNamespace(
+        proba=[proba], true=[np.array([0, 1, 1])], age=[np.array([5.0, 8.0, 40.0])]
+    )
+    bins = tool.by_age(collector, edges=(0.0, 10.0, 30.0, 100.0))
+    assert bins == [
+        {"low": 0.0, "high": 10.0, "seconds": 2, "accuracy": 0.5, "mean_confidence": 0.7},
+        {"low": 30.0, "high": 100.0, "seconds": 1, "accuracy": 1.0, "mean_confidence": 0.7},
+    ]
+    assert tool.by_age(SimpleNamespace(proba=[], true=[], age=[])) == []
 
 
 def test_confident_wrong_seconds_are_summed_per_scenario_by_hand():

@@ -108,6 +108,19 @@ def confident_wrong(one: xr.Dataset, true_group: int | None) -> tuple[np.ndarray
     return answers, wrong
 
 
+def seconds_since_detection(t: np.ndarray, dd: np.ndarray) -> np.ndarray:
+    """Per second, the time since DD last rose (0 at its rising edge; a DD on from the first
+    second counts from there), NaN where DD is off: the age of the isolation signature."""
+    t = np.asarray(t, dtype=np.float64)
+    dd = np.asarray(dd, dtype=bool)
+    rising = dd & ~np.concatenate(([False], dd[:-1]))
+    last = np.maximum.accumulate(np.where(rising, np.arange(t.size), -1))
+    age = np.full(t.size, np.nan)
+    on = dd & (last >= 0)
+    age[on] = t[on] - t[last[on]]
+    return age
+
+
 class RunCollector:
     """Accumulates per-run indices, calibration samples and counts over the batches.
 
@@ -128,7 +141,8 @@ class RunCollector:
     is fitted on out-of-fold training residuals, so it lies well above 1 where the normal models
     do not fit the inputs) and the calibration
     sample (``proba``, ``true``, ``cluster``: at most `CALIBRATION_SECONDS_PER_RUN` detected
-    faulty seconds per run; ``answered``: those whose answer is not "mismatch") with the
+    faulty seconds per run; ``answered``: those whose answer is not "mismatch"; ``age``: their
+    seconds since the detection, `seconds_since_detection`) with the
     stream's group ``labels`` and ``attrs``.
     """
 
@@ -138,6 +152,7 @@ class RunCollector:
         self.true: list[np.ndarray] = []
         self.cluster: list[np.ndarray] = []
         self.answered: list[np.ndarray] = []
+        self.age: list[np.ndarray] = []
         self.labels: list[str] | None = None
         self.attrs: dict[str, Any] = {}
         self.faulty_seconds = 0
@@ -211,6 +226,7 @@ class RunCollector:
                 keep = keep[np.round(pos).astype(np.int64)]
             self.proba.append(proba[keep])
             self.answered.append(state[keep] != MISMATCH)
+            self.age.append(seconds_since_detection(t, sig.dd)[keep])
             self.true.append(np.full(keep.size, sig.true_group))
             self.cluster.append(np.full(keep.size, len(self.rows) - 1))
         return row
