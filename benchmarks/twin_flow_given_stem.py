@@ -15,8 +15,9 @@ residuals at its mode, and prints:
   flow term fitted by `bayes_fdi.twin.model.noise_estimate` to what is left), 400 draws at the
   mode, beside the shipped twin's posterior predictive coverage.
 
-Run: ``OMP_NUM_THREADS=1 PYTHONPATH=. python benchmarks/twin_flow_given_stem.py real 0 1 2 3 4``
-(about 40 CPU s per recording).
+Run: ``OMP_NUM_THREADS=1 PYTHONPATH=. python benchmarks/twin_flow_given_stem.py [--gain=G] real
+0 1 2 3 4`` (about 40 CPU s per recording); ``--gain=1`` fixes ``lam`` at 1 (the valve law
+alone) instead of fitting it.
 """
 
 from __future__ import annotations
@@ -70,12 +71,16 @@ def stem_gain(r, slope, mask):
 
 
 def main(argv: list[str]) -> int:
+    fixed = None
+    if argv and argv[0].startswith("--gain="):
+        fixed = float(argv[0].split("=", 1)[1])
+        argv = argv[1:]
     rng = np.random.default_rng(0)
     for which in argv or ["real"]:
         fit, held = _data(which)
         twin = ActuatorTwin(random_state=0).fit(fit)
         w, r, ratio, slope = _residuals(twin, fit)
-        lam = stem_gain(r, slope, w.mask)
+        lam = stem_gain(r, slope, w.mask) if fixed is None else fixed
         left = r.copy()
         left[..., 1] -= lam * slope * r[..., 0]
         z = noise_estimate(left, w.mask, ratio)
