@@ -236,10 +236,10 @@ def transplant_library(
     each of as many equal slices of the range as the fault has runs of that profile (and sign),
     in an order drawn per fault (`strength_slices`), so that every profile (and sign) meets both
     ends of the range (measured on the commissioning benchmark's selection plants, it did not
-    name the faults better: see the commissioning page); the profile (abrupt for even ``k``, incipient for odd ``k``,
-    with a ramp uniform in ``ramp`` s); the onset uniformly in ``onset`` (fractions of ``duration``,
-    rounded to whole seconds); and the twin's parameters (one posterior draw; a fixed
-    `ActuatorParameters` is used as is).
+    name the faults better: see the commissioning page); the profile (abrupt for even ``k``,
+    incipient for odd ``k``, with a ramp uniform in ``ramp`` s); the onset uniformly in
+    ``onset`` (fractions of ``duration``, rounded to whole seconds); and the twin's parameters
+    (one posterior draw; a fixed `ActuatorParameters` is used as is).
     The signed faults (f12, f13, f14, f17, f19 and the measurement faults) take the sign
     ``SIGN_PATTERN[k % 4]`` times one drawn per fault by ``default_rng([seed, i])``: every
     profile meets both signs once a fault has four runs (with a random sign per run, all the
