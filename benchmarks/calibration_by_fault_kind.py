@@ -1,7 +1,7 @@
 """The group probabilities' calibration of a diagnoser, abrupt and incipient faults apart.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/calibration_by_fault_kind.py [--model FILE] \
-        [--seeds 5000,5001]
+        [--seeds 5000,5001] [--excitation dgen|chirp|flow-loop|telegraph] [--fault-free-hours 8]
 
 The benchmark's group-level ECE pools the detected faulty seconds of every scenario (at most
 600 a run). This script scores the same sample on the 44 Step-I scenarios with noise seeds that
@@ -11,8 +11,16 @@ reports the top-label ECE, accuracy and mean confidence of the abrupt scenarios'
 incipient scenarios' and of both together, the same by the signature's age (seconds since the
 detection: `AGE_EDGES`), the scenarios whose named group is most often wrong, and the faulty
 seconds answered with a wrong group at p > 0.9 (confident wrong), by
-scenario. ``--model``: a model file (default: the default model, fitted and cached on first use).
-Results go to stdout and ``benchmarks/out/calibration_by_fault_kind.json``.
+scenario. Beside them, the detection on the same runs: the big abrupt scenarios detected in
+every seed, the runs whose DD stays on from its first rising edge, the first detection's median
+per scenario, the fault-free parts' median r_fd; and ``--fault-free-hours H`` (0: none)
+fault-free hours simulated with the seed after the last of ``--seeds``, with the alarms (rising
+edges of DD) in them. ``--excitation`` runs all of it under a shift family of
+``sim/shift-*.toml`` (its inputs drawn with the first seed, the noise of each scenario with the
+first seed plus its position, as `benchmarks/excitation_temperature.py` does) instead of DGen's
+sines. ``--model``: a model file (default: the default model, fitted and cached on first use).
+Results go to stdout and ``benchmarks/out/calibration_by_fault_kind.json``
+(``calibration_by_fault_kind-FAMILY.json`` under a shift family).
 """
 
 from __future__ import annotations
@@ -33,6 +41,16 @@ AGE_EDGES = (0.0, 10.0, 30.0, 100.0, 300.0, 600.0, 1200.0, float("inf"))
 OUT = ROOT / "benchmarks" / "out" / "calibration_by_fault_kind.json"
 
 
+def _script(name: str):
+    """The sibling script ``benchmarks/NAME.py`` as a module."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def _summary(col, n_bootstrap: int) -> dict:
     from bayes_fdi.benchmark.collection import group_calibration
 
@@ -41,19 +59,22 @@ def _summary(col, n_bootstrap: int) -> dict:
     return {k: cal[k] for k in keys if k in cal}
 
 
-def collect(diagnoser, scenarios, seeds) -> tuple[dict, list[dict]]:
+def collect(diagnoser, scenarios, seeds, simulate_runs=None) -> tuple[dict, list[dict]]:
     """Stream every scenario with every seed through ``diagnoser`` and collect the benchmark's
     calibration sample three ways: ``{"abrupt": ..., "incipient": ..., "all": ...}``
     (`~bayes_fdi.benchmark.collection.RunCollector`), and one row per run that gave calibration
     seconds (its scenario, seed, true group, the group it names most often, accuracy and mean
-    confidence of its seconds)."""
+    confidence of its seconds). ``simulate_runs(scenario, seeds)``: the runs of a scenario
+    (default: `~bayes_fdi.benchmark.scenarios.simulate_scenario` under DGen's inputs)."""
     from bayes_fdi.benchmark.collection import RunCollector
     from bayes_fdi.benchmark.scenarios import simulate_scenario, strip_truth
+
+    simulate_runs = simulate_runs or simulate_scenario
 
     collectors = {k: RunCollector(seed=0) for k in ("abrupt", "incipient", "all")}
     per_run = []
     for scenario in scenarios:
-        stream = diagnoser.run(strip_truth(simulate_scenario(scenario, seeds)))
+        stream = diagnoser.run(strip_truth(simulate_runs(scenario, seeds)))
         kind = collectors["abrupt" if scenario.mode == "abrupt" else "incipient"]
         for i, seed in enumerate(seeds):
             one = stream.isel(run=i)
@@ -98,6 +119,49 @@ def by_age(collector, edges=AGE_EDGES) -> list[dict]:
     return rows
 
 
+def detection_summary(collector) -> dict:
+    """The detection on ``collector``'s runs: ``big_abrupt`` (scenario name -> seeds, seeds
+    with a first detection, seeds whose DD stayed on from it, median first-detection time in s
+    or None), ``detected_every_seed`` and ``kept`` / ``detected_runs`` over those scenarios,
+    ``median_r_fd`` and ``runs_r_fd_above`` (0.01) over every run."""
+    from bayes_fdi.benchmark.report_detection import scenario_name
+
+    big: dict[str, dict] = {}
+    for row in collector.rows:
+        if row["mode"] != "abrupt" or row["size"] != "big":
+            continue
+        first = row["first_detection"]
+        e = big.setdefault(scenario_name(row), {"seeds": 0, "detected": 0, "kept": 0, "t": []})
+        e["seeds"] += 1
+        if first["t_dt_first"] >= 0:
+            e["detected"] += 1
+            e["kept"] += int(bool(first["dd_permanent"]))
+            e["t"].append(first["t_dt_first"])
+    for e in big.values():
+        e["t_dt_first_median"] = float(np.median(e.pop("t"))) if e["detected"] else None
+    r_fd = [row["indices"]["r_fd"] for row in collector.rows]
+    return {
+        "big_abrupt": big,
+        "detected_every_seed": sum(e["detected"] == e["seeds"] for e in big.values()),
+        "detected_runs": sum(e["detected"] for e in big.values()),
+        "kept": sum(e["kept"] for e in big.values()),
+        "median_r_fd": float(np.median(r_fd)) if r_fd else float("nan"),
+        "runs_r_fd_above": sum(r > 0.01 for r in r_fd),
+    }
+
+
+def fault_free_alarms(diagnoser, runs, warmup: float) -> dict:
+    """Alarms (rising edges of DD after ``warmup`` s) and the share of seconds with DD on, in the
+    fault-free ``runs`` (one run)."""
+    from bayes_fdi.datasets import CHANNELS
+
+    stream = diagnoser.run(runs[list(CHANNELS)]).isel(run=0)
+    dd = np.asarray(stream["DD"].values, dtype=bool)
+    after = np.asarray(stream["time"].values, dtype=np.float64) >= warmup
+    rising = dd & ~np.concatenate(([False], dd[:-1]))
+    return {"alarms": int(np.sum(rising & after)), "dd_on": float(np.mean(dd[after]))}
+
+
 def confident_wrong_summary(collector) -> dict:
     """The faulty seconds answered with a wrong group at p > 0.9 (the benchmark's confident
     wrong count) over every run of ``collector``: ``seconds``, ``faulty_seconds``, ``share``,
@@ -123,17 +187,44 @@ def main() -> None:
     parser.add_argument("--model", default=None, help="a model file (default: the default model)")
     parser.add_argument("--seeds", default=",".join(str(s) for s in SELECTION_SEEDS))
     parser.add_argument("--bootstrap", type=int, default=200)
+    parser.add_argument("--excitation", default="dgen", help="dgen, or a shift family's name")
+    parser.add_argument("--fault-free-hours", type=float, default=0.0)
     args = parser.parse_args()
-    from bayes_fdi.benchmark.scenarios import SCENARIOS
+    from bayes_fdi.actuator import simulate
+    from bayes_fdi.benchmark.scenarios import SCENARIOS, T_ON, fault_free_hours
+    from bayes_fdi.benchmark.shift import shift_families
+    from bayes_fdi.campaigns.excitation import excitation_inputs
     from bayes_fdi.deployment.fitting import default_model, load_online_model
     from bayes_fdi.reporting import write_json
 
     seeds = [int(s) for s in args.seeds.split(",")]
     if min(seeds) < 1000 or max(seeds) >= 10_000:
         raise SystemExit("--seeds: use seeds in [1000, 10000), apart from training and evaluation")
+    families = {f.name: f for f in shift_families()}
+    if args.excitation != "dgen" and args.excitation not in families:
+        raise SystemExit(f"--excitation: dgen or one of {', '.join(families)}")
     diagnoser = load_online_model(args.model) if args.model else default_model(progress=True)
     t0 = time.process_time()
-    collectors, per_run = collect(diagnoser, SCENARIOS, seeds)
+    simulate_runs, free = None, None
+    free_seed, hours = max(seeds) + 1, args.fault_free_hours
+    if args.excitation != "dgen":
+        shift_runs = _script("excitation_temperature").shift_runs
+        family = families[args.excitation]
+        longest = max(round(s.t_hor) for s in SCENARIOS)
+        drawn = excitation_inputs(family.excitation, len(seeds), longest, seed=seeds[0])
+        drawn = drawn[["CV", "P1", "P2", "T1"]]
+
+        def simulate_runs(scenario, run_seeds):
+            return shift_runs(family, scenario, run_seeds, drawn)
+
+        if hours > 0:
+            inputs = excitation_inputs(
+                family.excitation, 1, round(T_ON + 3600 * hours), seed=free_seed
+            )
+            free = simulate(inputs[["CV", "P1", "P2", "T1"]], None, seed=free_seed)
+    elif hours > 0:
+        free = fault_free_hours(hours, seed=free_seed)
+    collectors, per_run = collect(diagnoser, SCENARIOS, seeds, simulate_runs)
     result = {
         "seeds": seeds,
         "model": args.model or "default",
@@ -141,8 +232,14 @@ def main() -> None:
         **{k: _summary(c, args.bootstrap) for k, c in collectors.items()},
         "by_age": {k: by_age(c) for k, c in collectors.items()},
         "confident_wrong": confident_wrong_summary(collectors["all"]),
+        "detection": detection_summary(collectors["all"]),
+        "excitation": args.excitation,
         "runs": per_run,
     }
+    if free is not None:
+        result["fault_free"] = {
+            "hours": hours, "seed": free_seed, **fault_free_alarms(diagnoser, free, T_ON)
+        }  # fmt: skip
     print("| scenarios | seconds | runs | ECE [95 % interval] | accuracy | mean confidence |")
     print("|---|---:|---:|---|---:|---:|")
     for name in ("abrupt", "incipient", "all"):
@@ -172,9 +269,29 @@ def main() -> None:
     )
     for name, seconds in cw["scenarios"].items():
         print(f"  {name}: {seconds} s")
+    det = result["detection"]
+    print(
+        f"\ndetection: big abrupt scenarios detected in every seed {det['detected_every_seed']} "
+        f"of {len(det['big_abrupt'])}; DD kept on from the first detection in {det['kept']} of "
+        f"{det['detected_runs']} detected runs; median r_fd {det['median_r_fd']:.3f} "
+        f"({det['runs_r_fd_above']} runs above 0.01)"
+    )
+    medians = {name: e["t_dt_first_median"] for name, e in det["big_abrupt"].items()}
+    print(
+        "  first detection, median s: "
+        + "; ".join(f"{name} {'-' if t is None else f'{t:g}'}" for name, t in medians.items())
+    )
+    if "fault_free" in result:
+        ff = result["fault_free"]
+        print(
+            f"{ff['hours']:g} fault-free hours (seed {ff['seed']}): {ff['alarms']} alarms, "
+            f"DD on {100 * ff['dd_on']:.2f} %"
+        )
+    result["cpu_seconds"] = time.process_time() - t0
     print(f"\n{result['cpu_seconds']:.0f} CPU s")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    write_json(result, OUT)
+    out = OUT if args.excitation == "dgen" else OUT.with_name(f"{OUT.stem}-{args.excitation}.json")
+    write_json(result, out)
 
 
 if __name__ == "__main__":

@@ -121,3 +121,43 @@ def test_confident_wrong_seconds_are_summed_per_scenario_by_hand():
     assert list(cw["scenarios"]) == ["f4 incipient", "f13 abrupt small"]
     assert (cw["seconds"], cw["faulty_seconds"]) == (95, 2000)
     assert cw["share"] == pytest.approx(95 / 2000)
+
+
+def test_the_detection_summary_by_hand():
+    """Big abrupt scenarios detected in every seed, kept on, first-detection medians; r_fd over
+    every run."""
+    from types import SimpleNamespace
+
+    def row(fault, mode, size, first, kept, r_fd):
+        return {"fault": fault, "mode": mode, "size": size, "indices": {"r_fd": r_fd},
+                "first_detection": {"t_dt_first": first, "dd_permanent": kept}}  # fmt: skip
+
+    collector = SimpleNamespace(
+        rows=[
+            row("f1", "abrupt", "big", 1.0, True, 0.0),
+            row("f1", "abrupt", "big", 3.0, False, 0.0),
+            row("f12", "abrupt", "big", -1.0, False, 0.02),
+            row("f12", "abrupt", "big", 40.0, True, 0.0),
+            row("f4", "incipient", None, 900.0, True, 0.5),
+        ]
+    )
+    det = tool.detection_summary(collector)
+    assert det["big_abrupt"]["f1 abrupt big"] == {
+        "seeds": 2, "detected": 2, "kept": 1, "t_dt_first_median": 2.0
+    }  # fmt: skip
+    assert det["big_abrupt"]["f12 abrupt big"]["t_dt_first_median"] == 40.0
+    assert (det["detected_every_seed"], det["detected_runs"], det["kept"]) == (1, 3, 2)
+    assert det["median_r_fd"] == 0.0 and det["runs_r_fd_above"] == 2
+
+
+def test_fault_free_alarms_are_the_rising_edges_of_the_streams_dd():
+    """Counted on a faulty run, so that there are edges to count."""
+    diag = small_calibrated_diagnoser(small_runs())
+    runs = small_runs().faults.isel(run=[0])
+    stream = diag.run(runs).isel(run=0)
+    dd = stream["DD"].values.astype(bool)
+    t = stream["time"].values
+    got = tool.fault_free_alarms(diag, runs, warmup=10.0)
+    edges = [i for i in range(len(dd)) if dd[i] and (i == 0 or not dd[i - 1]) and t[i] >= 10.0]
+    assert got["alarms"] == len(edges) >= 1
+    assert got["dd_on"] == pytest.approx(dd[t >= 10.0].mean())
