@@ -16,11 +16,11 @@ every seed, the runs whose DD stays on from its first rising edge, the first det
 per scenario, the fault-free parts' median r_fd; and ``--fault-free-hours H`` (0: none)
 fault-free hours simulated with the seed after the last of ``--seeds``, with the alarms (rising
 edges of DD) in them. ``--excitation`` runs all of it under a shift family of
-``sim/shift-*.toml`` (its inputs drawn with the first seed, the noise of each scenario with the
-first seed plus its position, as `benchmarks/excitation_temperature.py` does) instead of DGen's
-sines. ``--model``: a model file (default: the default model, fitted and cached on first use).
-Results go to stdout and ``benchmarks/out/calibration_by_fault_kind.json``
-(``calibration_by_fault_kind-FAMILY.json`` under a shift family).
+``sim/shift-*.toml`` (`selection_inputs`: its inputs drawn with the first seed, the noise of
+each scenario with the first seed plus its position) instead of DGen's sines. ``--model``: a
+model file (default: the default model, fitted and cached on first use). Results go to stdout
+and ``benchmarks/out/calibration_by_fault_kind.json`` (``calibration_by_fault_kind-FAMILY.json``
+under a shift family).
 """
 
 from __future__ import annotations
@@ -41,14 +41,16 @@ AGE_EDGES = (0.0, 10.0, 30.0, 100.0, 300.0, 600.0, 1200.0, float("inf"))
 OUT = ROOT / "benchmarks" / "out" / "calibration_by_fault_kind.json"
 
 
-def _script(name: str):
-    """The sibling script ``benchmarks/NAME.py`` as a module."""
-    import importlib.util
+def selection_inputs(family, seeds, duration: int):
+    """The shift ``family``'s `~bayes_fdi.benchmark.shift.ShiftInputs` for selection
+    ``seeds``: inputs drawn with the first seed, each scenario's noise with the first seed plus
+    its position (the shift benchmark draws the same way with seeds of its own)."""
+    from bayes_fdi.benchmark.shift import ShiftInputs
 
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    first = int(seeds[0])
+    return ShiftInputs(
+        family, seeds, duration, first_seed=first, input_seed=first, noise_seed=first
+    )
 
 
 def _summary(col, n_bootstrap: int) -> dict:
@@ -190,10 +192,8 @@ def main() -> None:
     parser.add_argument("--excitation", default="dgen", help="dgen, or a shift family's name")
     parser.add_argument("--fault-free-hours", type=float, default=0.0)
     args = parser.parse_args()
-    from bayes_fdi.actuator import simulate
     from bayes_fdi.benchmark.scenarios import SCENARIOS, T_ON, fault_free_hours
     from bayes_fdi.benchmark.shift import shift_families
-    from bayes_fdi.campaigns.excitation import excitation_inputs
     from bayes_fdi.deployment.fitting import default_model, load_online_model
     from bayes_fdi.reporting import write_json
 
@@ -208,20 +208,11 @@ def main() -> None:
     simulate_runs, free = None, None
     free_seed, hours = max(seeds) + 1, args.fault_free_hours
     if args.excitation != "dgen":
-        shift_runs = _script("excitation_temperature").shift_runs
-        family = families[args.excitation]
         longest = max(round(s.t_hor) for s in SCENARIOS)
-        drawn = excitation_inputs(family.excitation, len(seeds), longest, seed=seeds[0])
-        drawn = drawn[["CV", "P1", "P2", "T1"]]
-
-        def simulate_runs(scenario, run_seeds):
-            return shift_runs(family, scenario, run_seeds, drawn)
-
+        shifted = selection_inputs(families[args.excitation], seeds, longest)
+        simulate_runs = shifted.simulate
         if hours > 0:
-            inputs = excitation_inputs(
-                family.excitation, 1, round(T_ON + 3600 * hours), seed=free_seed
-            )
-            free = simulate(inputs[["CV", "P1", "P2", "T1"]], None, seed=free_seed)
+            free = shifted.fault_free(hours, warmup=T_ON, seed=free_seed)
     elif hours > 0:
         free = fault_free_hours(hours, seed=free_seed)
     collectors, per_run = collect(diagnoser, SCENARIOS, seeds, simulate_runs)

@@ -27,31 +27,21 @@ confidence per excitation; results to stdout and ``benchmarks/out/excitation_tem
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import calibration_families as families  # sibling scripts
+from calibration_by_fault_kind import SELECTION_SEEDS, selection_inputs
+
 ROOT = Path(__file__).resolve().parents[1]
-#: Noise seeds (and shift input draws) of the selection runs.
-SELECTION_SEEDS = (5000, 5001)
 #: Floor of each standard deviation before its logarithm (a constant input).
 COVARIATE_FLOOR = 1e-5
 #: Floor of a probability before its logarithm.
 PROBABILITY_FLOOR = 1e-12
-
-
-def _families_module():
-    spec = importlib.util.spec_from_file_location(
-        "calibration_families", ROOT / "benchmarks" / "calibration_families.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-families = _families_module()
 
 
 def design(cov: np.ndarray) -> np.ndarray:
@@ -69,28 +59,23 @@ def input_covariates(runs, i: int, window: int) -> np.ndarray:
 
 
 def benchmark_sample(calibrated, raw, runs, scenario, window: int) -> list[tuple]:
-    """Per run of ``runs`` (one scenario), the benchmark's calibration seconds: the model's
+    """Per run of ``runs`` (one scenario; ``run`` = the seed), the benchmark's calibration
+    seconds as `~bayes_fdi.benchmark.collection.RunCollector` keeps them: the model's
     probabilities (stream ``calibrated``), the classifier's own (stream ``raw``), the input
     covariates and the true group index, as ``(proba, raw_proba, cov, true)``."""
-    from bayes_fdi.benchmark.collection import CALIBRATION_SECONDS_PER_RUN
-    from bayes_fdi.scoring.decision_signals import decision_signals
+    from bayes_fdi.benchmark.collection import RunCollector
 
+    collector = RunCollector(seed=0)
     out = []
-    t = np.asarray(calibrated["time"].values, dtype=np.float64)
-    for i in range(calibrated.sizes["run"]):
-        one = calibrated.isel(run=i)
-        sig = decision_signals(one, scenario.fault)
-        if sig.true_group is None:
+    for i, seed in enumerate(runs["run"].values):
+        kept = len(collector.index)
+        collector.add(scenario, int(seed), calibrated.isel(run=i))
+        if len(collector.index) == kept:  # no calibration second in this run
             continue
-        proba = one["group_proba"].transpose("time", "group").values
-        own = raw.isel(run=i)["group_proba"].transpose("time", "group").values
-        faulty = (t >= scenario.t_from) & (t < scenario.t_hor)
-        keep = np.flatnonzero(faulty & sig.dd & np.isfinite(proba).all(axis=1))
-        if keep.size > CALIBRATION_SECONDS_PER_RUN:
-            pos = np.linspace(0, keep.size - 1, CALIBRATION_SECONDS_PER_RUN)
-            keep = keep[np.round(pos).astype(np.int64)]
-        cov = input_covariates(runs, i, window)
-        out.append((proba[keep], own[keep], cov[keep], np.full(keep.size, sig.true_group)))
+        keep = collector.index[-1]
+        own = raw.isel(run=i)["group_proba"].transpose("time", "group").values[keep]
+        cov = input_covariates(runs, i, window)[keep]
+        out.append((collector.proba[-1], own, cov, collector.true[-1]))
     return out
 
 
@@ -111,18 +96,6 @@ def score_sample(rows, classes, single, weights) -> dict:
     }
 
 
-def shift_runs(family, scenario, seeds, drawn):
-    """``scenario`` simulated under the shift ``family``'s inputs ``drawn`` (one run per seed),
-    with noise seed ``seed + the scenario's position``, as the shift benchmark does with its
-    own seeds."""
-    from bayes_fdi.actuator import simulate
-    from bayes_fdi.benchmark.scenarios import SCENARIOS
-
-    position = [s.name for s in SCENARIOS].index(scenario.name)
-    drive = drawn.isel(time=slice(0, round(scenario.t_hor)))
-    return simulate(drive, [scenario.fault_spec()] * len(seeds), seed=seeds[0] + position)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", default=None, help="a model file (default: the default model)")
@@ -132,8 +105,6 @@ def main() -> None:
     from bayes_fdi.benchmark.scenarios import SCENARIOS, simulate_scenario, strip_truth
     from bayes_fdi.benchmark.shift import shift_families
     from bayes_fdi.calibration import TemperatureScaler
-    from bayes_fdi.campaigns.excitation import excitation_inputs
-    from bayes_fdi.datasets import CHANNELS
     from bayes_fdi.default_diagnoser import simulate_online_campaigns
     from bayes_fdi.deployment.fitting import default_model, load_online_model
     from bayes_fdi.reporting import write_json
@@ -166,18 +137,14 @@ def main() -> None:
     inputs = {"DGen (nominal)": None, **{f.name: f for f in shift_families()}}
     longest = max(round(s.t_hor) for s in SCENARIOS)
     for name, family in inputs.items():
-        drawn = None
-        if family is not None:
-            drawn = excitation_inputs(family.excitation, len(seeds), longest, seed=seeds[0])
-            drawn = drawn[["CV", "P1", "P2", "T1"]]
+        shifted = None if family is None else selection_inputs(family, seeds, longest)
         rows = []
         for scenario in SCENARIOS:
-            if family is None:
+            if shifted is None:
                 runs = simulate_scenario(scenario, seeds)
-                x = strip_truth(runs)
             else:
-                runs = shift_runs(family, scenario, seeds, drawn)
-                x = runs[list(CHANNELS)]
+                runs = shifted.simulate(scenario, seeds)
+            x = strip_truth(runs)
             rows += benchmark_sample(model.run(x), raw.run(x), runs, scenario, args.window)
         result["excitations"][name] = score_sample(rows, classes, single, weights)
     result["cpu_seconds"] = time.process_time() - t0

@@ -15,9 +15,10 @@ tool = load_benchmark("excitation_temperature")
 
 
 def test_the_sample_is_the_benchmarks_and_the_model_calibrates_the_classifiers_own():
-    """The seconds the tool scores are those `RunCollector` keeps for the benchmark's ECE, and
-    the model's probabilities are its temperature applied to the classifier's own (the stream
-    with the calibrator set aside): softmax(log p / T)."""
+    """The seconds the tool scores are those `RunCollector` keeps for the benchmark's ECE (a
+    collector of its own over the same stream agrees), and the classifier's own probabilities
+    of those seconds (the stream with the calibrator set aside) are the ones the model's
+    temperature turned into its probabilities: softmax(log p / T), second by second."""
     runs_fit = small_runs()
     model = small_calibrated_diagnoser(runs_fit)
     raw = small_calibrated_diagnoser(runs_fit)

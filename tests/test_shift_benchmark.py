@@ -78,6 +78,27 @@ def test_a_seeds_scenarios_share_its_family_inputs_and_differ_in_their_noise(chi
         ShiftInputs(chirp, [10_000], 1500).simulate(BY_NAME["f13 incipient"], [10_000])
 
 
+def test_a_study_draws_the_same_way_with_seeds_of_its_own(chirp):
+    """Seed ``first_seed + k`` reads run k of the draw with ``input_seed``; a scenario's noise
+    is ``noise_seed`` plus its position in the table; fault-free hours take their own seed:
+    each checked against the generator and the simulator called directly."""
+    study = ShiftInputs(chirp, [5000, 5002], 1500, first_seed=5000, input_seed=77, noise_seed=5000)
+    drawn = excitation_inputs(chirp.excitation, 3, 1500, seed=77)
+    np.testing.assert_array_equal(study.inputs["CV"].values, drawn["CV"].values[[0, 2]])
+    scenario = BY_NAME["f1 abrupt big"]
+    position = [s.name for s in SCENARIOS].index(scenario.name)
+    runs = study.simulate(scenario, [5002])
+    direct = simulate(study.inputs.sel(run=[5002]), [scenario.fault_spec()], seed=5000 + position)
+    np.testing.assert_array_equal(runs["X"].values, direct["X"].values)
+    assert list(runs["run"].values) == [5002]
+    free = study.fault_free(0.05, seed=5003)
+    alone = excitation_inputs(chirp.excitation, 1, 300 + 180, seed=5003)
+    np.testing.assert_array_equal(free["CV"].values, alone["CV"].values)
+    assert list(free["run"].values) == [5003]
+    with pytest.raises(ValueError, match="seeds must be >= 5000"):
+        ShiftInputs(chirp, [4999], 100, first_seed=5000)
+
+
 def test_fault_free_hours_under_a_family(chirp):
     ds = ShiftInputs(chirp, [10_000], 100).fault_free(0.1)
     assert ds.sizes["time"] == 300 + 360 and list(ds["run"].values) == [20_000]

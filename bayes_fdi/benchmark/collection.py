@@ -141,8 +141,9 @@ class RunCollector:
     is fitted on out-of-fold training residuals, so it lies well above 1 where the normal models
     do not fit the inputs) and the calibration
     sample (``proba``, ``true``, ``cluster``: at most `CALIBRATION_SECONDS_PER_RUN` detected
-    faulty seconds per run; ``answered``: those whose answer is not "mismatch"; ``age``: their
-    seconds since the detection, `seconds_since_detection`) with the
+    faulty seconds per run; ``index``: their positions in the run; ``answered``: those whose
+    answer is not "mismatch"; ``age``: their seconds since the detection,
+    `seconds_since_detection`) with the
     stream's group ``labels`` and ``attrs``.
     """
 
@@ -153,6 +154,7 @@ class RunCollector:
         self.cluster: list[np.ndarray] = []
         self.answered: list[np.ndarray] = []
         self.age: list[np.ndarray] = []
+        self.index: list[np.ndarray] = []
         self.labels: list[str] | None = None
         self.attrs: dict[str, Any] = {}
         self.faulty_seconds = 0
@@ -227,6 +229,7 @@ class RunCollector:
             self.proba.append(proba[keep])
             self.answered.append(state[keep] != MISMATCH)
             self.age.append(seconds_since_detection(t, sig.dd)[keep])
+            self.index.append(keep)
             self.true.append(np.full(keep.size, sig.true_group))
             self.cluster.append(np.full(keep.size, len(self.rows) - 1))
         return row

@@ -116,19 +116,34 @@ class ShiftInputs:
     family
         The shift family.
     seeds
-        The benchmark seeds (``>= BENCHMARK_SEED``).
+        The benchmark seeds (``>= first_seed``).
     duration
         Seconds drawn: the longest horizon the runs need.
+    first_seed, input_seed, noise_seed
+        Seed ``first_seed + k`` reads run ``k`` of the family's draw with ``input_seed``, and
+        a scenario's noise seed is ``noise_seed`` plus its position in the table. The defaults
+        are the shift benchmark's (`BENCHMARK_SEED`, `SHIFT_INPUT_SEED`, `SHIFT_NOISE_SEED`);
+        a study that must stay apart from its evaluation draws with seeds of its own.
     """
 
-    def __init__(self, family: ShiftFamily, seeds: Sequence[int], duration: int) -> None:
+    def __init__(
+        self,
+        family: ShiftFamily,
+        seeds: Sequence[int],
+        duration: int,
+        *,
+        first_seed: int = BENCHMARK_SEED,
+        input_seed: int = SHIFT_INPUT_SEED,
+        noise_seed: int = SHIFT_NOISE_SEED,
+    ) -> None:
         seeds = [int(s) for s in seeds]
-        if not seeds or min(seeds) < BENCHMARK_SEED:
-            raise ValueError(f"ShiftInputs: seeds must be >= {BENCHMARK_SEED}, got {seeds}")
+        if not seeds or min(seeds) < first_seed:
+            raise ValueError(f"ShiftInputs: seeds must be >= {first_seed}, got {seeds}")
         self.family = family
-        runs = max(seeds) - BENCHMARK_SEED + 1
-        drawn = excitation_inputs(family.excitation, runs, int(duration), seed=SHIFT_INPUT_SEED)
-        drawn = drawn[_INPUTS].isel(run=[s - BENCHMARK_SEED for s in seeds])
+        self.noise_seed = int(noise_seed)
+        runs = max(seeds) - first_seed + 1
+        drawn = excitation_inputs(family.excitation, runs, int(duration), seed=input_seed)
+        drawn = drawn[_INPUTS].isel(run=[s - first_seed for s in seeds])
         self.inputs = drawn.assign_coords(run=np.asarray(seeds, dtype=np.int64))
 
     def simulate(self, scenario: BenchmarkScenario, seeds: Sequence[int]) -> xr.Dataset:
@@ -145,7 +160,7 @@ class ShiftInputs:
             )
         drive = self.inputs.sel(run=[int(s) for s in seeds]).isel(time=slice(0, duration))
         faults = [scenario.fault_spec()] * drive.sizes["run"]
-        ds = simulate(drive, faults, seed=SHIFT_NOISE_SEED + position)
+        ds = simulate(drive, faults, seed=self.noise_seed + position)
         ds.attrs.update(scenario.run_attrs(position, seeds), excitation=self.family.name)
         return ds
 
@@ -153,15 +168,18 @@ class ShiftInputs:
         """The first seed's excitation over ``duration`` s (the fault effects' inputs)."""
         return self.inputs.isel(run=[0], time=slice(0, int(duration)))
 
-    def fault_free(self, hours: float, *, warmup: float = T_ON) -> xr.Dataset:
-        """One fault-free run of ``warmup + hours`` under the family (as
-        `~bayes_fdi.benchmark.scenarios.fault_free_hours` under DGen's inputs)."""
+    def fault_free(
+        self, hours: float, *, warmup: float = T_ON, seed: int = FAULT_FREE_SEED
+    ) -> xr.Dataset:
+        """One fault-free run of ``warmup + hours`` under the family, inputs and noise drawn
+        with ``seed`` (as `~bayes_fdi.benchmark.scenarios.fault_free_hours` under DGen's
+        inputs)."""
         if not hours > 0:
             raise ValueError(f"fault_free: hours must be > 0, got {hours!r}")
         duration = round(warmup + 3600.0 * hours)
-        drive = excitation_inputs(self.family.excitation, 1, duration, seed=FAULT_FREE_SEED)
-        ds = simulate(drive[_INPUTS], None, seed=FAULT_FREE_SEED)
-        ds = ds.assign_coords(run=[FAULT_FREE_SEED])
+        drive = excitation_inputs(self.family.excitation, 1, duration, seed=seed)
+        ds = simulate(drive[_INPUTS], None, seed=seed)
+        ds = ds.assign_coords(run=[seed])
         ds.attrs.update(warmup=float(warmup), hours=float(hours), excitation=self.family.name)
         return ds
 
