@@ -340,8 +340,8 @@ def _faults(value: Any, duration: int) -> dict[str, FaultSpec]:
         direction = _direction(
             merged.get("direction", FAULT_DIRECTION[f]), f"faults.{f}.direction", f
         )
-        draw = _strength_draw(merged["draw"], f"faults.{f}.draw" if "draw" in overrides.get(
-            f, {}) else "faults.draw")  # fmt: skip
+        draw_key = f"faults.{f}.draw" if "draw" in overrides.get(f, {}) else "faults.draw"
+        draw = _strength_draw(merged["draw"], draw_key)
         faults[f] = FaultSpec(strength, direction, onset, profile, ramp, draw)
     return faults
 

@@ -274,7 +274,8 @@ def transplant_library(
         signs = SIGNS.get(name, (1.0,))
         fault_rng = np.random.default_rng([int(seed), i])
         flip = fault_rng.choice(signs)
-        slices = strength_slices(int(runs_per_fault), len(signs) == 2, fault_rng)
+        if strength_draw == "stratified":
+            slices = strength_slices(int(runs_per_fault), len(signs) == 2, fault_rng)
         for k in range(int(runs_per_fault)):
             rng = np.random.default_rng([int(seed), i, k])
             stratum = len(starts) / runs_per_fault
