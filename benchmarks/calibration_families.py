@@ -1,7 +1,7 @@
 """The default diagnoser's group probabilities family by family: what one temperature can calibrate.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/calibration_families.py [--model FILE] \
-        [--seed 0] [--covariates inputs|window] [--window 120] [--heldout-seed 601]
+        [--seed 0] [--covariates inputs|window|strength] [--window 120] [--heldout-seed 601]
 
 A model recalibrated by one temperature (``--model``, or `fit_online_diagnoser` with
 ``--seed`` and ``calibration="temperature"``: the default model at seed 0 but for its
@@ -17,14 +17,18 @@ Then each family in turn plays an excitation the calibration never saw (leave on
 
 - *one temperature* (`~bayes_fdi.calibration.TemperatureScaler`, fitted without bounds on the
   other six families' seconds), scored on the left-out family;
-- *a temperature that reads the excitation*: ``log T`` linear in the logarithms of three
-  measures of how much the excitation moves, fitted by maximum likelihood on the other six
+- *a temperature that reads the excitation*: ``log T`` linear in the logarithms of
+  covariates (three measures of how much the excitation moves, or the signature's strength),
+  fitted by maximum likelihood on the other six
   families (hand-written here: an experiment, not a calibrator of the library), scored the
   same way. ``--covariates inputs`` (default): the standard deviations over the trailing
   ``--window`` s of CV, of its one-second increments and of the pressure drop P1 - P2;
   ``--covariates window``: the variances, over the isolation window since the detection, of
   the predicted position X_hat, of the signed root of the pressure drop and of the predicted
-  flow F_hat (the regressors of the signature's slopes, which its running sums hold).
+  flow F_hat (the regressors of the signature's slopes, which its running sums hold);
+  ``--covariates strength``: how far the fault has moved the residuals, the absolute means
+  since the detection of X's and F's residuals in units of their predictive standard
+  deviations (a signature's strength against the noise, whatever the excitation).
 
 Both keep the named group, so they change the confidence, never the accuracy. Last, both
 temperatures fitted on all seven files score held-out runs of the DGen file (the nominal
@@ -48,8 +52,9 @@ ROOT = Path(__file__).resolve().parents[1]
 COVARIATES = {
     "inputs": ("std CV", "std dCV", "std dP"),
     "window": ("var X_hat", "var s", "var F_hat"),
+    "strength": ("|mean z_X|", "|mean z_F|"),
 }
-COVARIATE_FLOOR = {"inputs": 1e-5, "window": 1e-8}
+COVARIATE_FLOOR = {"inputs": 1e-5, "window": 1e-8, "strength": 1e-3}
 #: The campaign file of the DGen sines (the nominal benchmark's excitation) in ``sim/``.
 DGEN_FILE = "online-faults-abrupt"
 
@@ -81,6 +86,45 @@ def variance_since_detection(values: np.ndarray, detected: np.ndarray) -> np.nda
     return out
 
 
+def covariates_of(runs, stream, window: int, covariates: str) -> np.ndarray:
+    """``(runs, time, k)`` covariates of every second of ``runs`` (diagnosed as ``stream``),
+    by the mode ``covariates`` (a key of `COVARIATES`; module docstring)."""
+    dd = stream["DD"].transpose("run", "time").values.astype(bool)
+    if covariates == "strength":
+        z = [
+            (stream[f"r_{c}"] / stream[f"{c}_hat_std"]).transpose("run", "time").values
+            for c in ("X", "F")
+        ]
+        return np.stack([np.abs(mean_since_detection(v, dd)) for v in z], axis=-1)
+    cv = runs["CV"].transpose("run", "time").values
+    dp = (runs["P1"] - runs["P2"]).transpose("run", "time").values
+    if covariates == "inputs":
+        dcv = np.diff(cv, axis=1, prepend=cv[:, :1])
+        return np.stack([trailing_std(v, window) for v in (cv, dcv, dp)], axis=-1)
+    s = np.sign(dp) * np.sqrt(np.abs(dp))
+    hats = [stream[f"{c}_hat"].transpose("run", "time").values for c in ("X", "F")]
+    return np.stack([variance_since_detection(v, dd) for v in (hats[0], s, hats[1])], -1)
+
+
+def mean_since_detection(values: np.ndarray, detected: np.ndarray) -> np.ndarray:
+    """Mean of each row of ``values`` ``(runs, time)`` over the seconds since the last rising
+    edge of ``detected`` (NaN while it is off; NaN values skipped), as the signature window
+    counts them."""
+    out = np.full(values.shape, np.nan)
+    for r in range(values.shape[0]):
+        n = s1 = 0.0
+        for t in range(values.shape[1]):
+            if not detected[r, t]:
+                continue
+            if t == 0 or not detected[r, t - 1]:
+                n = s1 = 0.0
+            if np.isfinite(values[r, t]):
+                n, s1 = n + 1.0, s1 + values[r, t]
+            if n > 0:
+                out[r, t] = s1 / n
+    return out
+
+
 def family_seconds(diagnoser, runs, window: int, covariates: str) -> dict[str, np.ndarray]:
     """The uncalibrated group probabilities, true groups and excitation covariates of the
     detected seconds after the onset of every run of one campaign."""
@@ -91,15 +135,7 @@ def family_seconds(diagnoser, runs, window: int, covariates: str) -> dict[str, n
     dd = stream["DD"].transpose("run", "time").values.astype(bool)
     labels = [str(g) for g in stream["group"].values]
     group_of = {f: j for j, g in enumerate(labels) for f in g.split("|")}
-    cv = runs["CV"].transpose("run", "time").values
-    dp = (runs["P1"] - runs["P2"]).transpose("run", "time").values
-    if covariates == "inputs":
-        dcv = np.diff(cv, axis=1, prepend=cv[:, :1])
-        cov = np.stack([trailing_std(v, window) for v in (cv, dcv, dp)], axis=-1)
-    else:
-        s = np.sign(dp) * np.sqrt(np.abs(dp))
-        hats = [stream[f"{c}_hat"].transpose("run", "time").values for c in ("X", "F")]
-        cov = np.stack([variance_since_detection(v, dd) for v in (hats[0], s, hats[1])], -1)
+    cov = covariates_of(runs, stream, window, covariates)
     t = runs["time"].values
     out: dict[str, list] = {"proba": [], "true": [], "cov": []}
     for r, (state, onset) in enumerate(

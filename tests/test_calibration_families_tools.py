@@ -35,6 +35,38 @@ def test_variance_since_detection_restarts_at_each_rising_edge():
     assert np.allclose(got[ok], want[ok], rtol=0, atol=1e-9)  # sums of squares up to 1331
 
 
+def test_mean_since_detection_restarts_at_each_rising_edge():
+    values = np.array([[3.0, -1.0, 2.0, 4.0, 7.0, 5.0, np.nan, 1.0, -3.0]])
+    detected = np.array([[0, 1, 1, 1, 0, 1, 1, 1, 1]], dtype=bool)
+    got = bench.mean_since_detection(values, detected)[0]
+    # off at 0 and 4; from 1: -1, (-1+2)/2, (-1+2+4)/3; from 5: 5, 5 (NaN skipped), 3, 1
+    want = np.array([np.nan, -1.0, 0.5, 5 / 3, np.nan, 5.0, 5.0, 3.0, 1.0])
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    ok = np.isfinite(want)
+    assert np.allclose(got[ok], want[ok], rtol=0, atol=1e-15)  # sums of a few small numbers
+
+
+def test_strength_covariates_are_the_standardised_residual_means_since_detection():
+    import xarray as xr
+
+    dd = np.array([[0, 1, 1, 0, 1]], dtype=bool)
+    r_x = np.array([[0.1, 0.2, -0.6, 0.0, 0.3]])
+    r_f = np.array([[1.0, -2.0, -4.0, 0.0, 1.0]])
+    std_x, std_f = np.full((1, 5), 0.1), np.full((1, 5), 2.0)
+    stream = xr.Dataset(
+        {
+            k: (("run", "time"), v)
+            for k, v in {"DD": dd, "r_X": r_x, "r_F": r_f, "X_hat_std": std_x,
+                         "F_hat_std": std_f}.items()
+        }
+    )  # fmt: skip
+    got = bench.covariates_of(None, stream, 120, "strength")[0]
+    # X: 2, then |(2 - 6) / 2|, off, 3; F: 1, |(-1 - 2) / 2|, off, 0.5
+    want = np.array([[np.nan, np.nan], [2.0, 1.0], [2.0, 1.5], [np.nan, np.nan], [3.0, 0.5]])
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    assert np.allclose(got[np.isfinite(want)], want[np.isfinite(want)], rtol=1e-12)
+
+
 def test_scaled_is_a_temperature_scaling_row_by_row():
     rng = np.random.default_rng(1)
     proba = rng.dirichlet(np.ones(4), size=50)

@@ -29,7 +29,8 @@ def test_the_sample_is_the_benchmarks_and_the_model_calibrates_the_classifiers_o
     runs = simulate_scenario(scenario, seeds, position=7)
     x = strip_truth(runs)
     stream = model.run(x)
-    rows = tool.benchmark_sample(stream, raw.run(x), runs, scenario, 120)
+    raw_stream = raw.run(x)
+    rows = tool.benchmark_sample(stream, raw_stream, runs, scenario, 120)
     collector = RunCollector(seed=0)
     for i, seed in enumerate(seeds):
         collector.add(scenario, seed, stream.isel(run=i))
@@ -44,6 +45,13 @@ def test_the_sample_is_the_benchmarks_and_the_model_calibrates_the_classifiers_o
         by_hand = np.exp(np.log(np.maximum(own, 1e-300)) / t)
         by_hand /= by_hand.sum(axis=1, keepdims=True)
         np.testing.assert_allclose(proba, by_hand, rtol=1e-9, atol=1e-12)
+    # the signature's strength instead of the inputs: the same seconds, the stream's covariates
+    strength = tool.families.covariates_of(runs, raw_stream, 120, "strength")
+    rows_s = tool.benchmark_sample(stream, raw_stream, runs, scenario, 120, "strength")
+    for i, (row, row_s) in enumerate(zip(rows, rows_s, strict=True)):
+        np.testing.assert_array_equal(row[0], row_s[0])
+        np.testing.assert_array_equal(row_s[2], strength[i][collector.index[i]])
+        assert row_s[2].shape == (row[0].shape[0], 2) and np.isfinite(row_s[2]).all()
 
 
 def test_a_constant_excitation_temperature_is_one_temperature():
