@@ -152,16 +152,23 @@ def detection_summary(collector) -> dict:
     }
 
 
+def alarms_after(time, dd, warmup: float) -> dict:
+    """Alarms and the share of seconds with DD on after ``warmup`` s, counted as the benchmarks
+    count them: the rising edges of DD after the warm-up, an alarm still on when the warm-up
+    ends counting one."""
+    from bayes_fdi.scoring.decision_signals import decision_high, rising_edges
+
+    after = np.asarray(time, dtype=np.float64) >= warmup
+    on = decision_high(dd)[after]
+    return {"alarms": rising_edges(on), "dd_on": float(np.mean(on))}
+
+
 def fault_free_alarms(diagnoser, runs, warmup: float) -> dict:
-    """Alarms (rising edges of DD after ``warmup`` s) and the share of seconds with DD on, in the
-    fault-free ``runs`` (one run)."""
+    """`alarms_after` of the diagnoser's stream over the fault-free ``runs`` (one run)."""
     from bayes_fdi.datasets import CHANNELS
 
     stream = diagnoser.run(runs[list(CHANNELS)]).isel(run=0)
-    dd = np.asarray(stream["DD"].values, dtype=bool)
-    after = np.asarray(stream["time"].values, dtype=np.float64) >= warmup
-    rising = dd & ~np.concatenate(([False], dd[:-1]))
-    return {"alarms": int(np.sum(rising & after)), "dd_on": float(np.mean(dd[after]))}
+    return alarms_after(stream["time"].values, stream["DD"].values, warmup)
 
 
 def confident_wrong_summary(collector) -> dict:
