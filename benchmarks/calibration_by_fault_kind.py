@@ -163,12 +163,25 @@ def alarms_after(time, dd, warmup: float) -> dict:
     return {"alarms": rising_edges(on), "dd_on": float(np.mean(on))}
 
 
-def fault_free_alarms(diagnoser, runs, warmup: float) -> dict:
-    """`alarms_after` of the diagnoser's stream over the fault-free ``runs`` (one run)."""
+def fault_free_alarms(diagnoser, runs, warmup: float, *, answers: bool = False) -> dict:
+    """`alarms_after` of the diagnoser's stream over the fault-free ``runs`` (one run); with
+    ``answers``, also ``answers`` (the stream's state in the seconds with DD on after the
+    warm-up: state -> seconds) and ``blurred`` (those seconds with a confident status,
+    BLURRED)."""
     from bayes_fdi.datasets import CHANNELS
+    from bayes_fdi.scoring.decision_signals import decision_high
 
     stream = diagnoser.run(runs[list(CHANNELS)]).isel(run=0)
-    return alarms_after(stream["time"].values, stream["DD"].values, warmup)
+    out = alarms_after(stream["time"].values, stream["DD"].values, warmup)
+    if answers:
+        on = decision_high(stream["DD"].values) & (stream["time"].values >= warmup)
+        states = np.asarray(stream["state"].values).astype(str)[on]
+        status = np.asarray(stream["status"].values).astype(str)[on]
+        names, counts = np.unique(states, return_counts=True)
+        order = np.argsort(-counts, kind="stable")
+        out["answers"] = {str(names[i]): int(counts[i]) for i in order}
+        out["blurred"] = int(np.sum(status == "BLURRED"))
+    return out
 
 
 def confident_wrong_summary(collector) -> dict:

@@ -14,9 +14,10 @@ benchmarks' (10 000 and up)), for each excitation, as the benchmarks draw them
 (`~bayes_fdi.benchmark.scenarios.fault_free_hours`, `~bayes_fdi.benchmark.shift.ShiftInputs.
 fault_free`), runs the model (``--model``, or the cached default model) over them and prints per
 draw the alarms after the set-up zone (rising edges of DD, an alarm still on when the set-up
-zone ends counting one, as the benchmarks count them) and the share of seconds with DD on, then
-per excitation the draws within the target (at most one alarm in 8 hours and DD on at most 1 %
-of the time) and the mean alarms per 8 hours.
+zone ends counting one, as the benchmarks count them), the share of seconds with DD on, and what
+the model answered while it was on (its states, and the seconds it was BLURRED: a confident
+fault), then per excitation the draws within the target (at most one alarm in 8 hours and DD on
+at most 1 % of the time) and the mean alarms per 8 hours.
 Results to stdout and ``--json`` (default ``benchmarks/out/fault_free_draws.json``).
 """
 
@@ -57,13 +58,14 @@ def summary(draws: list[dict], hours: float) -> dict:
     over the draws."""
     per_8h = [d["alarms"] * 8.0 / hours for d in draws]
     return {
-        "draws": len(draws),
+        "n_draws": len(draws),
         "within_target": sum(
             a <= MAX_ALARMS_PER_8H and d["dd_on"] <= MAX_DD_ON
             for a, d in zip(per_8h, draws, strict=True)
         ),
         "mean_alarms_per_8h": float(np.mean(per_8h)),
         "mean_dd_on": float(np.mean([d["dd_on"] for d in draws])),
+        "blurred_seconds": int(sum(d.get("blurred", 0) for d in draws)),
     }
 
 
@@ -92,8 +94,8 @@ def main(argv: list[str] | None = None) -> int:
     diagnoser = load_online_model(args.model) if args.model else default_model(progress=False)
     t0 = time.process_time()
     result = {"model": args.model or "default", "hours": args.hours, "seeds": seeds}
-    print("| excitation | seed | alarms | DD on |")
-    print("|---|---:|---:|---:|")
+    print("| excitation | seed | alarms | DD on | answers while on (s) | BLURRED (s) |")
+    print("|---|---:|---:|---:|---|---:|")
     for name in names:
         draws = []
         for seed in seeds:
@@ -104,15 +106,21 @@ def main(argv: list[str] | None = None) -> int:
                     families[name], [seed], 1, first_seed=seed, input_seed=seed, noise_seed=seed
                 )
                 runs = shifted.fault_free(args.hours, warmup=T_ON, seed=seed)
-            draws.append({"seed": seed, **fault_free_alarms(diagnoser, runs, T_ON)})
+            found = fault_free_alarms(diagnoser, runs, T_ON, answers=True)
+            draws.append({"seed": seed, **found})
             d = draws[-1]
-            print(f"| {name} | {seed} | {d['alarms']} | {100 * d['dd_on']:.1f} % |", flush=True)
+            said = ", ".join(f"{k} {v}" for k, v in list(d["answers"].items())[:4]) or "-"
+            print(
+                f"| {name} | {seed} | {d['alarms']} | {100 * d['dd_on']:.1f} % | {said} | "
+                f"{d['blurred']} |",
+                flush=True,
+            )
         result[name] = {"draws": draws, **summary(draws, args.hours)}
     result["cpu_seconds"] = time.process_time() - t0
     for name in names:
         s = result[name]
         print(
-            f"{name}: {s['within_target']} of {s['draws']} draws within the target (at most "
+            f"{name}: {s['within_target']} of {s['n_draws']} draws within the target (at most "
             f"{MAX_ALARMS_PER_8H} alarm in 8 h, DD on at most {100 * MAX_DD_ON:g} %); "
             f"{s['mean_alarms_per_8h']:.2f} alarms per 8 h on average, DD on "
             f"{100 * s['mean_dd_on']:.1f} % of the time"

@@ -25,10 +25,11 @@ def test_summary_scales_the_alarms_to_8_hours():
         {"alarms": 1, "dd_on": 0.5},  # 2 in 8 h, and on half the time
     ]
     s = tool.summary(draws, hours=4.0)
-    assert s["draws"] == 4
+    assert s["n_draws"] == 4
     assert s["within_target"] == 1
     assert s["mean_alarms_per_8h"] == pytest.approx((0 + 2 + 6 + 2) / 4)
     assert s["mean_dd_on"] == pytest.approx(0.56 / 4)
+    assert s["blurred_seconds"] == 0  # no draw says how long it was BLURRED
     # over 8 hours: one alarm is within the target unless DD stays on for more than 1 %
     eight = tool.summary([{"alarms": 1, "dd_on": 0.01}, {"alarms": 1, "dd_on": 0.02}], hours=8.0)
     assert eight["within_target"] == 1
