@@ -90,9 +90,11 @@ def covariates_of(runs, stream, window: int, covariates: str) -> np.ndarray:
     """``(runs, time, k)`` covariates of every second of ``runs`` (diagnosed as ``stream``),
     by the mode ``covariates`` (a key of `COVARIATES`; module docstring)."""
     dd = stream["DD"].transpose("run", "time").values.astype(bool)
-    if covariates == "strength":
+    if covariates == "strength":  # the normal models' standardised residuals
         z = [
-            (stream[f"r_{c}"] / stream[f"{c}_hat_std"]).transpose("run", "time").values
+            ((runs[c] - stream[f"{c}_hat"]) / stream[f"{c}_hat_std"])
+            .transpose("run", "time")
+            .values
             for c in ("X", "F")
         ]
         return np.stack([np.abs(mean_since_detection(v, dd)) for v in z], axis=-1)

@@ -50,17 +50,21 @@ def test_strength_covariates_are_the_standardised_residual_means_since_detection
     import xarray as xr
 
     dd = np.array([[0, 1, 1, 0, 1]], dtype=bool)
-    r_x = np.array([[0.1, 0.2, -0.6, 0.0, 0.3]])
-    r_f = np.array([[1.0, -2.0, -4.0, 0.0, 1.0]])
+    x = np.array([[0.6, 0.7, -0.1, 0.5, 0.8]])
+    x_hat = np.full((1, 5), 0.5)  # residuals 0.1, 0.2, -0.6, 0, 0.3
+    f = np.array([[2.0, -1.0, -3.0, 1.0, 2.0]])
+    f_hat = np.full((1, 5), 1.0)  # residuals 1, -2, -4, 0, 1
     std_x, std_f = np.full((1, 5), 0.1), np.full((1, 5), 2.0)
+    dims = ("run", "time")
+    runs = xr.Dataset({"X": (dims, x), "F": (dims, f)})
     stream = xr.Dataset(
         {
-            k: (("run", "time"), v)
-            for k, v in {"DD": dd, "r_X": r_x, "r_F": r_f, "X_hat_std": std_x,
+            k: (dims, v)
+            for k, v in {"DD": dd, "X_hat": x_hat, "F_hat": f_hat, "X_hat_std": std_x,
                          "F_hat_std": std_f}.items()
         }
     )  # fmt: skip
-    got = bench.covariates_of(None, stream, 120, "strength")[0]
+    got = bench.covariates_of(runs, stream, 120, "strength")[0]
     # X: 2, then |(2 - 6) / 2|, off, 3; F: 1, |(-1 - 2) / 2|, off, 0.5
     want = np.array([[np.nan, np.nan], [2.0, 1.0], [2.0, 1.5], [np.nan, np.nan], [3.0, 0.5]])
     assert np.array_equal(np.isnan(got), np.isnan(want))
