@@ -15,6 +15,7 @@ the isolability groups are found.
 
 Printed per plant:
 
+- the spread of the training rows' features (1st, 25th, 75th and 99th percentiles);
 - **every node of the tree**: its two sides, its training rows and relevance vectors, and the
   balanced accuracy (the mean over the node's classes of the share of a class's rows sent to its
   side) of the node's RVC on its training rows and on the held-out library's rows of its classes,
@@ -118,6 +119,14 @@ def _signatures(result, plant, healthy, seed: int) -> dict[str, Any]:
         rows = np.isin(yh, known) & (ages >= GROUP_MIN_AGE)
         out[name] = (Xh[rows], yh[rows])
     return out
+
+
+def feature_spread(X: np.ndarray) -> dict[str, list[float]]:
+    """The 1st, 25th, 75th and 99th percentiles of each isolation feature over the rows ``X``."""
+    from bayes_fdi.diagnosis.isolation.signatures import ISOLATION_FEATURES
+
+    q = np.percentile(X, [1, 25, 75, 99], axis=0)
+    return {name: q[:, j].tolist() for j, name in enumerate(ISOLATION_FEATURES)}
 
 
 def node_rows(tree, train, heldout) -> list[dict[str, Any]]:
@@ -225,6 +234,11 @@ def main(argv: list[str] | None = None) -> int:
             f"held-out rows {len(sets['library'][1])} (library), {len(sets['later'][1])} (later)",
             flush=True,
         )
+        spread = feature_spread(X_train)
+        print(
+            "  training rows, features' 1st, 25th, 75th, 99th percentiles: "
+            + "; ".join(f"{k} " + " ".join(f"{v:.3g}" for v in q) for k, q in spread.items())
+        )
         print("  node  rows  RVs  RVC train  RVC held-out  forest held-out  sides")
         for r in nodes:
             print(
@@ -241,7 +255,9 @@ def main(argv: list[str] | None = None) -> int:
                 if key != "fit_cpu_s"
             ]
             print(f"  {name:28s} fit {scores['fit_cpu_s']:5.1f} CPU s; " + "; ".join(parts))
-        results[index] = {"nodes": nodes, "classifiers": whole, "groups": groups}
+        results[index] = {
+            "nodes": nodes, "classifiers": whole, "groups": groups, "feature_spread": spread
+        }  # fmt: skip
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump({"commission_seed": seed, "plants": results}, f, indent=1)

@@ -54,3 +54,14 @@ def test_node_rows_read_each_nodes_own_classifier():
         assert (r["left"], r["right"]) == (list(node.left), list(node.right))
         # well separated clusters: every node's RVC and forest send every row to its side
         assert r["rvc_train"] == r["rvc_heldout"] == r["forest_heldout"] == 1.0
+
+
+def test_feature_spread_is_each_features_percentiles():
+    from bayes_fdi.diagnosis.isolation.signatures import ISOLATION_FEATURES
+
+    X = np.tile(np.arange(101.0)[:, None], (1, len(ISOLATION_FEATURES)))
+    X[:, 1] *= -2.0
+    spread = tool.feature_spread(X)
+    assert list(spread) == list(ISOLATION_FEATURES)
+    assert spread[ISOLATION_FEATURES[0]] == pytest.approx([1.0, 25.0, 75.0, 99.0])
+    assert spread[ISOLATION_FEATURES[1]] == pytest.approx([-198.0, -150.0, -50.0, -2.0])
