@@ -14,10 +14,11 @@ seconds answered with a wrong group at p > 0.9 (confident wrong), by
 scenario. Beside them, the detection on the same runs: the big abrupt scenarios detected in
 every seed, the runs whose DD stays on from its first rising edge, the first detection's median
 per scenario, the fault-free parts' median r_fd; and ``--fault-free-hours H`` (0: none)
-fault-free hours simulated with the seed after the last of ``--seeds``, with the alarms (rising
-edges of DD) in them. ``--excitation`` runs all of it under a shift family of
-``sim/shift-*.toml`` (`selection_inputs`: its inputs drawn with the first seed, the noise of
-each scenario with the first seed plus its position) instead of DGen's sines. ``--model``: a
+fault-free hours simulated with the seed after the last of ``--seeds``, with the alarms in them
+(`alarms_after`: rising edges of DD, an alarm still on when the set-up zone ends counting
+one). ``--excitation`` runs all of it under a shift family of ``sim/shift-*.toml``
+(`selection_inputs`: its inputs drawn with the first seed, the noise of each scenario with the
+first seed plus its position) instead of DGen's sines. ``--model``: a
 model file (default: the default model, fitted and cached on first use). Results go to stdout
 and ``benchmarks/out/calibration_by_fault_kind.json`` (``calibration_by_fault_kind-FAMILY.json``
 under a shift family).
@@ -172,9 +173,10 @@ def fault_free_alarms(diagnoser, runs, warmup: float, *, answers: bool = False) 
     from bayes_fdi.scoring.decision_signals import decision_high
 
     stream = diagnoser.run(runs[list(CHANNELS)]).isel(run=0)
-    out = alarms_after(stream["time"].values, stream["DD"].values, warmup)
+    time, dd = stream["time"].values, stream["DD"].values
+    out = alarms_after(time, dd, warmup)
     if answers:
-        on = decision_high(stream["DD"].values) & (stream["time"].values >= warmup)
+        on = decision_high(dd) & (np.asarray(time, dtype=np.float64) >= warmup)
         states = np.asarray(stream["state"].values).astype(str)[on]
         status = np.asarray(stream["status"].values).astype(str)[on]
         names, counts = np.unique(states, return_counts=True)

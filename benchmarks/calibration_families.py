@@ -68,10 +68,11 @@ def trailing_std(values: np.ndarray, window: int) -> np.ndarray:
     return frame.rolling(window, min_periods=1).std(ddof=0).to_numpy().T
 
 
-def variance_since_detection(values: np.ndarray, detected: np.ndarray) -> np.ndarray:
-    """Variance of each row of ``values`` ``(runs, time)`` over the seconds since the last
-    rising edge of ``detected`` (NaN while it is off), as the signature window counts them."""
-    out = np.full(values.shape, np.nan)
+def _moments_since_detection(values: np.ndarray, detected: np.ndarray):
+    """Mean and variance of each row of ``values`` ``(runs, time)`` over the seconds since the
+    last rising edge of ``detected`` (NaN while it is off; NaN values skipped), as the signature
+    window counts them."""
+    mean, var = np.full(values.shape, np.nan), np.full(values.shape, np.nan)
     for r in range(values.shape[0]):
         n = s1 = s2 = 0.0
         for t in range(values.shape[1]):
@@ -82,14 +83,29 @@ def variance_since_detection(values: np.ndarray, detected: np.ndarray) -> np.nda
             if np.isfinite(values[r, t]):
                 n, s1, s2 = n + 1.0, s1 + values[r, t], s2 + values[r, t] ** 2
             if n > 0:
-                out[r, t] = max(s2 / n - (s1 / n) ** 2, 0.0)
-    return out
+                mean[r, t] = s1 / n
+                var[r, t] = max(s2 / n - (s1 / n) ** 2, 0.0)
+    return mean, var
+
+
+def variance_since_detection(values: np.ndarray, detected: np.ndarray) -> np.ndarray:
+    """Variance of each row of ``values`` over the seconds since DD last rose
+    (`_moments_since_detection`)."""
+    return _moments_since_detection(values, detected)[1]
+
+
+def mean_since_detection(values: np.ndarray, detected: np.ndarray) -> np.ndarray:
+    """Mean of each row of ``values`` over the seconds since DD last rose
+    (`_moments_since_detection`)."""
+    return _moments_since_detection(values, detected)[0]
 
 
 def covariates_of(runs, stream, window: int, covariates: str) -> np.ndarray:
     """``(runs, time, k)`` covariates of every second of ``runs`` (diagnosed as ``stream``),
-    by the mode ``covariates`` (a key of `COVARIATES`; module docstring)."""
-    dd = stream["DD"].transpose("run", "time").values.astype(bool)
+    by the mode ``covariates`` (a key of `COVARIATES`; module docstring). The input covariates
+    read ``runs`` alone (``stream`` may be None)."""
+    if covariates != "inputs":
+        dd = stream["DD"].transpose("run", "time").values.astype(bool)
     if covariates == "strength":  # the normal models' standardised residuals
         z = [
             ((runs[c] - stream[f"{c}_hat"]) / stream[f"{c}_hat_std"])
@@ -106,25 +122,6 @@ def covariates_of(runs, stream, window: int, covariates: str) -> np.ndarray:
     s = np.sign(dp) * np.sqrt(np.abs(dp))
     hats = [stream[f"{c}_hat"].transpose("run", "time").values for c in ("X", "F")]
     return np.stack([variance_since_detection(v, dd) for v in (hats[0], s, hats[1])], -1)
-
-
-def mean_since_detection(values: np.ndarray, detected: np.ndarray) -> np.ndarray:
-    """Mean of each row of ``values`` ``(runs, time)`` over the seconds since the last rising
-    edge of ``detected`` (NaN while it is off; NaN values skipped), as the signature window
-    counts them."""
-    out = np.full(values.shape, np.nan)
-    for r in range(values.shape[0]):
-        n = s1 = 0.0
-        for t in range(values.shape[1]):
-            if not detected[r, t]:
-                continue
-            if t == 0 or not detected[r, t - 1]:
-                n = s1 = 0.0
-            if np.isfinite(values[r, t]):
-                n, s1 = n + 1.0, s1 + values[r, t]
-            if n > 0:
-                out[r, t] = s1 / n
-    return out
 
 
 def family_seconds(diagnoser, runs, window: int, covariates: str) -> dict[str, np.ndarray]:

@@ -45,26 +45,17 @@ import calibration_families as families  # sibling scripts
 from calibration_by_fault_kind import SELECTION_SEEDS, selection_inputs
 
 ROOT = Path(__file__).resolve().parents[1]
-#: Floor of each standard deviation before its logarithm (a constant input).
-COVARIATE_FLOOR = 1e-5
 #: Floor of a probability before its logarithm.
 PROBABILITY_FLOOR = 1e-12
+#: Floor of each input covariate before its logarithm (a constant input).
+INPUT_FLOOR = families.COVARIATE_FLOOR["inputs"]
 
 
-def design(cov: np.ndarray, floor: float = COVARIATE_FLOOR) -> np.ndarray:
+def design(cov: np.ndarray, floor: float = INPUT_FLOOR) -> np.ndarray:
     """The rows ``[1, log c_1, ..., log c_k]`` of ``log T``'s linear model (by default the
     input covariates: ``[1, log std CV, log std dCV, log std dP]``), each covariate floored at
     ``floor``."""
     return np.column_stack([np.ones(len(cov)), np.log(np.maximum(cov, floor))])
-
-
-def input_covariates(runs, i: int, window: int) -> np.ndarray:
-    """``(time, 3)``: the trailing standard deviations of CV, its increments and P1 - P2 of run
-    ``i`` of ``runs``."""
-    cv = runs["CV"].isel(run=i).values
-    dp = (runs["P1"] - runs["P2"]).isel(run=i).values
-    dcv = np.diff(cv, prepend=cv[:1])
-    return np.stack([families.trailing_std(v[None], window)[0] for v in (cv, dcv, dp)], -1)
 
 
 def benchmark_sample(
@@ -73,14 +64,12 @@ def benchmark_sample(
     """Per run of ``runs`` (one scenario; ``run`` = the seed), the benchmark's calibration
     seconds as `~bayes_fdi.benchmark.collection.RunCollector` keeps them: the model's
     probabilities (stream ``calibrated``), the classifier's own (stream ``raw``), the
-    covariates (`input_covariates`, or ``calibration_families.covariates_of`` for another
-    mode) and the true group index, as ``(proba, raw_proba, cov, true)``."""
+    covariates of mode ``covariates`` (``calibration_families.covariates_of``) and the true
+    group index, as ``(proba, raw_proba, cov, true)``."""
     from bayes_fdi.benchmark.collection import RunCollector
 
     collector = RunCollector(seed=0)
-    by_stream = None
-    if covariates != "inputs":
-        by_stream = families.covariates_of(runs, raw, window, covariates)
+    cov_all = families.covariates_of(runs, raw, window, covariates)
     out = []
     for i, seed in enumerate(runs["run"].values):
         kept = len(collector.index)
@@ -89,12 +78,11 @@ def benchmark_sample(
             continue
         keep = collector.index[-1]
         own = raw.isel(run=i)["group_proba"].transpose("time", "group").values[keep]
-        cov = (input_covariates(runs, i, window) if by_stream is None else by_stream[i])[keep]
-        out.append((collector.proba[-1], own, cov, collector.true[-1]))
+        out.append((collector.proba[-1], own, cov_all[i][keep], collector.true[-1]))
     return out
 
 
-def score_sample(rows, classes, single, weights, floor=COVARIATE_FLOOR, scalers=None) -> dict:
+def score_sample(rows, classes, single, weights, floor=INPUT_FLOOR, scalers=None) -> dict:
     """ECE, accuracy and confidence of the sample ``rows``: under the model's calibration, the
     classifier's own probabilities, ``single`` (a fitted temperature scaler), the covariates'
     temperature with ``weights`` (covariates floored at ``floor``) and each fitted recalibrator

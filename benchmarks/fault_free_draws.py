@@ -11,13 +11,13 @@ demand) with the seed, so one draw may pass or fail by what it happens to visit.
 draws ``--hours`` fault-free hours with each seed of ``--seeds`` (a range ``A-B`` or a comma list;
 by default eight seeds in the selection range, apart from the training's (below 1000) and the
 benchmarks' (10 000 and up)), for each excitation, as the benchmarks draw them
-(`~bayes_fdi.benchmark.scenarios.fault_free_hours`, `~bayes_fdi.benchmark.shift.ShiftInputs.
-fault_free`), runs the model (``--model``, or the cached default model) over them and prints per
-draw the alarms after the set-up zone (rising edges of DD, an alarm still on when the set-up
-zone ends counting one, as the benchmarks count them), the share of seconds with DD on, and what
-the model answered while it was on (its states, and the seconds it was BLURRED: a confident
-fault), then per excitation the draws within the target (at most one alarm in 8 hours and DD on
-at most 1 % of the time) and the mean alarms per 8 hours.
+(`~bayes_fdi.benchmark.scenarios.fault_free_hours`,
+`~bayes_fdi.benchmark.shift.family_fault_free`), runs the model (``--model``, or the cached
+default model) over them and prints per draw the alarms after the set-up zone (rising edges of
+DD, an alarm still on when the set-up zone ends counting one, as the benchmarks count them),
+the share of seconds with DD on, and what the model answered while it was on (its states, and
+the seconds it was BLURRED: a confident fault), then per excitation the draws within the target
+(at most one alarm in 8 hours and DD on at most 1 % of the time) and the mean alarms per 8 hours.
 Results to stdout and ``--json`` (default ``benchmarks/out/fault_free_draws.json``).
 """
 
@@ -31,10 +31,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from calibration_by_fault_kind import alarms_after, fault_free_alarms  # sibling script
+from calibration_by_fault_kind import fault_free_alarms  # sibling script
 
 ROOT = Path(__file__).resolve().parents[1]
-__all__ = ["alarms_after", "main", "parse_seeds", "summary"]
+__all__ = ["main", "parse_seeds", "summary"]
 
 #: The target: at most this many alarms in 8 fault-free hours, and DD on at most this share of
 #: the time (the benchmarks' `~bayes_fdi.benchmark.report_detection.fault_free_target`).
@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", default=None, help="where to write the results")
     args = parser.parse_args(argv)
     from bayes_fdi.benchmark.scenarios import T_ON, fault_free_hours
-    from bayes_fdi.benchmark.shift import ShiftInputs, shift_families
+    from bayes_fdi.benchmark.shift import family_fault_free, shift_families
     from bayes_fdi.deployment.fitting import default_model, load_online_model
     from bayes_fdi.reporting import write_json
 
@@ -102,10 +102,7 @@ def main(argv: list[str] | None = None) -> int:
             if name == "dgen":
                 runs = fault_free_hours(args.hours, seed=seed)
             else:
-                shifted = ShiftInputs(  # its fault-free hours depend on the seed given only
-                    families[name], [seed], 1, first_seed=seed, input_seed=seed, noise_seed=seed
-                )
-                runs = shifted.fault_free(args.hours, warmup=T_ON, seed=seed)
+                runs = family_fault_free(families[name], args.hours, warmup=T_ON, seed=seed)
             found = fault_free_alarms(diagnoser, runs, T_ON, answers=True)
             draws.append({"seed": seed, **found})
             d = draws[-1]

@@ -158,6 +158,22 @@ def test_fault_free_alarms_are_the_rising_edges_of_the_streams_dd():
     dd = stream["DD"].values.astype(bool)
     t = stream["time"].values
     got = tool.fault_free_alarms(diag, runs, warmup=10.0)
-    edges = [i for i in range(len(dd)) if dd[i] and (i == 0 or not dd[i - 1]) and t[i] >= 10.0]
+    counted = np.flatnonzero(t >= 10.0)  # an alarm on at the first counted second counts one
+    edges = [i for i in counted if dd[i] and (i == counted[0] or not dd[i - 1])]
     assert got["alarms"] == len(edges) >= 1
     assert got["dd_on"] == pytest.approx(dd[t >= 10.0].mean())
+
+
+def test_an_alarm_on_when_the_warmup_ends_counts_one():
+    """The benchmarks' count: the rising edges of DD after the warm-up, an alarm still on at
+    its end counting one (`alarms_after`, which `fault_free_alarms` applies to a stream)."""
+    t = np.arange(8.0)
+    dd = np.array([0, 1, 1, 1, 1, 0, 1, 0], dtype=bool)
+    # after the warm-up (t >= 3): [1, 1, 0, 1, 0] -> on at its start (1) and one edge (1)
+    got = tool.alarms_after(t, dd, warmup=3.0)
+    assert got == {"alarms": 2, "dd_on": pytest.approx(3 / 5)}
+    # a DD off at the end of the warm-up: only the edges after it
+    assert tool.alarms_after(t, dd, warmup=5.0) == {"alarms": 1, "dd_on": pytest.approx(1 / 3)}
+    # NaN (no decision) is off, as the benchmarks read it
+    nan_dd = np.array([np.nan, 1.0, np.nan, 1.0])
+    assert tool.alarms_after(np.arange(4.0), nan_dd, warmup=0.0)["alarms"] == 2

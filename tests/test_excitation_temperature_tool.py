@@ -76,7 +76,7 @@ def test_the_covariates_are_trailing_standard_deviations_by_hand():
     runs = xr.Dataset(
         {k: (("run", "time"), v[None]) for k, v in {"CV": cv, "P1": p1, "P2": p2}.items()}
     )
-    cov = tool.input_covariates(runs, 0, window=3)
+    cov = tool.families.covariates_of(runs, None, 3, "inputs")[0]
     dcv = np.diff(cv, prepend=cv[0])
     for t in range(5):
         lo = max(0, t - 2)

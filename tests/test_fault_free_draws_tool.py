@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from benchmark_scripts import load_benchmark
 
@@ -33,18 +32,3 @@ def test_summary_scales_the_alarms_to_8_hours():
     # over 8 hours: one alarm is within the target unless DD stays on for more than 1 %
     eight = tool.summary([{"alarms": 1, "dd_on": 0.01}, {"alarms": 1, "dd_on": 0.02}], hours=8.0)
     assert eight["within_target"] == 1
-
-
-def test_an_alarm_on_when_the_warmup_ends_counts_one():
-    """The benchmarks' count: the rising edges of DD after the warm-up, an alarm still on at
-    its end counting one (`alarms_after`, which `fault_free_alarms` applies to a stream)."""
-    t = np.arange(8.0)
-    dd = np.array([0, 1, 1, 1, 1, 0, 1, 0], dtype=bool)
-    # after the warm-up (t >= 3): [1, 1, 0, 1, 0] -> on at its start (1) and one edge (1)
-    got = tool.alarms_after(t, dd, warmup=3.0)
-    assert got == {"alarms": 2, "dd_on": pytest.approx(3 / 5)}
-    # a DD off at the end of the warm-up: only the edges after it
-    assert tool.alarms_after(t, dd, warmup=5.0) == {"alarms": 1, "dd_on": pytest.approx(1 / 3)}
-    # NaN (no decision) is off, as the benchmarks read it
-    nan_dd = np.array([np.nan, 1.0, np.nan, 1.0])
-    assert tool.alarms_after(np.arange(4.0), nan_dd, warmup=0.0)["alarms"] == 2

@@ -55,6 +55,7 @@ __all__ = [
     "SHIFT_PREFIX",
     "ShiftFamily",
     "ShiftInputs",
+    "family_fault_free",
     "run_from_cli",
     "run_shift_benchmark",
     "shift_families",
@@ -171,17 +172,23 @@ class ShiftInputs:
     def fault_free(
         self, hours: float, *, warmup: float = T_ON, seed: int = FAULT_FREE_SEED
     ) -> xr.Dataset:
-        """One fault-free run of ``warmup + hours`` under the family, inputs and noise drawn
-        with ``seed`` (as `~bayes_fdi.benchmark.scenarios.fault_free_hours` under DGen's
-        inputs)."""
-        if not hours > 0:
-            raise ValueError(f"fault_free: hours must be > 0, got {hours!r}")
-        duration = round(warmup + 3600.0 * hours)
-        drive = excitation_inputs(self.family.excitation, 1, duration, seed=seed)
-        ds = simulate(drive[_INPUTS], None, seed=seed)
-        ds = ds.assign_coords(run=[seed])
-        ds.attrs.update(warmup=float(warmup), hours=float(hours), excitation=self.family.name)
-        return ds
+        """The family's `family_fault_free` hours (inputs and noise drawn with ``seed``)."""
+        return family_fault_free(self.family, hours, warmup=warmup, seed=seed)
+
+
+def family_fault_free(
+    family: ShiftFamily, hours: float, *, warmup: float = T_ON, seed: int = FAULT_FREE_SEED
+) -> xr.Dataset:
+    """One fault-free run of ``warmup + hours`` under ``family``, inputs and noise drawn with
+    ``seed`` (as `~bayes_fdi.benchmark.scenarios.fault_free_hours` under DGen's inputs)."""
+    if not hours > 0:
+        raise ValueError(f"fault_free: hours must be > 0, got {hours!r}")
+    duration = round(warmup + 3600.0 * hours)
+    drive = excitation_inputs(family.excitation, 1, duration, seed=seed)
+    ds = simulate(drive[_INPUTS], None, seed=seed)
+    ds = ds.assign_coords(run=[seed])
+    ds.attrs.update(warmup=float(warmup), hours=float(hours), excitation=family.name)
+    return ds
 
 
 def run_shift_benchmark(

@@ -55,6 +55,7 @@ __all__ = [
     "runs_as_list",
     "split_fault_runs",
     "stack_runs",
+    "training_rows",
     "training_signatures",
 ]
 
@@ -234,6 +235,16 @@ def cap_rows(y: np.ndarray, cap: int, rng: np.random.Generator) -> np.ndarray:
     return np.sort(np.concatenate(keep)) if keep else np.empty(0, dtype=np.int64)
 
 
+def training_rows(
+    y: np.ndarray, known: Sequence[str], cap: int, random_state: int | None
+) -> np.ndarray:
+    """Indices of the training signatures the classifier is fitted on: those of the ``known``
+    (classified) faults, at most ``cap`` per fault (`cap_rows`, seed ``[random_state, 5]``)."""
+    rng = np.random.default_rng(None if random_state is None else [random_state, 5])
+    keep = np.flatnonzero(np.isin(y, known))
+    return keep[cap_rows(y[keep], int(cap), rng)]
+
+
 def fit_detection(
     oof_z: np.ndarray,
     detector: Any,
@@ -370,7 +381,7 @@ def fit_isolation(
     calibration runs, `split_fault_runs` splits ``fault_runs``. Faults detected in fewer than
     ``detect_rate`` of their training runs, or with fewer than 5 signatures, are undetectable
     and not classified; each fault keeps at most ``max_signatures_per_fault`` training rows
-    (`cap_rows`, seed ``[random_state, 5]``). ``seconds`` receives the timings. With
+    (`training_rows`). ``seconds`` receives the timings. With
     ``group_rule="naming"`` (`~bayes_fdi.diagnosis.isolation.isolator.naming_confusion`) the
     groups come from every detected faulty second of the validation runs at least
     `GROUP_MIN_AGE` s after its detection (as the diagnoser names them, and as a benchmark
@@ -403,9 +414,7 @@ def fit_isolation(
     if len(known) < 2:
         return IsolationFit(None, tuple(undetectable), rates, None)
     t0 = time.perf_counter()
-    rng = np.random.default_rng(None if random_state is None else [random_state, 5])
-    keep = np.flatnonzero(np.isin(y, known))
-    keep = keep[cap_rows(y[keep], int(max_signatures_per_fault), rng)]
+    keep = training_rows(y, known, max_signatures_per_fault, random_state)
     vkeep = np.isin(yv, known) & (av >= GROUP_MIN_AGE)
     ckeep = np.isin(yc, known)
     isolator = FaultIsolator(
